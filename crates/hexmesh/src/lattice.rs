@@ -1,0 +1,397 @@
+//! The cubic lattice: cells of edge `h` on a regular grid with shared nodes.
+
+use thiserror::Error;
+
+/// Offsets of the 8 corners of a cell, in VTK_HEXAHEDRON order: the bottom face
+/// (z = 0) counter-clockwise seen from +z, then the top face (z = 1) likewise.
+pub const CORNER_OFFSETS: [[u32; 3]; 8] = [
+    [0, 0, 0],
+    [1, 0, 0],
+    [1, 1, 0],
+    [0, 1, 0],
+    [0, 0, 1],
+    [1, 0, 1],
+    [1, 1, 1],
+    [0, 1, 1],
+];
+
+/// Why a lattice could not be built.
+#[derive(Debug, Error, Clone, PartialEq)]
+pub enum LatticeError {
+    /// The cell edge is not a positive finite number.
+    #[error("cell size h = {0} is not a positive finite number")]
+    BadCellSize(f64),
+    /// The origin has a NaN or infinite coordinate.
+    #[error("lattice origin {0:?} has a non-finite coordinate")]
+    BadOrigin([f64; 3]),
+    /// No cells were given.
+    #[error("the lattice has no cells")]
+    Empty,
+    /// A cell lies outside the declared grid.
+    #[error("cell at grid coordinates {coord:?} lies outside the grid of {dims:?} cells")]
+    CellOutsideGrid {
+        /// Grid coordinates of the offending cell.
+        coord: [u32; 3],
+        /// Grid dimensions in cells.
+        dims: [u32; 3],
+    },
+    /// The same grid cell was given twice.
+    #[error("cell at grid coordinates {0:?} is given more than once")]
+    DuplicateCell([u32; 3]),
+    /// The grid has more nodes than `u32` indices can address.
+    #[error("grid of {0:?} cells is too large for u32 node indices")]
+    GridTooLarge([u32; 3]),
+}
+
+/// A set of cubic cells of edge `h` on a regular grid, with shared nodes.
+///
+/// Invariants (established by [`Lattice::from_cells`], the only constructor):
+/// cells are unique and sorted by their grid linear index (x fastest, then y,
+/// then z); nodes are exactly the corners of the cells, without duplicates,
+/// sorted the same way; `cells[c][k]` is the node at grid coordinates
+/// `cell_coords[c] + CORNER_OFFSETS[k]` (VTK_HEXAHEDRON order).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Lattice {
+    origin: [f64; 3],
+    h: f64,
+    dims: [u32; 3],
+    nodes: Vec<[f64; 3]>,
+    node_coords: Vec<[u32; 3]>,
+    cells: Vec<[u32; 8]>,
+    cell_coords: Vec<[u32; 3]>,
+}
+
+fn node_key(c: [u32; 3], dims: [u32; 3]) -> u64 {
+    let nx = dims[0] as u64 + 1;
+    let ny = dims[1] as u64 + 1;
+    c[0] as u64 + nx * (c[1] as u64 + ny * c[2] as u64)
+}
+
+fn cell_key(c: [u32; 3], dims: [u32; 3]) -> u64 {
+    let nx = dims[0] as u64;
+    let ny = dims[1] as u64;
+    c[0] as u64 + nx * (c[1] as u64 + ny * c[2] as u64)
+}
+
+impl Lattice {
+    /// Builds a lattice from the grid coordinates of its cells.
+    ///
+    /// `origin` is the position of grid node (0, 0, 0), `h` the cell edge (m),
+    /// `dims` the grid size in cells. Cells may come in any order; they are
+    /// sorted. Fails on a bad `h` or origin, no cells, a cell outside the grid,
+    /// or a duplicated cell.
+    pub fn from_cells(
+        origin: [f64; 3],
+        h: f64,
+        dims: [u32; 3],
+        cell_coords: impl IntoIterator<Item = [u32; 3]>,
+    ) -> Result<Self, LatticeError> {
+        if !(h.is_finite() && h > 0.0) {
+            return Err(LatticeError::BadCellSize(h));
+        }
+        if origin.iter().any(|v| !v.is_finite()) {
+            return Err(LatticeError::BadOrigin(origin));
+        }
+        let node_count = (dims[0] as u64 + 1) * (dims[1] as u64 + 1) * (dims[2] as u64 + 1);
+        if node_count > u32::MAX as u64 {
+            return Err(LatticeError::GridTooLarge(dims));
+        }
+        let mut keyed: Vec<(u64, [u32; 3])> = Vec::new();
+        for coord in cell_coords {
+            if (0..3).any(|k| coord[k] >= dims[k]) {
+                return Err(LatticeError::CellOutsideGrid { coord, dims });
+            }
+            keyed.push((cell_key(coord, dims), coord));
+        }
+        if keyed.is_empty() {
+            return Err(LatticeError::Empty);
+        }
+        keyed.sort_unstable_by_key(|&(key, _)| key);
+        if let Some(w) = keyed.windows(2).find(|w| w[0].0 == w[1].0) {
+            return Err(LatticeError::DuplicateCell(w[0].1));
+        }
+        let cell_coords: Vec<[u32; 3]> = keyed.into_iter().map(|(_, c)| c).collect();
+
+        let corner = |c: [u32; 3], k: usize| {
+            let o = CORNER_OFFSETS[k];
+            [c[0] + o[0], c[1] + o[1], c[2] + o[2]]
+        };
+        let mut node_keys: Vec<u64> = cell_coords
+            .iter()
+            .flat_map(|&c| (0..8).map(move |k| node_key(corner(c, k), dims)))
+            .collect();
+        node_keys.sort_unstable();
+        node_keys.dedup();
+        let nx = dims[0] as u64 + 1;
+        let ny = dims[1] as u64 + 1;
+        let node_coords: Vec<[u32; 3]> = node_keys
+            .iter()
+            .map(|&key| {
+                [
+                    (key % nx) as u32,
+                    ((key / nx) % ny) as u32,
+                    (key / (nx * ny)) as u32,
+                ]
+            })
+            .collect();
+        let nodes = node_coords
+            .iter()
+            .map(|c| std::array::from_fn(|k| origin[k] + h * c[k] as f64))
+            .collect();
+        let cells = cell_coords
+            .iter()
+            .map(|&c| {
+                std::array::from_fn(|k| {
+                    let key = node_key(corner(c, k), dims);
+                    // Every corner key was inserted above, so the search succeeds.
+                    node_keys.binary_search(&key).map_or(u32::MAX, |i| i as u32)
+                })
+            })
+            .collect();
+        Ok(Self {
+            origin,
+            h,
+            dims,
+            nodes,
+            node_coords,
+            cells,
+            cell_coords,
+        })
+    }
+
+    /// A rectangular block of `n[0] x n[1] x n[2]` cells of edge `h` whose
+    /// minimum corner is at `origin`.
+    pub fn block(n: [u32; 3], h: f64, origin: [f64; 3]) -> Result<Self, LatticeError> {
+        let cells = (0..n[2])
+            .flat_map(move |z| (0..n[1]).flat_map(move |y| (0..n[0]).map(move |x| [x, y, z])));
+        Self::from_cells(origin, h, n, cells)
+    }
+
+    /// The L-shaped block of the paper's shearing experiment, made of six unit
+    /// cubes of edge `unit` (m), each split into `cells_per_unit`^3 cells.
+    ///
+    /// In units: a vertical leg `x in [0, 1], z in [0, 2]` and an overhanging arm
+    /// `x in [1, 2], z in [1, 2]`, both `y in [0, 2]`. The bounding box is
+    /// `2 unit` on every side (the paper: 4 m with 2 m wide arms). The base is the
+    /// face z = 0 of the leg; the arm's top faces are at z = 2 unit, x > unit.
+    pub fn l_shape(cells_per_unit: u32, unit: f64) -> Result<Self, LatticeError> {
+        let n = cells_per_unit;
+        let units: [[u32; 3]; 6] = [
+            [0, 0, 0],
+            [0, 1, 0],
+            [0, 0, 1],
+            [0, 1, 1],
+            [1, 0, 1],
+            [1, 1, 1],
+        ];
+        let cells = units.into_iter().flat_map(move |u| {
+            (0..n).flat_map(move |z| {
+                (0..n).flat_map(move |y| {
+                    (0..n).map(move |x| [u[0] * n + x, u[1] * n + y, u[2] * n + z])
+                })
+            })
+        });
+        if cells_per_unit == 0 {
+            return Err(LatticeError::Empty);
+        }
+        Self::from_cells([0.0; 3], unit / n as f64, [2 * n, 2 * n, 2 * n], cells)
+    }
+
+    /// Position of grid node (0, 0, 0) (m).
+    pub fn origin(&self) -> [f64; 3] {
+        self.origin
+    }
+
+    /// Cell edge length (m).
+    pub fn h(&self) -> f64 {
+        self.h
+    }
+
+    /// Grid size in cells.
+    pub fn dims(&self) -> [u32; 3] {
+        self.dims
+    }
+
+    /// Rest positions of the nodes (m).
+    pub fn nodes(&self) -> &[[f64; 3]] {
+        &self.nodes
+    }
+
+    /// Grid coordinates of the nodes.
+    pub fn node_coords(&self) -> &[[u32; 3]] {
+        &self.node_coords
+    }
+
+    /// Cells as 8 node indices in VTK_HEXAHEDRON order.
+    pub fn cells(&self) -> &[[u32; 8]] {
+        &self.cells
+    }
+
+    /// Grid coordinates of the cells (of their minimum corner).
+    pub fn cell_coords(&self) -> &[[u32; 3]] {
+        &self.cell_coords
+    }
+
+    /// Number of nodes.
+    pub fn num_nodes(&self) -> usize {
+        self.nodes.len()
+    }
+
+    /// Number of cells.
+    pub fn num_cells(&self) -> usize {
+        self.cells.len()
+    }
+
+    /// Total volume of the cells (m^3).
+    pub fn volume(&self) -> f64 {
+        self.cells.len() as f64 * self.h.powi(3)
+    }
+
+    /// Index of the cell at grid coordinates `coord`, if it is in the lattice.
+    pub fn cell_at(&self, coord: [u32; 3]) -> Option<u32> {
+        if (0..3).any(|k| coord[k] >= self.dims[k]) {
+            return None;
+        }
+        let key = cell_key(coord, self.dims);
+        self.cell_coords
+            .binary_search_by_key(&key, |&c| cell_key(c, self.dims))
+            .ok()
+            .map(|i| i as u32)
+    }
+
+    /// Index of the node at grid coordinates `coord`, if it is in the lattice.
+    pub fn node_at(&self, coord: [u32; 3]) -> Option<u32> {
+        if (0..3).any(|k| coord[k] > self.dims[k]) {
+            return None;
+        }
+        let key = node_key(coord, self.dims);
+        self.node_coords
+            .binary_search_by_key(&key, |&c| node_key(c, self.dims))
+            .ok()
+            .map(|i| i as u32)
+    }
+
+    /// Axis-aligned bounding box of the nodes as `(min, max)`.
+    pub fn bounding_box(&self) -> ([f64; 3], [f64; 3]) {
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for p in &self.nodes {
+            for k in 0..3 {
+                lo[k] = lo[k].min(p[k]);
+                hi[k] = hi[k].max(p[k]);
+            }
+        }
+        (lo, hi)
+    }
+
+    /// Number of distinct cell edges (each shared edge counted once).
+    pub fn num_unique_edges(&self) -> usize {
+        let mut edges: Vec<(u32, u32)> = self
+            .cells
+            .iter()
+            .flat_map(|c| CELL_EDGES.iter().map(move |&(a, b, _)| (c[a], c[b])))
+            .map(|(a, b)| (a.min(b), a.max(b)))
+            .collect();
+        edges.sort_unstable();
+        edges.dedup();
+        edges.len()
+    }
+}
+
+/// The 12 edges of a cell as `(corner, corner, axis)`, corners in
+/// VTK_HEXAHEDRON order, the first corner at the lower coordinate along `axis`.
+pub const CELL_EDGES: [(usize, usize, usize); 12] = [
+    (0, 1, 0),
+    (3, 2, 0),
+    (4, 5, 0),
+    (7, 6, 0),
+    (0, 3, 1),
+    (1, 2, 1),
+    (4, 7, 1),
+    (5, 6, 1),
+    (0, 4, 2),
+    (1, 5, 2),
+    (2, 6, 2),
+    (3, 7, 2),
+];
+
+/// The 4 body diagonals of a cell as corner pairs (VTK_HEXAHEDRON order).
+pub const CELL_DIAGONALS: [(usize, usize); 4] = [(0, 6), (1, 7), (2, 4), (3, 5)];
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn block_shares_nodes() {
+        let l = Lattice::block([3, 2, 2], 0.5, [1.0, 2.0, 3.0]).unwrap();
+        assert_eq!(l.num_cells(), 12);
+        assert_eq!(l.num_nodes(), 4 * 3 * 3);
+        // 3x2x2 block: x-edges 3*3*3, y-edges 4*2*3, z-edges 4*3*2.
+        assert_eq!(l.num_unique_edges(), 27 + 24 + 24);
+        for (c, cell) in l.cells().iter().enumerate() {
+            let cc = l.cell_coords()[c];
+            for (k, &n) in cell.iter().enumerate() {
+                let o = CORNER_OFFSETS[k];
+                assert_eq!(
+                    l.node_coords()[n as usize],
+                    [cc[0] + o[0], cc[1] + o[1], cc[2] + o[2]]
+                );
+                let p = l.nodes()[n as usize];
+                for a in 0..3 {
+                    let expect = l.origin()[a] + 0.5 * (cc[a] + o[a]) as f64;
+                    assert_eq!(p[a], expect);
+                }
+            }
+        }
+        assert!((l.volume() - 12.0 * 0.125).abs() < 1e-15);
+    }
+
+    #[test]
+    fn constructor_rejects_bad_input() {
+        assert_eq!(
+            Lattice::block([1, 1, 1], 0.0, [0.0; 3]),
+            Err(LatticeError::BadCellSize(0.0))
+        );
+        assert!(matches!(
+            Lattice::block([1, 1, 1], 1.0, [f64::NAN, 0.0, 0.0]),
+            Err(LatticeError::BadOrigin(_))
+        ));
+        assert_eq!(
+            Lattice::block([0, 1, 1], 1.0, [0.0; 3]),
+            Err(LatticeError::Empty)
+        );
+        assert_eq!(
+            Lattice::from_cells([0.0; 3], 1.0, [2, 2, 2], [[0, 0, 0], [0, 0, 0]]),
+            Err(LatticeError::DuplicateCell([0, 0, 0]))
+        );
+        assert_eq!(
+            Lattice::from_cells([0.0; 3], 1.0, [2, 2, 2], [[0, 2, 0]]),
+            Err(LatticeError::CellOutsideGrid {
+                coord: [0, 2, 0],
+                dims: [2, 2, 2]
+            })
+        );
+    }
+
+    #[test]
+    fn l_shape_has_six_unit_cubes() {
+        let l = Lattice::l_shape(2, 2.0).unwrap();
+        assert_eq!(l.num_cells(), 6 * 8);
+        assert_eq!(l.h(), 1.0);
+        assert_eq!(l.bounding_box(), ([0.0; 3], [4.0; 3]));
+        assert!(l.cell_at([3, 0, 0]).is_none());
+        assert!(l.cell_at([3, 0, 3]).is_some());
+    }
+
+    #[test]
+    fn lookups_find_cells_and_nodes() {
+        let l = Lattice::from_cells([0.0; 3], 1.0, [4, 4, 4], [[3, 3, 3], [0, 1, 2]]).unwrap();
+        assert_eq!(l.cell_coords(), &[[0, 1, 2], [3, 3, 3]]);
+        assert_eq!(l.cell_at([3, 3, 3]), Some(1));
+        assert_eq!(l.cell_at([1, 1, 1]), None);
+        let n = l.node_at([4, 4, 4]).unwrap();
+        assert_eq!(l.nodes()[n as usize], [4.0, 4.0, 4.0]);
+        assert_eq!(l.node_at([2, 2, 2]), None);
+    }
+}

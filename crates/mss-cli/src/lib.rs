@@ -1,0 +1,6 @@
+//! # mss-cli (skeleton)
+
+/// Entry point of the `mss` binary.
+pub fn run() -> anyhow::Result<()> {
+    Ok(())
+}

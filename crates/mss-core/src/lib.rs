@@ -1,0 +1,23 @@
+//! # mss-core
+//!
+//! The hexahedral mass-spring model (MSS) of Baudet et al. (WSCG 2009) as
+//! defined in the project's MODEL.md: per-cell edge and body-diagonal springs
+//! whose stiffnesses follow from Young's modulus and Poisson's ratio, lumped
+//! masses, and the correction forces that make the lattice reproduce both E and
+//! nu. Also boundary conditions, loads, explicit / implicit / static solvers,
+//! virtual material tests and a small hexahedral FEM used as the reference.
+//!
+//! Knows nothing of file formats: it takes a [`hexmesh::Lattice`].
+
+pub mod material;
+pub mod model;
+pub mod sparse;
+
+pub use material::{Material, MaterialError};
+pub use model::{CellCoefficients, Model, ModelError, Parameterization};
+pub use sparse::BlockCsr;
+
+/// 3-vectors of the simulation (`f64`).
+pub type Vec3 = nalgebra::Vector3<f64>;
+/// 3x3 matrices of the simulation (`f64`).
+pub type Mat3 = nalgebra::Matrix3<f64>;

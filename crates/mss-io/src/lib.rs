@@ -1,0 +1,1 @@
+//! # mss-io (skeleton)
