@@ -298,6 +298,67 @@ impl Lattice {
     }
 }
 
+/// The 6 faces of a cell as 4 corners (VTK_HEXAHEDRON order), counter-clockwise
+/// seen from outside the cell, in the order -x, +x, -y, +y, -z, +z.
+pub const CELL_FACES: [[usize; 4]; 6] = [
+    [0, 4, 7, 3],
+    [1, 2, 6, 5],
+    [0, 1, 5, 4],
+    [3, 7, 6, 2],
+    [0, 3, 2, 1],
+    [4, 5, 6, 7],
+];
+
+/// A cell face that no other cell shares: part of the lattice boundary.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct BoundaryFace {
+    /// The cell the face belongs to.
+    pub cell: u32,
+    /// Which face of the cell: index into [`CELL_FACES`] (0..6 = -x, +x, -y, +y, -z, +z).
+    pub face: u8,
+    /// The face's 4 nodes, counter-clockwise seen from outside the lattice.
+    pub nodes: [u32; 4],
+}
+
+impl BoundaryFace {
+    /// Outward unit normal of the face at rest: the axis of [`CELL_FACES`] with its sign.
+    pub fn rest_normal(&self) -> [f64; 3] {
+        let mut n = [0.0; 3];
+        n[self.face as usize / 2] = if self.face % 2 == 0 { -1.0 } else { 1.0 };
+        n
+    }
+}
+
+impl Lattice {
+    /// Every cell face not shared by two cells, in cell order then face order.
+    pub fn boundary_faces(&self) -> Vec<BoundaryFace> {
+        let mut out = Vec::new();
+        for (c, (&cell, &cc)) in self.cells.iter().zip(&self.cell_coords).enumerate() {
+            for (f, corners) in CELL_FACES.iter().enumerate() {
+                let axis = f / 2;
+                let mut neighbour = cc;
+                let has_neighbour = if f % 2 == 0 {
+                    cc[axis] > 0 && {
+                        neighbour[axis] -= 1;
+                        self.cell_at(neighbour).is_some()
+                    }
+                } else {
+                    neighbour[axis] += 1;
+                    self.cell_at(neighbour).is_some()
+                };
+                if !has_neighbour {
+                    out.push(BoundaryFace {
+                        cell: c as u32,
+                        face: f as u8,
+                        nodes: corners.map(|k| cell[k]),
+                    });
+                }
+            }
+        }
+        out
+    }
+}
+
 /// The 12 edges of a cell as `(corner, corner, axis)`, corners in
 /// VTK_HEXAHEDRON order, the first corner at the lower coordinate along `axis`.
 pub const CELL_EDGES: [(usize, usize, usize); 12] = [
@@ -382,6 +443,31 @@ mod tests {
         assert_eq!(l.bounding_box(), ([0.0; 3], [4.0; 3]));
         assert!(l.cell_at([3, 0, 0]).is_none());
         assert!(l.cell_at([3, 0, 3]).is_some());
+    }
+
+    #[test]
+    fn boundary_faces_of_block_are_outward() {
+        let l = Lattice::block([2, 3, 1], 1.0, [0.0; 3]).unwrap();
+        let faces = l.boundary_faces();
+        assert_eq!(faces.len(), 2 * (2 * 3 + 2 + 3));
+        let centre = [1.0, 1.5, 0.5];
+        for f in &faces {
+            let p = f.nodes.map(|n| l.nodes()[n as usize]);
+            // Newell normal of the quad must agree with the rest normal and point away from the centre.
+            let mut nrm = [0.0; 3];
+            for i in 0..4 {
+                let (a, b) = (p[i], p[(i + 1) % 4]);
+                nrm[0] += (a[1] - b[1]) * (a[2] + b[2]);
+                nrm[1] += (a[2] - b[2]) * (a[0] + b[0]);
+                nrm[2] += (a[0] - b[0]) * (a[1] + b[1]);
+            }
+            let rn = f.rest_normal();
+            let dot: f64 = (0..3).map(|k| nrm[k] * rn[k]).sum();
+            assert!(dot > 0.0, "face {f:?} is not counter-clockwise from outside");
+            let mid: Vec<f64> = (0..3).map(|k| p.iter().map(|q| q[k]).sum::<f64>() / 4.0).collect();
+            let out: f64 = (0..3).map(|k| (mid[k] - centre[k]) * rn[k]).sum();
+            assert!(out > 0.0);
+        }
     }
 
     #[test]

@@ -20,5 +20,7 @@
 pub mod lattice;
 pub mod mesh;
 
-pub use lattice::{CELL_DIAGONALS, CELL_EDGES, CORNER_OFFSETS, Lattice, LatticeError};
+pub use lattice::{
+    BoundaryFace, CELL_DIAGONALS, CELL_EDGES, CELL_FACES, CORNER_OFFSETS, Lattice, LatticeError,
+};
 pub use mesh::TriMesh;

@@ -9,8 +9,15 @@
 //!
 //! Knows nothing of file formats: it takes a [`hexmesh::Lattice`].
 
+pub mod constraints;
+pub mod experiments;
+pub mod fem;
+pub mod loads;
 pub mod material;
+pub mod material_test;
 pub mod model;
+pub mod modes;
+pub mod solver;
 pub mod sparse;
 
 pub use material::{Material, MaterialError};
