@@ -324,7 +324,11 @@ impl BoundaryFace {
     /// Outward unit normal of the face at rest: the axis of [`CELL_FACES`] with its sign.
     pub fn rest_normal(&self) -> [f64; 3] {
         let mut n = [0.0; 3];
-        n[self.face as usize / 2] = if self.face % 2 == 0 { -1.0 } else { 1.0 };
+        n[self.face as usize / 2] = if self.face.is_multiple_of(2) {
+            -1.0
+        } else {
+            1.0
+        };
         n
     }
 }
@@ -378,6 +382,173 @@ pub const CELL_EDGES: [(usize, usize, usize); 12] = [
 
 /// The 4 body diagonals of a cell as corner pairs (VTK_HEXAHEDRON order).
 pub const CELL_DIAGONALS: [(usize, usize); 4] = [(0, 6), (1, 7), (2, 4), (3, 5)];
+
+impl Lattice {
+    /// Builds a lattice from a dense occupancy grid: `occupied[x + dims[0] *
+    /// (y + dims[1] * z)]` says whether that grid cell is a cell. Same result
+    /// and invariants as [`Lattice::from_cells`] with the occupied cells, in
+    /// linear time (no sorting), for large voxelizations.
+    pub fn from_occupancy(
+        origin: [f64; 3],
+        h: f64,
+        dims: [u32; 3],
+        occupied: &[bool],
+    ) -> Result<Self, LatticeError> {
+        if !(h.is_finite() && h > 0.0) {
+            return Err(LatticeError::BadCellSize(h));
+        }
+        if origin.iter().any(|v| !v.is_finite()) {
+            return Err(LatticeError::BadOrigin(origin));
+        }
+        let node_count = (dims[0] as u64 + 1) * (dims[1] as u64 + 1) * (dims[2] as u64 + 1);
+        if node_count > u32::MAX as u64 {
+            return Err(LatticeError::GridTooLarge(dims));
+        }
+        let [dx, dy, dz] = dims.map(|d| d as usize);
+        if occupied.len() != dx * dy * dz {
+            // A grid of the wrong size cannot be interpreted: no valid cells.
+            return Err(LatticeError::Empty);
+        }
+        use rayon::prelude::*;
+        let (nx, ny, nz) = (dx + 1, dy + 1, dz + 1);
+        let cell_row = |y: usize, z: usize| &occupied[dx * (y + dy * z)..dx * (y + dy * z + 1)];
+        // A node is used if any of the (up to) 8 cells around it is occupied;
+        // done per node row, streaming through the neighbouring cell rows.
+        let mut node_index = vec![u32::MAX; node_count as usize];
+        let row_counts: Vec<u32> = node_index
+            .par_chunks_mut(nx)
+            .enumerate()
+            .map(|(r, out)| {
+                let (y, z) = (r % ny, r / ny);
+                let mut used = vec![false; dx];
+                for cz in z.saturating_sub(1)..(z + 1).min(dz) {
+                    for cy in y.saturating_sub(1)..(y + 1).min(dy) {
+                        for (u, &o) in used.iter_mut().zip(cell_row(cy, cz)) {
+                            *u |= o;
+                        }
+                    }
+                }
+                let mut n = 0u32;
+                for (x, slot) in out.iter_mut().enumerate() {
+                    let left = x > 0 && used[x - 1];
+                    let right = x < dx && used[x];
+                    if left || right {
+                        *slot = n;
+                        n += 1;
+                    }
+                }
+                n
+            })
+            .collect();
+        // Row-local numbers to global ones (node order = grid linear order).
+        let mut offsets = Vec::with_capacity(row_counts.len());
+        let mut total = 0u32;
+        for &c in &row_counts {
+            offsets.push(total);
+            total += c;
+        }
+        node_index
+            .par_chunks_mut(nx)
+            .zip(&offsets)
+            .for_each(|(row, &off)| {
+                for v in row.iter_mut().filter(|v| **v != u32::MAX) {
+                    *v += off;
+                }
+            });
+        if total == 0 {
+            return Err(LatticeError::Empty);
+        }
+        // Outputs are allocated zeroed at their exact sizes and filled per
+        // z-layer in parallel (disjoint slices, so the result is the same for
+        // any number of threads).
+        let mut node_coords = vec![[0u32; 3]; total as usize];
+        let mut nodes = vec![[0.0f64; 3]; total as usize];
+        {
+            let mut coord_rest = node_coords.as_mut_slice();
+            let mut node_rest = nodes.as_mut_slice();
+            let mut jobs = Vec::with_capacity(nz);
+            for z in 0..nz {
+                let n: usize = row_counts[z * ny..(z + 1) * ny]
+                    .iter()
+                    .map(|&c| c as usize)
+                    .sum();
+                let (c, cr) = coord_rest.split_at_mut(n);
+                let (p, pr) = node_rest.split_at_mut(n);
+                coord_rest = cr;
+                node_rest = pr;
+                jobs.push((z, c, p));
+            }
+            jobs.into_par_iter().for_each(|(z, coords, points)| {
+                let mut i = 0;
+                for y in 0..ny {
+                    let row = &node_index[nx * (y + ny * z)..nx * (y + ny * z + 1)];
+                    for (x, &v) in row.iter().enumerate() {
+                        if v != u32::MAX {
+                            let c = [x as u32, y as u32, z as u32];
+                            coords[i] = c;
+                            points[i] = std::array::from_fn(|k| origin[k] + h * c[k] as f64);
+                            i += 1;
+                        }
+                    }
+                }
+            });
+        }
+        let layer_cells: Vec<usize> = (0..dz)
+            .into_par_iter()
+            .map(|z| {
+                occupied[dx * dy * z..dx * dy * (z + 1)]
+                    .iter()
+                    .filter(|&&o| o)
+                    .count()
+            })
+            .collect();
+        let n_cells: usize = layer_cells.iter().sum();
+        let mut cell_coords = vec![[0u32; 3]; n_cells];
+        let mut cells = vec![[0u32; 8]; n_cells];
+        {
+            let mut coord_rest = cell_coords.as_mut_slice();
+            let mut cell_rest = cells.as_mut_slice();
+            let mut jobs = Vec::with_capacity(dz);
+            for (z, &n) in layer_cells.iter().enumerate() {
+                let (c, cr) = coord_rest.split_at_mut(n);
+                let (p, pr) = cell_rest.split_at_mut(n);
+                coord_rest = cr;
+                cell_rest = pr;
+                jobs.push((z, c, p));
+            }
+            jobs.into_par_iter().for_each(|(z, coords, out)| {
+                let mut i = 0;
+                for y in 0..dy {
+                    let base = nx * (y + ny * z);
+                    for (x, _) in cell_row(y, z).iter().enumerate().filter(|(_, o)| **o) {
+                        coords[i] = [x as u32, y as u32, z as u32];
+                        let b = base + x;
+                        out[i] = [
+                            node_index[b],
+                            node_index[b + 1],
+                            node_index[b + 1 + nx],
+                            node_index[b + nx],
+                            node_index[b + nx * ny],
+                            node_index[b + 1 + nx * ny],
+                            node_index[b + 1 + nx + nx * ny],
+                            node_index[b + nx + nx * ny],
+                        ];
+                        i += 1;
+                    }
+                }
+            });
+        }
+        Ok(Self {
+            origin,
+            h,
+            dims,
+            nodes,
+            node_coords,
+            cells,
+            cell_coords,
+        })
+    }
+}
 
 #[cfg(test)]
 mod tests {
@@ -463,11 +634,35 @@ mod tests {
             }
             let rn = f.rest_normal();
             let dot: f64 = (0..3).map(|k| nrm[k] * rn[k]).sum();
-            assert!(dot > 0.0, "face {f:?} is not counter-clockwise from outside");
-            let mid: Vec<f64> = (0..3).map(|k| p.iter().map(|q| q[k]).sum::<f64>() / 4.0).collect();
+            assert!(
+                dot > 0.0,
+                "face {f:?} is not counter-clockwise from outside"
+            );
+            let mid: Vec<f64> = (0..3)
+                .map(|k| p.iter().map(|q| q[k]).sum::<f64>() / 4.0)
+                .collect();
             let out: f64 = (0..3).map(|k| (mid[k] - centre[k]) * rn[k]).sum();
             assert!(out > 0.0);
         }
+    }
+
+    #[test]
+    fn from_occupancy_matches_from_cells() {
+        let dims = [3, 2, 2];
+        let occ = [
+            true, false, true, false, true, true, true, false, false, false, true, true,
+        ];
+        let cells: Vec<[u32; 3]> = (0..12)
+            .filter(|&i| occ[i])
+            .map(|i| [(i % 3) as u32, ((i / 3) % 2) as u32, (i / 6) as u32])
+            .collect();
+        let a = Lattice::from_occupancy([0.5, 0.0, -1.0], 0.25, dims, &occ).unwrap();
+        let b = Lattice::from_cells([0.5, 0.0, -1.0], 0.25, dims, cells).unwrap();
+        assert_eq!(a, b);
+        assert_eq!(
+            Lattice::from_occupancy([0.0; 3], 1.0, dims, &[false; 12]),
+            Err(LatticeError::Empty)
+        );
     }
 
     #[test]

@@ -1,6 +1,186 @@
-//! # mss-cli (skeleton)
+//! # mss-cli
+//!
+//! The `mss` command: turns a surface mesh into a hexahedral mass-spring soft
+//! body (Baudet et al. 2009) and simulates it.
+//!
+//! - `mss run [SCENE]`: runs a scene file (without one: the bundled default job).
+//! - `mss voxelize MESH`: voxelizes a mesh and writes the lattice and its skins.
+//! - `mss check SCENE`: validates a scene and estimates its cost.
+//! - `mss init [FILE]`: writes a commented template scene.
+//! - `mss experiment ...`: the paper's experiments.
+//!
+//! [`run_with_args`] runs the command line given to it, so everything the
+//! binary does can be tested without a process:
+//!
+//! ```
+//! let dir = tempfile::tempdir().unwrap();
+//! let file = dir.path().join("scene.toml");
+//! mss_cli::run_with_args(["mss", "-q", "init", file.to_str().unwrap()]).unwrap();
+//! mss_cli::run_with_args(["mss", "-q", "init", file.to_str().unwrap()]).unwrap_err();
+//! ```
+//!
+//! Errors come back as [`anyhow::Error`]; [`error_report`] renders one as the
+//! single line the binary prints (or the chain of causes under `-v`), and
+//! [`exit_code`] maps it to the process exit code.
 
-/// Entry point of the `mss` binary.
+use std::ffi::OsString;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicU8, Ordering};
+
+use anyhow::Context;
+use clap::{Args, Parser};
+
+pub mod commands;
+pub mod output;
+pub mod progress;
+pub mod setup;
+
+/// Command-line interface of `mss`.
+#[derive(Debug, Parser)]
+#[command(
+    name = "mss",
+    version,
+    about = "Hexahedral mass-spring soft bodies from surface meshes (Baudet et al. 2009)",
+    long_about = "Turns a closed surface mesh (OBJ, STL) into a lattice of cubic cells, builds the \
+                  hexahedral mass-spring system of Baudet et al. (WSCG 2009) whose springs and \
+                  correction forces reproduce a given Young's modulus and Poisson's ratio, and \
+                  simulates it. Results are VTK files (open the .pvd in ParaView) and OBJ skins."
+)]
+pub struct Cli {
+    /// Options shared by every subcommand.
+    #[command(flatten)]
+    pub global: GlobalArgs,
+    /// The subcommand.
+    #[command(subcommand)]
+    pub command: commands::Command,
+}
+
+/// Options shared by every subcommand.
+#[derive(Debug, Clone, Args)]
+pub struct GlobalArgs {
+    /// More messages (-v: info and the chain of causes of an error, -vv: debug, -vvv: trace).
+    #[arg(short, long, action = clap::ArgAction::Count, global = true)]
+    pub verbose: u8,
+    /// Fewer messages (-q: no progress bars or summaries, only errors).
+    #[arg(short, long, action = clap::ArgAction::Count, global = true, conflicts_with = "verbose")]
+    pub quiet: u8,
+    /// Worker threads for the parallel parts (default: one per core). Results do
+    /// not depend on it.
+    #[arg(long, value_name = "N", global = true)]
+    pub threads: Option<usize>,
+    /// Output folder (overrides the scene's `[output] folder`).
+    #[arg(long, value_name = "DIR", global = true)]
+    pub out: Option<PathBuf>,
+}
+
+impl GlobalArgs {
+    /// Whether progress bars and summaries are shown.
+    pub fn chatty(&self) -> bool {
+        self.quiet == 0
+    }
+}
+
+/// A command line that clap refused (unknown option, missing argument, ...):
+/// exit code 2.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct UsageError(pub String);
+
+static VERBOSITY: AtomicU8 = AtomicU8::new(0);
+
+/// Runs `mss` with the process's command line.
 pub fn run() -> anyhow::Result<()> {
-    Ok(())
+    run_with_args(std::env::args_os())
+}
+
+/// Runs `mss` with the given command line (the first item is the program name).
+/// `--help` and `--version` print and return `Ok`.
+pub fn run_with_args<I, T>(args: I) -> anyhow::Result<()>
+where
+    I: IntoIterator<Item = T>,
+    T: Into<OsString> + Clone,
+{
+    let cli = match Cli::try_parse_from(args) {
+        Ok(cli) => cli,
+        Err(e) => {
+            use clap::error::ErrorKind;
+            return match e.kind() {
+                ErrorKind::DisplayHelp | ErrorKind::DisplayVersion => {
+                    e.print().context("cannot print the help text")?;
+                    Ok(())
+                }
+                _ => Err(UsageError(clap_error_line(&e)).into()),
+            };
+        }
+    };
+    VERBOSITY.store(cli.global.verbose, Ordering::Relaxed);
+    init_logger(&cli.global);
+    let threads = cli.global.threads.unwrap_or(0);
+    if cli.global.threads == Some(0) {
+        return Err(UsageError(
+            "--threads 0: give at least 1 thread (or leave --threads out for one per core)".into(),
+        )
+        .into());
+    }
+    // A local pool (not the global one) so that several runs in one process,
+    // as in tests, can each choose their thread count.
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .context("cannot start the worker threads")?;
+    pool.install(|| commands::dispatch(&cli))
+}
+
+fn clap_error_line(e: &clap::Error) -> String {
+    let text = e.render().to_string();
+    let first = text
+        .lines()
+        .find(|l| !l.trim().is_empty())
+        .unwrap_or("invalid command line")
+        .trim();
+    let first = first.strip_prefix("error: ").unwrap_or(first);
+    format!("{first} (see `mss --help`)")
+}
+
+fn init_logger(g: &GlobalArgs) {
+    use log::LevelFilter;
+    let level = match (g.quiet, g.verbose) {
+        (q, _) if q >= 2 => LevelFilter::Off,
+        (1, _) => LevelFilter::Error,
+        (_, 0) => LevelFilter::Warn,
+        (_, 1) => LevelFilter::Info,
+        (_, 2) => LevelFilter::Debug,
+        _ => LevelFilter::Trace,
+    };
+    // The logger can be installed once per process; later calls (tests running
+    // several command lines) only change the level.
+    let _ = env_logger::Builder::new()
+        .filter_level(LevelFilter::Trace)
+        .format_timestamp(None)
+        .format_target(false)
+        .try_init();
+    log::set_max_level(level);
+}
+
+/// The text the binary prints for an error: one line `error: ...` with every
+/// cause joined by ": ", or under `-v` the error followed by one line per cause.
+pub fn error_report(e: &anyhow::Error) -> String {
+    let flat = |s: String| s.split_whitespace().collect::<Vec<_>>().join(" ");
+    if VERBOSITY.load(Ordering::Relaxed) == 0 {
+        return format!("error: {}", flat(format!("{e:#}")));
+    }
+    let mut out = format!("error: {}", flat(e.to_string()));
+    for cause in e.chain().skip(1) {
+        out.push_str(&format!("\n  caused by: {}", flat(cause.to_string())));
+    }
+    out
+}
+
+/// Process exit code for an error: 2 for a refused command line, 1 otherwise.
+pub fn exit_code(e: &anyhow::Error) -> u8 {
+    if e.downcast_ref::<UsageError>().is_some() {
+        2
+    } else {
+        1
+    }
 }

@@ -1,1 +1,672 @@
-//! (placeholder: being written)
+//! The paper's experiments (WSCG 2009, section 5) as computations: the
+//! cantilever under gravity, the L-shaped block under a surface load, and
+//! virtual material tests. Results are plain structs; file formats live in
+//! `mss-io`.
+//!
+//! Error metric (MODEL.md, the paper's Figures 5 and 6): for every lattice node
+//! `e = |u_mss - u_ref| / max_nodes |u_ref| * 100 %`, reported as mean (M),
+//! population standard deviation (SD) and maximum (MAX) over the nodes.
+//!
+//! The reference `u_ref` is Q1 finite elements ([`crate::fem`]) on a refinement
+//! of the lattice, Richardson-extrapolated from two refinements (`r/2` and `r`,
+//! `u = (4 u_r - u_{r/2}) / 3`, Q1 displacements converge as h^2), evaluated at
+//! the coarse lattice's rest node positions. Small loads use linear elasticity on
+//! both sides (MSS: `K0 u = f` with `K0 = -tangent(rest)`); the large-deflection
+//! regime uses the nonlinear static solver for the MSS and compressible
+//! neo-Hookean FEM.
+
+use hexmesh::Lattice;
+use thiserror::Error;
+
+use crate::constraints::Constraints;
+use crate::fem::{Fem, FemError, FemLaw, NewtonOptions};
+use crate::loads::Load;
+use crate::material_test::{MaterialTestError, MeasuredMaterial, measure_material};
+use crate::model::parameterization_by_name;
+use crate::solver::{Problem, SolverError, State, StaticOptions, solve_static};
+use crate::{LinearSolveError, Material, MaterialError, Model, ModelError, Vec3};
+
+/// Why an experiment failed.
+#[derive(Debug, Error)]
+pub enum ExperimentError {
+    /// Lattice construction failed.
+    #[error(transparent)]
+    Lattice(#[from] hexmesh::LatticeError),
+    /// Bad material.
+    #[error(transparent)]
+    Material(#[from] MaterialError),
+    /// Model construction failed.
+    #[error(transparent)]
+    Model(#[from] ModelError),
+    /// FEM reference failed.
+    #[error("FEM reference: {0}")]
+    Fem(#[from] FemError),
+    /// MSS linear solve failed.
+    #[error("MSS linear solve: {0}")]
+    Linear(#[from] LinearSolveError),
+    /// MSS static solve failed.
+    #[error("MSS static solve: {0}")]
+    Solver(#[from] SolverError),
+    /// Material test failed.
+    #[error("material test: {0}")]
+    MaterialTest(#[from] MaterialTestError),
+    /// Unknown parameterization name.
+    #[error("unknown parameterization {0:?}")]
+    Parameterization(String),
+    /// An invalid experiment setting.
+    #[error("{0}")]
+    Setting(String),
+    /// The MSS problem set-up was refused.
+    #[error("problem set-up: {0}")]
+    Problem(String),
+}
+
+/// Load regime of a static experiment.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Regime {
+    /// Small load, linear (small-strain) solutions on both sides.
+    Linear,
+    /// Large load: nonlinear MSS statics against neo-Hookean FEM.
+    Large,
+}
+
+impl Regime {
+    /// Short label.
+    pub fn label(self) -> &'static str {
+        match self {
+            Regime::Linear => "small load (linear)",
+            Regime::Large => "large deflection (nonlinear)",
+        }
+    }
+}
+
+/// The paper's error statistics over the nodes, in % of `max |u_ref|`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ErrorStats {
+    /// Mean.
+    pub mean: f64,
+    /// Population standard deviation.
+    pub sd: f64,
+    /// Maximum.
+    pub max: f64,
+}
+
+/// Per-node errors `|u - u_ref| / max |u_ref| * 100` and their statistics.
+pub fn error_stats(u: &[Vec3], u_ref: &[Vec3]) -> (Vec<f64>, ErrorStats) {
+    let umax = u_ref.iter().map(|v| v.norm()).fold(0.0, f64::max);
+    let scale = if umax > 0.0 { 100.0 / umax } else { 0.0 };
+    let e: Vec<f64> = u
+        .iter()
+        .zip(u_ref)
+        .map(|(a, b)| (a - b).norm() * scale)
+        .collect();
+    let n = e.len().max(1) as f64;
+    let mean = e.iter().sum::<f64>() / n;
+    let sd = (e.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n).sqrt();
+    let max = e.iter().copied().fold(0.0, f64::max);
+    (e, ErrorStats { mean, sd, max })
+}
+
+/// One MSS run against the reference.
+#[derive(Debug, Clone)]
+pub struct RunResult {
+    /// Parameterization name ("paper", "springs", "volumetric").
+    pub model: String,
+    /// Cells along each axis of the lattice's grid.
+    pub dims: [u32; 3],
+    /// Cell edge (m).
+    pub h: f64,
+    /// Error statistics (% of max |u_ref|).
+    pub stats: ErrorStats,
+    /// Mean displacement of the monitored nodes (beam: tip, L: loaded top), m.
+    pub monitor: Vec3,
+    /// The lattice (for output).
+    pub lattice: Lattice,
+    /// MSS nodal displacements (m).
+    pub u: Vec<Vec3>,
+    /// Reference displacements at the lattice nodes (m).
+    pub u_ref: Vec<Vec3>,
+    /// Per-node error (% of max |u_ref|).
+    pub node_error: Vec<f64>,
+    /// Wall-clock seconds of the MSS solve.
+    pub seconds: f64,
+}
+
+/// How the reference was computed.
+#[derive(Debug, Clone)]
+pub struct ReferenceInfo {
+    /// Cells of the finest FEM grid.
+    pub fine_dims: [u32; 3],
+    /// Constitutive law.
+    pub law: FemLaw,
+    /// Whether Richardson extrapolation from the half-resolution FEM was used.
+    pub richardson: bool,
+    /// Mean monitored displacement of the fine FEM and of the extrapolation (m).
+    pub monitor_fine: Vec3,
+    /// Same for the extrapolated reference.
+    pub monitor_ref: Vec3,
+    /// Wall-clock seconds of the reference.
+    pub seconds: f64,
+}
+
+/// Cantilever (beam) experiment settings.
+#[derive(Debug, Clone)]
+pub struct BeamSettings {
+    /// Poisson's ratio.
+    pub poisson: f64,
+    /// Density (kg/m^3): 0.01 for the small load, 3.125 for the paper's large one.
+    pub density: f64,
+    /// Regime.
+    pub regime: Regime,
+    /// Cells across the thickness of each MSS lattice (4x1x1 -> 1, ...).
+    pub resolutions: Vec<u32>,
+    /// Cells across the thickness of the finest FEM reference (16 = 64x16x16).
+    pub reference: u32,
+    /// Parameterizations to run.
+    pub models: Vec<String>,
+}
+
+/// The paper's cantilever dimensions and material.
+pub const BEAM_LENGTH: f64 = 0.4;
+/// Beam cross-section side (m).
+pub const BEAM_SIDE: f64 = 0.1;
+/// Young's modulus of the experiments (Pa).
+pub const BEAM_YOUNG: f64 = 1000.0;
+/// Gravity (m/s^2).
+pub const GRAVITY: f64 = 9.81;
+
+/// A sampled deflection curve along the beam axis.
+#[derive(Debug, Clone)]
+pub struct Curve {
+    /// Label.
+    pub label: String,
+    /// (x, deflection w) pairs, w positive downwards (m).
+    pub points: Vec<(f64, f64)>,
+}
+
+/// Results of the cantilever experiment for one setting.
+#[derive(Debug, Clone)]
+pub struct BeamResult {
+    /// The settings.
+    pub settings: BeamSettings,
+    /// Reference info.
+    pub reference: ReferenceInfo,
+    /// Runs, per model and resolution.
+    pub runs: Vec<RunResult>,
+    /// Euler-Bernoulli tip deflection (m, downwards).
+    pub euler_bernoulli_tip: f64,
+    /// Timoshenko tip deflection (m, downwards, shear factor 5/6).
+    pub timoshenko_tip: f64,
+    /// Neutral-axis deflection curves: reference, beam theories, MSS runs.
+    pub curves: Vec<Curve>,
+}
+
+/// Euler-Bernoulli deflection `q x^2 (6 L^2 - 4 L x + x^2) / (24 E I)` of the
+/// clamped cantilever under the distributed load `q` (N/m).
+pub fn euler_bernoulli(x: f64, q: f64, e: f64) -> f64 {
+    let l = BEAM_LENGTH;
+    let i = BEAM_SIDE.powi(4) / 12.0;
+    q * x * x * (6.0 * l * l - 4.0 * l * x + x * x) / (24.0 * e * i)
+}
+
+/// Timoshenko deflection: Euler-Bernoulli plus the shear term
+/// `q (L x - x^2 / 2) / (kappa G A)` with `kappa = 5/6`.
+pub fn timoshenko(x: f64, q: f64, e: f64, nu: f64) -> f64 {
+    let g = e / (2.0 * (1.0 + nu));
+    let a = BEAM_SIDE * BEAM_SIDE;
+    euler_bernoulli(x, q, e) + q * (BEAM_LENGTH * x - x * x / 2.0) / (5.0 / 6.0 * g * a)
+}
+
+/// A static problem: lattice, material, clamped nodes, consistent nodal loads.
+struct Case<'a> {
+    material: Material,
+    clamp: &'a dyn Fn([f64; 3]) -> bool,
+    /// Consistent nodal forces on a lattice (coarse or refined).
+    loads: &'a dyn Fn(&Fem) -> Vec<Vec3>,
+    monitor: &'a dyn Fn([f64; 3]) -> bool,
+}
+
+fn mean_over(lattice: &Lattice, u: &[Vec3], pred: &dyn Fn([f64; 3]) -> bool) -> Vec3 {
+    let mut s = Vec3::zeros();
+    let mut n = 0;
+    for (p, v) in lattice.nodes().iter().zip(u) {
+        if pred(*p) {
+            s += v;
+            n += 1;
+        }
+    }
+    if n > 0 { s / n as f64 } else { s }
+}
+
+/// FEM reference at the nodes of every lattice in `targets` (they must lie in
+/// the fine mesh); `fine_r` refines `base`.
+fn reference(
+    base: &Lattice,
+    case: &Case,
+    fine_r: u32,
+    regime: Regime,
+    targets: &[&Lattice],
+) -> Result<(Vec<Vec<Vec3>>, ReferenceInfo), ExperimentError> {
+    let t0 = std::time::Instant::now();
+    let law = match regime {
+        Regime::Linear => FemLaw::Linear,
+        Regime::Large => FemLaw::NeoHookean,
+    };
+    let solve = |r: u32| -> Result<(Fem, Vec<Vec3>), ExperimentError> {
+        let fem = Fem::new(base, r, case.material)?;
+        let bc = fem.clamp_where(case.clamp);
+        let f = (case.loads)(&fem);
+        let opts = NewtonOptions {
+            load_steps: 2,
+            ..NewtonOptions::default()
+        };
+        let sol = fem.solve(law, &bc, &f, &opts)?;
+        log::info!(
+            "FEM {:?} on {:?} cells: {} iterations, {:.1} s",
+            law,
+            fem.lattice().dims(),
+            sol.iterations,
+            t0.elapsed().as_secs_f64()
+        );
+        Ok((fem, sol.displacement))
+    };
+    let (fine, u_fine) = solve(fine_r)?;
+    let coarse = if fine_r.is_multiple_of(2) {
+        Some(solve(fine_r / 2)?)
+    } else {
+        None
+    };
+    let mut out = Vec::new();
+    let at = |fem: &Fem, u: &[Vec3], l: &Lattice| -> Result<Vec<Vec3>, ExperimentError> {
+        fem.interpolate_all(u, l.nodes())
+            .ok_or_else(|| ExperimentError::Setting("lattice node outside the FEM mesh".into()))
+    };
+    for l in targets {
+        let uf = at(&fine, &u_fine, l)?;
+        let u = match &coarse {
+            Some((fc, uc)) => {
+                let uc = at(fc, uc, l)?;
+                uf.iter()
+                    .zip(&uc)
+                    .map(|(a, b)| (a * 4.0 - b) / 3.0)
+                    .collect()
+            }
+            None => uf,
+        };
+        out.push(u);
+    }
+    let fl = fine.lattice();
+    let monitor_fine = mean_over(fl, &u_fine, case.monitor);
+    let monitor_ref = match &coarse {
+        Some((fc, uc)) => {
+            let uc_at = at(fc, uc, fl)?;
+            let ex: Vec<Vec3> = u_fine
+                .iter()
+                .zip(&uc_at)
+                .map(|(a, b)| (a * 4.0 - b) / 3.0)
+                .collect();
+            mean_over(fl, &ex, case.monitor)
+        }
+        None => monitor_fine,
+    };
+    Ok((
+        out,
+        ReferenceInfo {
+            fine_dims: fl.dims(),
+            law,
+            richardson: coarse.is_some(),
+            monitor_fine,
+            monitor_ref,
+            seconds: t0.elapsed().as_secs_f64(),
+        },
+    ))
+}
+
+/// Consistent nodal forces on an MSS lattice, computed like the FEM's.
+fn lattice_loads(lattice: &Lattice, case: &Case) -> Result<Vec<Vec3>, ExperimentError> {
+    let fem = Fem::new(lattice, 1, case.material)?;
+    Ok((case.loads)(&fem))
+}
+
+/// Fixed nodal forces as an MSS load.
+#[derive(Debug)]
+struct FixedForces(Vec<Vec3>);
+
+impl Load for FixedForces {
+    fn name(&self) -> String {
+        "experiment loads".into()
+    }
+    fn add_forces(&self, _m: &Model, _t: f64, _x: &[Vec3], scale: f64, f: &mut [Vec3]) {
+        for (fi, v) in f.iter_mut().zip(&self.0) {
+            *fi += v * scale;
+        }
+    }
+}
+
+/// MSS displacement of `lattice` under the case's loads.
+fn mss_solve(
+    lattice: &Lattice,
+    case: &Case,
+    model_name: &str,
+    regime: Regime,
+) -> Result<Vec<Vec3>, ExperimentError> {
+    let param = parameterization_by_name(model_name)
+        .ok_or_else(|| ExperimentError::Parameterization(model_name.to_string()))?;
+    let model = Model::new(lattice, case.material, param.as_ref())?;
+    let f = lattice_loads(lattice, case)?;
+    let fixed: Vec<bool> = lattice.nodes().iter().map(|&p| (case.clamp)(p)).collect();
+    match regime {
+        Regime::Linear => {
+            let k = model.tangent(model.rest_positions());
+            // K0 = -tangent(rest): solve (-T) u = f as T u = -f.
+            let neg: Vec<Vec3> = f.iter().map(|v| -v).collect();
+            Ok(k.solve(&neg, &fixed)?)
+        }
+        Regime::Large => {
+            let mut c = Constraints::none(model.num_nodes());
+            let nodes: Vec<u32> = (0..fixed.len() as u32)
+                .filter(|&i| fixed[i as usize])
+                .collect();
+            c.fix(&nodes)
+                .map_err(|e| ExperimentError::Problem(e.to_string()))?;
+            let problem = Problem::new(model)
+                .with_constraints(c)
+                .map_err(|e| ExperimentError::Problem(e.to_string()))?
+                .with_load(Box::new(FixedForces(f)));
+            let mut state = State::at_rest(problem.model());
+            let opts = StaticOptions {
+                rtol: 1e-10,
+                ..StaticOptions::default()
+            };
+            solve_static(&problem, &mut state, &opts)?;
+            Ok(state.displacements(problem.model()))
+        }
+    }
+}
+
+fn run_case(
+    lattice: &Lattice,
+    case: &Case,
+    model: &str,
+    regime: Regime,
+    u_ref: Vec<Vec3>,
+) -> Result<RunResult, ExperimentError> {
+    let t0 = std::time::Instant::now();
+    let u = mss_solve(lattice, case, model, regime)?;
+    let seconds = t0.elapsed().as_secs_f64();
+    let (node_error, stats) = error_stats(&u, &u_ref);
+    Ok(RunResult {
+        model: model.to_string(),
+        dims: lattice.dims(),
+        h: lattice.h(),
+        stats,
+        monitor: mean_over(lattice, &u, case.monitor),
+        lattice: lattice.clone(),
+        u,
+        u_ref,
+        node_error,
+        seconds,
+    })
+}
+
+/// Mean deflection (downwards) of each cross-section x = const of a lattice.
+fn section_curve(lattice: &Lattice, u: &[Vec3]) -> Vec<(f64, f64)> {
+    let mut sums: std::collections::BTreeMap<u32, (f64, f64, u32)> = Default::default();
+    for ((p, c), v) in lattice.nodes().iter().zip(lattice.node_coords()).zip(u) {
+        let e = sums.entry(c[0]).or_insert((p[0], 0.0, 0));
+        e.1 += -v.z;
+        e.2 += 1;
+    }
+    sums.values().map(|&(x, s, n)| (x, s / n as f64)).collect()
+}
+
+/// Runs the cantilever experiment: x = 0 clamped, gravity along -z.
+pub fn beam(settings: &BeamSettings) -> Result<BeamResult, ExperimentError> {
+    if settings.resolutions.is_empty()
+        || settings
+            .resolutions
+            .iter()
+            .any(|&r| r == 0 || !settings.reference.is_multiple_of(r))
+    {
+        return Err(ExperimentError::Setting(format!(
+            "beam resolutions {:?} must be positive divisors of the reference resolution {}",
+            settings.resolutions, settings.reference
+        )));
+    }
+    let material = Material::new(BEAM_YOUNG, settings.poisson, settings.density)?;
+    let lattice_for = |n: u32| Lattice::block([4 * n, n, n], BEAM_SIDE / n as f64, [0.0; 3]);
+    let clamp = |p: [f64; 3]| p[0].abs() < 1e-9;
+    let tip = |p: [f64; 3]| (p[0] - BEAM_LENGTH).abs() < 1e-9;
+    let loads = |fem: &Fem| fem.gravity_load(Vec3::new(0.0, 0.0, -GRAVITY));
+    let case = Case {
+        material,
+        clamp: &clamp,
+        loads: &loads,
+        monitor: &tip,
+    };
+    let lattices: Vec<Lattice> = settings
+        .resolutions
+        .iter()
+        .map(|&n| lattice_for(n))
+        .collect::<Result<_, _>>()?;
+    let base = lattice_for(1)?;
+    // Curves of the reference: sample at the nodes of the finest MSS lattice
+    // (plus the others) through a dedicated target.
+    let curve_lattice = lattice_for(settings.reference)?;
+    let mut targets: Vec<&Lattice> = lattices.iter().collect();
+    targets.push(&curve_lattice);
+    let (mut refs, info) = reference(&base, &case, settings.reference, settings.regime, &targets)?;
+    let ref_fine = refs.pop().unwrap_or_default();
+    let mut runs = Vec::new();
+    for model in &settings.models {
+        for (l, u_ref) in lattices.iter().zip(&refs) {
+            runs.push(run_case(l, &case, model, settings.regime, u_ref.clone())?);
+        }
+    }
+    let q = settings.density * GRAVITY * BEAM_SIDE * BEAM_SIDE;
+    let mut curves = vec![Curve {
+        label: format!(
+            "FEM reference ({}x{}x{})",
+            info.fine_dims[0], info.fine_dims[1], info.fine_dims[2]
+        ),
+        points: section_curve(&curve_lattice, &ref_fine),
+    }];
+    let xs: Vec<f64> = (0..=40).map(|i| BEAM_LENGTH * i as f64 / 40.0).collect();
+    curves.push(Curve {
+        label: "Euler-Bernoulli".into(),
+        points: xs
+            .iter()
+            .map(|&x| (x, euler_bernoulli(x, q, BEAM_YOUNG)))
+            .collect(),
+    });
+    curves.push(Curve {
+        label: "Timoshenko".into(),
+        points: xs
+            .iter()
+            .map(|&x| (x, timoshenko(x, q, BEAM_YOUNG, settings.poisson)))
+            .collect(),
+    });
+    for r in &runs {
+        curves.push(Curve {
+            label: format!("{} {}x{}x{}", r.model, r.dims[0], r.dims[1], r.dims[2]),
+            points: section_curve(&r.lattice, &r.u),
+        });
+    }
+    Ok(BeamResult {
+        settings: settings.clone(),
+        reference: info,
+        runs,
+        euler_bernoulli_tip: euler_bernoulli(BEAM_LENGTH, q, BEAM_YOUNG),
+        timoshenko_tip: timoshenko(BEAM_LENGTH, q, BEAM_YOUNG, settings.poisson),
+        curves,
+    })
+}
+
+/// Where the L-shape's surface load is applied, and in which direction.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LLoad {
+    /// Downward traction on the arm's top faces (z = top, x > unit).
+    ArmTopDown,
+    /// Horizontal traction along +x on the arm's top faces.
+    ArmTopShearX,
+    /// Horizontal traction along +y on the arm's top faces.
+    ArmTopShearY,
+    /// Downward traction on the arm's free end face (x = max), orthogonal to
+    /// the base.
+    ArmEndDown,
+}
+
+impl LLoad {
+    /// All readings tried.
+    pub const ALL: [LLoad; 4] = [
+        LLoad::ArmTopDown,
+        LLoad::ArmTopShearX,
+        LLoad::ArmTopShearY,
+        LLoad::ArmEndDown,
+    ];
+    /// Description.
+    pub fn describe(self) -> &'static str {
+        match self {
+            LLoad::ArmTopDown => "downward traction on the arm's top face",
+            LLoad::ArmTopShearX => "horizontal (+x) shear traction on the arm's top face",
+            LLoad::ArmTopShearY => "horizontal (+y) shear traction on the arm's top face",
+            LLoad::ArmEndDown => "downward traction on the arm's end face (x = 4 m)",
+        }
+    }
+}
+
+/// L-shape experiment settings.
+#[derive(Debug, Clone)]
+pub struct LShapeSettings {
+    /// Load reading.
+    pub load: LLoad,
+    /// Traction magnitude (Pa); irrelevant to the relative errors in the linear regime.
+    pub traction: f64,
+    /// Cells per 2 m unit cube of the MSS lattices (2, 4, 8).
+    pub resolutions: Vec<u32>,
+    /// Cells per unit of the finest FEM reference.
+    pub reference: u32,
+    /// Parameterizations.
+    pub models: Vec<String>,
+}
+
+/// Results of the L-shape experiment.
+#[derive(Debug, Clone)]
+pub struct LShapeResult {
+    /// Settings.
+    pub settings: LShapeSettings,
+    /// Reference info.
+    pub reference: ReferenceInfo,
+    /// Runs per model and resolution.
+    pub runs: Vec<RunResult>,
+}
+
+/// Edge of the L's unit cubes (m): 4 m bounding box.
+pub const L_UNIT: f64 = 2.0;
+
+/// Runs the L-shape experiment (linear regime, mass neglected, E = 1 kPa,
+/// nu = 0.3, base z = 0 clamped).
+pub fn lshape(settings: &LShapeSettings) -> Result<LShapeResult, ExperimentError> {
+    if settings.resolutions.is_empty()
+        || settings
+            .resolutions
+            .iter()
+            .any(|&r| r == 0 || !settings.reference.is_multiple_of(r))
+    {
+        return Err(ExperimentError::Setting(format!(
+            "L-shape resolutions {:?} must be positive divisors of the reference resolution {}",
+            settings.resolutions, settings.reference
+        )));
+    }
+    let material = Material::new(1000.0, 0.3, 1.0)?;
+    let top = 2.0 * L_UNIT;
+    let load = settings.load;
+    let p = settings.traction;
+    let loads = move |fem: &Fem| {
+        let tol = 1e-9;
+        match load {
+            LLoad::ArmTopDown | LLoad::ArmTopShearX | LLoad::ArmTopShearY => {
+                let t = match load {
+                    LLoad::ArmTopDown => Vec3::new(0.0, 0.0, -p),
+                    LLoad::ArmTopShearX => Vec3::new(p, 0.0, 0.0),
+                    _ => Vec3::new(0.0, p, 0.0),
+                };
+                fem.traction_load(
+                    |c, n| n[2] > 0.5 && c[0] > L_UNIT && (c[2] - top).abs() < tol,
+                    t,
+                )
+            }
+            LLoad::ArmEndDown => fem.traction_load(
+                |c, n| n[0] > 0.5 && (c[0] - top).abs() < tol,
+                Vec3::new(0.0, 0.0, -p),
+            ),
+        }
+    };
+    let clamp = |q: [f64; 3]| q[2].abs() < 1e-9;
+    let monitor = |q: [f64; 3]| (q[2] - top).abs() < 1e-9 && q[0] > L_UNIT - 1e-9;
+    let base = Lattice::l_shape(1, L_UNIT)?;
+    let case = Case {
+        material,
+        clamp: &clamp,
+        loads: &loads,
+        monitor: &monitor,
+    };
+    let lattices: Vec<Lattice> = settings
+        .resolutions
+        .iter()
+        .map(|&n| Lattice::l_shape(n, L_UNIT))
+        .collect::<Result<_, _>>()?;
+    let targets: Vec<&Lattice> = lattices.iter().collect();
+    let (refs, info) = reference(&base, &case, settings.reference, Regime::Linear, &targets)?;
+    let mut runs = Vec::new();
+    for model in &settings.models {
+        for (l, u_ref) in lattices.iter().zip(&refs) {
+            runs.push(run_case(l, &case, model, Regime::Linear, u_ref.clone())?);
+        }
+    }
+    Ok(LShapeResult {
+        settings: settings.clone(),
+        reference: info,
+        runs,
+    })
+}
+
+/// One row of the material experiment.
+#[derive(Debug, Clone)]
+pub struct MaterialRow {
+    /// Parameterization.
+    pub model: String,
+    /// Input Poisson's ratio (E = 1000 Pa).
+    pub poisson: f64,
+    /// Measured moduli.
+    pub measured: MeasuredMaterial,
+    /// Exact G and K of the input material.
+    pub exact_shear: f64,
+    /// Exact bulk modulus.
+    pub exact_bulk: f64,
+}
+
+/// Virtual material tests on an `n^3` unit block for each nu and model.
+pub fn material(
+    poissons: &[f64],
+    models: &[String],
+    n: u32,
+) -> Result<Vec<MaterialRow>, ExperimentError> {
+    let mut rows = Vec::new();
+    for model in models {
+        let param = parameterization_by_name(model)
+            .ok_or_else(|| ExperimentError::Parameterization(model.clone()))?;
+        for &nu in poissons {
+            let m = Material::new(1000.0, nu, 1.0)?;
+            let measured = measure_material(m, param.as_ref(), n)?;
+            rows.push(MaterialRow {
+                model: model.clone(),
+                poisson: nu,
+                measured,
+                exact_shear: m.shear_modulus(),
+                exact_bulk: m.bulk_modulus(),
+            });
+        }
+    }
+    Ok(rows)
+}

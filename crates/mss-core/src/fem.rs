@@ -1,1 +1,1181 @@
-//! (placeholder: being written)
+//! A small hexahedral finite-element solver used as the reference solution.
+//!
+//! Trilinear hexahedra (Q1) with full 2x2x2 Gauss quadrature on a [`Lattice`],
+//! optionally refined `r` times per cell (each cell split into `r^3` cubes), so
+//! that a fine reference solution can be evaluated at the rest positions of a
+//! coarse lattice's nodes. Small-strain isotropic linear elasticity, and two
+//! hyperelastic laws (St. Venant-Kirchhoff and compressible neo-Hookean) solved
+//! by Newton's method with adaptive load stepping and a backtracking line search.
+//!
+//! Dirichlet degrees of freedom are eliminated; the stiffness (upper triangle of
+//! the free-free block) is assembled into a faer compressed-column matrix and
+//! factored by faer's supernodal sparse Cholesky with a fill-reducing ordering.
+//! Assembly is sequential in a fixed order (element matrices are computed in
+//! parallel), so results do not depend on the number of threads.
+//!
+//! Loads are consistent with the shape functions: on a cube, the consistent
+//! nodal load of a uniform body force is `V/8` per corner and that of a uniform
+//! traction `A/4` per face corner, which are also the MSS's lumped values, so
+//! the same loads can be applied to both.
+
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::perm::PermRef;
+use faer::sparse::linalg::cholesky::{
+    LltRef, SymbolicCholesky, SymmetricOrdering, factorize_symbolic_cholesky,
+};
+use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
+use faer::{Conj, MatMut, Side};
+use hexmesh::lattice::CORNER_OFFSETS;
+use hexmesh::{Lattice, LatticeError};
+use rayon::prelude::*;
+use thiserror::Error;
+
+use crate::{Material, MaterialError, Vec3};
+
+/// Why a finite-element problem could not be set up or solved.
+#[derive(Debug, Error, Clone, PartialEq)]
+pub enum FemError {
+    /// The refined lattice could not be built.
+    #[error("cannot refine the lattice: {0}")]
+    Lattice(#[from] LatticeError),
+    /// Refinement factor 0.
+    #[error("refinement factor must be at least 1, got {0}")]
+    Refinement(u32),
+    /// Invalid material for finite elements (needs E > 0, -1 < nu < 0.5).
+    #[error(transparent)]
+    Material(#[from] MaterialError),
+    /// A vector does not have one entry per node.
+    #[error("{what} has {given} entries for {nodes} nodes")]
+    Length {
+        /// Which input.
+        what: &'static str,
+        /// Entries given.
+        given: usize,
+        /// Nodes of the (refined) mesh.
+        nodes: usize,
+    },
+    /// A node index is out of range.
+    #[error("node {node} does not exist (the mesh has {nodes} nodes)")]
+    Node {
+        /// Index given.
+        node: u32,
+        /// Nodes of the mesh.
+        nodes: usize,
+    },
+    /// The stiffness matrix is singular or not positive definite: the
+    /// constraints do not remove all rigid motions, or the deformation is
+    /// unstable.
+    #[error(
+        "the stiffness matrix is not positive definite ({0}); fix enough degrees of freedom to remove every rigid motion"
+    )]
+    NotPositiveDefinite(String),
+    /// Newton's method did not converge even with small load steps.
+    #[error(
+        "Newton's method did not converge at load factor {load_factor} (residual {residual:e}); try more load steps"
+    )]
+    NoConvergence {
+        /// Fraction of the total load that was reached.
+        load_factor: f64,
+        /// Relative residual at the failure.
+        residual: f64,
+    },
+    /// The sparse factorization failed for a non-numerical reason.
+    #[error("sparse factorization failed: {0}")]
+    Factorization(String),
+    /// Every degree of freedom is fixed: nothing to solve.
+    #[error("every degree of freedom is fixed")]
+    NoFreeDofs,
+}
+
+/// Constitutive law of the finite-element solve.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FemLaw {
+    /// Small-strain linear elasticity (one linear solve).
+    Linear,
+    /// St. Venant-Kirchhoff: `S = lambda tr(E) I + 2 mu E`, Green strain `E`.
+    StVenantKirchhoff,
+    /// Compressible neo-Hookean:
+    /// `W = mu/2 (I1 - 3) - mu ln J + lambda/2 (ln J)^2`.
+    NeoHookean,
+}
+
+/// Settings of the nonlinear (Newton) solve.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NewtonOptions {
+    /// Initial number of equal load increments (halved adaptively on failure).
+    pub load_steps: u32,
+    /// Newton iterations allowed per increment.
+    pub max_iterations: u32,
+    /// Convergence: residual norm below `tolerance` times the load norm.
+    pub tolerance: f64,
+}
+
+impl Default for NewtonOptions {
+    fn default() -> Self {
+        Self {
+            load_steps: 8,
+            max_iterations: 30,
+            tolerance: 1e-10,
+        }
+    }
+}
+
+/// Prescribed displacement components (Dirichlet conditions), per node.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FemConstraints {
+    values: Vec<[Option<f64>; 3]>,
+}
+
+impl FemConstraints {
+    /// No constraint on any of `num_nodes` nodes.
+    pub fn new(num_nodes: usize) -> Self {
+        Self {
+            values: vec![[None; 3]; num_nodes],
+        }
+    }
+
+    /// Prescribes component `axis` (0, 1, 2) of node `node` to `value` (m).
+    pub fn fix(&mut self, node: u32, axis: usize, value: f64) -> Result<(), FemError> {
+        let nodes = self.values.len();
+        let slot = self
+            .values
+            .get_mut(node as usize)
+            .ok_or(FemError::Node { node, nodes })?;
+        slot[axis.min(2)] = Some(value);
+        Ok(())
+    }
+
+    /// Prescribes the whole displacement of node `node` (m).
+    pub fn fix_node(&mut self, node: u32, value: Vec3) -> Result<(), FemError> {
+        for k in 0..3 {
+            self.fix(node, k, value[k])?;
+        }
+        Ok(())
+    }
+
+    /// The prescribed value of each component, per node.
+    pub fn values(&self) -> &[[Option<f64>; 3]] {
+        &self.values
+    }
+
+    /// Number of prescribed components.
+    pub fn num_fixed(&self) -> usize {
+        self.values.iter().flatten().filter(|v| v.is_some()).count()
+    }
+}
+
+/// A finite-element solution.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FemSolution {
+    /// Nodal displacements of the (refined) mesh (m).
+    pub displacement: Vec<Vec3>,
+    /// Newton iterations used in total (1 for a linear solve).
+    pub iterations: u32,
+    /// Load increments used (1 for a linear solve).
+    pub load_steps: u32,
+    /// Final residual norm relative to the load norm.
+    pub relative_residual: f64,
+}
+
+/// A Q1 finite-element discretization of a lattice (possibly refined).
+#[derive(Debug, Clone)]
+pub struct Fem {
+    lattice: Lattice,
+    refinement: u32,
+    mu: f64,
+    lambda: f64,
+    density: f64,
+    /// Shape-function gradients (1/m) at the 8 Gauss points, `[gp][node][axis]`.
+    grads: [[[f64; 3]; 8]; 8],
+    /// Gauss weight times Jacobian determinant (same for every point).
+    wdet: f64,
+    /// Linear element stiffness, row-major 24 x 24, dof `3 a + i`.
+    ke: Vec<f64>,
+}
+
+/// Splits every cell of `lattice` into `r^3` cubes of edge `h / r`.
+pub fn refine(lattice: &Lattice, r: u32) -> Result<Lattice, FemError> {
+    if r == 0 {
+        return Err(FemError::Refinement(r));
+    }
+    if r == 1 {
+        return Ok(lattice.clone());
+    }
+    let dims = lattice.dims().map(|d| d.saturating_mul(r));
+    let cells = lattice.cell_coords().iter().flat_map(move |&c| {
+        (0..r).flat_map(move |k| {
+            (0..r)
+                .flat_map(move |j| (0..r).map(move |i| [c[0] * r + i, c[1] * r + j, c[2] * r + k]))
+        })
+    });
+    Ok(Lattice::from_cells(
+        lattice.origin(),
+        lattice.h() / r as f64,
+        dims,
+        cells,
+    )?)
+}
+
+impl Fem {
+    /// Discretizes `lattice`, each cell refined `refinement` times per axis, with
+    /// an isotropic material (E > 0, -1 < nu < 0.5; the density is used by
+    /// [`Fem::gravity_load`]).
+    pub fn new(lattice: &Lattice, refinement: u32, material: Material) -> Result<Self, FemError> {
+        let m = Material::with_poisson_range(
+            material.young,
+            material.poisson,
+            material.density,
+            -1.0,
+            0.5,
+        )?;
+        let lattice = refine(lattice, refinement)?;
+        let h = lattice.h();
+        let g = 1.0 / 3f64.sqrt();
+        let mut grads = [[[0.0; 3]; 8]; 8];
+        for (gp, o) in CORNER_OFFSETS.iter().enumerate() {
+            let xi: [f64; 3] = o.map(|v| if v == 0 { -g } else { g });
+            for (a, oa) in CORNER_OFFSETS.iter().enumerate() {
+                let s: [f64; 3] = oa.map(|v| if v == 0 { -1.0 } else { 1.0 });
+                for j in 0..3 {
+                    let mut d = 0.125 * s[j] * 2.0 / h;
+                    for mm in 0..3 {
+                        if mm != j {
+                            d *= 1.0 + s[mm] * xi[mm];
+                        }
+                    }
+                    grads[gp][a][j] = d;
+                }
+            }
+        }
+        let wdet = (h / 2.0).powi(3);
+        let (mu, lambda) = (m.shear_modulus(), m.lambda());
+        let mut ke = vec![0.0; 576];
+        for gr in &grads {
+            for a in 0..8 {
+                for b in 0..8 {
+                    let ga = gr[a];
+                    let gb = gr[b];
+                    let dot = ga[0] * gb[0] + ga[1] * gb[1] + ga[2] * gb[2];
+                    for i in 0..3 {
+                        for k in 0..3 {
+                            let mut v = lambda * ga[i] * gb[k] + mu * ga[k] * gb[i];
+                            if i == k {
+                                v += mu * dot;
+                            }
+                            ke[(3 * a + i) * 24 + 3 * b + k] += wdet * v;
+                        }
+                    }
+                }
+            }
+        }
+        Ok(Self {
+            lattice,
+            refinement,
+            mu,
+            lambda,
+            density: m.density,
+            grads,
+            wdet,
+            ke,
+        })
+    }
+
+    /// The (refined) mesh the solution lives on.
+    pub fn lattice(&self) -> &Lattice {
+        &self.lattice
+    }
+
+    /// Refinement factor per axis relative to the input lattice.
+    pub fn refinement(&self) -> u32 {
+        self.refinement
+    }
+
+    /// Number of nodes of the refined mesh.
+    pub fn num_nodes(&self) -> usize {
+        self.lattice.num_nodes()
+    }
+
+    /// Indices of the nodes whose rest position satisfies `pred`.
+    pub fn nodes_where(&self, pred: impl Fn([f64; 3]) -> bool) -> Vec<u32> {
+        (0..self.num_nodes() as u32)
+            .filter(|&n| pred(self.lattice.nodes()[n as usize]))
+            .collect()
+    }
+
+    /// Constraints clamping (zero displacement) every node where `pred` holds.
+    pub fn clamp_where(&self, pred: impl Fn([f64; 3]) -> bool) -> FemConstraints {
+        let mut c = FemConstraints::new(self.num_nodes());
+        for n in self.nodes_where(pred) {
+            c.values[n as usize] = [Some(0.0); 3];
+        }
+        c
+    }
+
+    /// Consistent nodal forces (N) of the body force `density * g` (`g` in m/s^2).
+    pub fn gravity_load(&self, g: Vec3) -> Vec<Vec3> {
+        let per_node = self.density * self.lattice.h().powi(3) / 8.0;
+        let mut f = vec![Vec3::zeros(); self.num_nodes()];
+        for cell in self.lattice.cells() {
+            for &n in cell {
+                f[n as usize] += g * per_node;
+            }
+        }
+        f
+    }
+
+    /// Consistent nodal forces (N) of a uniform traction `t` (Pa) on the boundary
+    /// faces for which `select(face centre, outward normal)` holds.
+    pub fn traction_load(&self, select: impl Fn([f64; 3], [f64; 3]) -> bool, t: Vec3) -> Vec<Vec3> {
+        let per_node = self.lattice.h().powi(2) / 4.0;
+        let mut f = vec![Vec3::zeros(); self.num_nodes()];
+        for face in self.lattice.boundary_faces() {
+            let p = face.nodes.map(|n| self.lattice.nodes()[n as usize]);
+            let centre = std::array::from_fn(|k| p.iter().map(|q| q[k]).sum::<f64>() / 4.0);
+            if select(centre, face.rest_normal()) {
+                for &n in &face.nodes {
+                    f[n as usize] += t * per_node;
+                }
+            }
+        }
+        f
+    }
+
+    /// Solves for the static equilibrium under nodal forces `f` (N) and the
+    /// prescribed displacements `bc`, with the constitutive `law`.
+    pub fn solve(
+        &self,
+        law: FemLaw,
+        bc: &FemConstraints,
+        f: &[Vec3],
+        opts: &NewtonOptions,
+    ) -> Result<FemSolution, FemError> {
+        let n = self.num_nodes();
+        if f.len() != n {
+            return Err(FemError::Length {
+                what: "load vector",
+                given: f.len(),
+                nodes: n,
+            });
+        }
+        if bc.values.len() != n {
+            return Err(FemError::Length {
+                what: "constraints",
+                given: bc.values.len(),
+                nodes: n,
+            });
+        }
+        let system = System::new(&self.lattice, bc)?;
+        match law {
+            FemLaw::Linear => self.solve_linear(&system, bc, f),
+            _ => self.solve_newton(law, &system, bc, f, opts),
+        }
+    }
+
+    /// Small-strain linear solve (same as `solve(FemLaw::Linear, ..)`).
+    pub fn solve_linear_elastic(
+        &self,
+        bc: &FemConstraints,
+        f: &[Vec3],
+    ) -> Result<FemSolution, FemError> {
+        self.solve(FemLaw::Linear, bc, f, &NewtonOptions::default())
+    }
+
+    fn solve_linear(
+        &self,
+        system: &System,
+        bc: &FemConstraints,
+        f: &[Vec3],
+    ) -> Result<FemSolution, FemError> {
+        let mut u = initial_displacement(bc, 1.0, None);
+        let (fint, values) = self.assemble(FemLaw::Linear, system, &u);
+        let mut r = residual(system, f, &fint, 1.0);
+        let fnorm = free_norm_of(system, f).max(norm(&r)).max(f64::MIN_POSITIVE);
+        let llt = system.factor(&values)?;
+        let r0 = r.clone();
+        system.solve(&llt, &mut r);
+        // A (numerically) singular matrix can factor with tiny positive pivots:
+        // check the residual of the solve.
+        let check = system.sym_mul(&values, &r);
+        let err = check
+            .iter()
+            .zip(&r0)
+            .map(|(a, b)| (a - b).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        let rel = err / fnorm;
+        if rel.is_nan() || rel >= 1e-6 {
+            return Err(FemError::NotPositiveDefinite(format!(
+                "linear solve residual {rel:e}"
+            )));
+        }
+        system.add_free(&mut u, &r, 1.0);
+        Ok(FemSolution {
+            displacement: u,
+            iterations: 1,
+            load_steps: 1,
+            relative_residual: rel,
+        })
+    }
+
+    fn solve_newton(
+        &self,
+        law: FemLaw,
+        system: &System,
+        bc: &FemConstraints,
+        f: &[Vec3],
+        opts: &NewtonOptions,
+    ) -> Result<FemSolution, FemError> {
+        let steps = opts.load_steps.max(1);
+        let mut u = initial_displacement(bc, 0.0, None);
+        let mut lam = 0.0f64;
+        let mut dlam = 1.0 / steps as f64;
+        let min_dlam = dlam / 1024.0;
+        let mut iterations = 0u32;
+        let mut increments = 0u32;
+        let fnorm_total = free_norm_of(system, f);
+        let mut last_rel = 0.0;
+        while lam < 1.0 {
+            let target = (lam + dlam).min(1.0);
+            let mut trial = initial_displacement(bc, target, Some(&u));
+            let scale = (fnorm_total * target).max(self.reaction_scale(law, system, &trial));
+            match self.newton_increment(law, system, f, target, &mut trial, scale, opts) {
+                Ok((its, rel)) => {
+                    iterations += its;
+                    increments += 1;
+                    last_rel = rel;
+                    u = trial;
+                    lam = target;
+                    log::debug!("FEM load factor {lam:.4}: {its} Newton iterations");
+                }
+                Err(rel) => {
+                    iterations += opts.max_iterations;
+                    dlam *= 0.5;
+                    if dlam < min_dlam {
+                        return Err(FemError::NoConvergence {
+                            load_factor: lam,
+                            residual: rel,
+                        });
+                    }
+                    log::debug!("FEM increment failed at {target:.4}, halving to {dlam:e}");
+                }
+            }
+        }
+        Ok(FemSolution {
+            displacement: u,
+            iterations,
+            load_steps: increments,
+            relative_residual: last_rel,
+        })
+    }
+
+    /// Norm of the internal forces on the free dofs: a force scale for problems
+    /// loaded only by prescribed displacements.
+    fn reaction_scale(&self, law: FemLaw, system: &System, u: &[Vec3]) -> f64 {
+        let fint = self.internal_forces_only(law, u);
+        let mut s = 0.0;
+        for (n, fi) in fint.iter().enumerate() {
+            for k in 0..3 {
+                if system.dof[3 * n + k] == FIXED {
+                    s += fi[k] * fi[k];
+                }
+            }
+        }
+        s.sqrt().max(f64::MIN_POSITIVE)
+    }
+
+    /// Newton iterations for one load increment; `Err(relative residual)` on failure.
+    #[allow(clippy::too_many_arguments)]
+    fn newton_increment(
+        &self,
+        law: FemLaw,
+        system: &System,
+        f: &[Vec3],
+        load: f64,
+        u: &mut Vec<Vec3>,
+        scale: f64,
+        opts: &NewtonOptions,
+    ) -> Result<(u32, f64), f64> {
+        let (mut fint, mut values) = self.assemble(law, system, u);
+        let mut r = residual(system, f, &fint, load);
+        let mut rnorm = norm(&r);
+        // Round-off floor of the residual: nodal forces are sums of element
+        // stresses of order (2 mu + lambda) h^2, so at tiny loads the relative
+        // tolerance alone can be out of reach.
+        let h = self.lattice.h();
+        let floor = 8.0
+            * f64::EPSILON
+            * (2.0 * self.mu + self.lambda)
+            * h
+            * h
+            * (system.nfree as f64).sqrt();
+        let scale = scale.max(floor / opts.tolerance);
+        for it in 0..opts.max_iterations {
+            log::trace!(
+                "FEM Newton load {load:.4} iteration {it}: residual {:e}",
+                rnorm / scale
+            );
+            if rnorm <= opts.tolerance * scale {
+                return Ok((it, rnorm / scale));
+            }
+            let Ok(llt) = system.factor(&values) else {
+                return Err(rnorm / scale);
+            };
+            let mut du = r.clone();
+            system.solve(&llt, &mut du);
+            if du.iter().any(|v| !v.is_finite()) {
+                return Err(rnorm / scale);
+            }
+            // Line search on the slope of the potential energy along du,
+            // g(alpha) = du . r(u + alpha du) (r = -grad energy): the residual
+            // norm is a poor merit function in bending (full Newton steps raise
+            // it while lowering the energy). Take the full step unless it
+            // overshoots the energy minimum along du by much, then regula falsi.
+            let g0: f64 = du.iter().zip(&r).map(|(a, b)| a * b).sum();
+            let eval = |alpha: f64| {
+                let mut trial = u.clone();
+                system.add_free(&mut trial, &du, alpha);
+                let ft = self.internal_forces_only(law, &trial);
+                let rt = residual(system, f, &ft, load);
+                let g: f64 = du.iter().zip(&rt).map(|(a, b)| a * b).sum();
+                (trial, g)
+            };
+            let (mut next, g1) = eval(1.0);
+            if g0.is_nan() || g0 <= 0.0 {
+                return Err(rnorm / scale);
+            }
+            if !g1.is_finite() || g1 < -0.5 * g0 {
+                let (mut lo, mut glo, mut hi, mut ghi) = (0.0f64, g0, 1.0f64, g1);
+                let mut found = false;
+                for _ in 0..12 {
+                    let alpha = if ghi.is_finite() {
+                        (lo + (hi - lo) * glo / (glo - ghi))
+                            .clamp(lo + 0.1 * (hi - lo), hi - 0.1 * (hi - lo))
+                    } else {
+                        0.5 * (lo + hi)
+                    };
+                    let (t, g) = eval(alpha);
+                    if g.is_finite() && g.abs() <= 0.5 * g0 {
+                        next = t;
+                        found = true;
+                        break;
+                    }
+                    if g.is_finite() && g > 0.0 {
+                        (lo, glo) = (alpha, g);
+                    } else {
+                        (hi, ghi) = (alpha, g);
+                    }
+                }
+                if !found {
+                    // No acceptable step: at the round-off floor this is convergence.
+                    if rnorm <= 1e3 * opts.tolerance * scale {
+                        return Ok((it + 1, rnorm / scale));
+                    }
+                    return Err(rnorm / scale);
+                }
+            }
+            *u = next;
+            (fint, values) = self.assemble(law, system, u);
+            r = residual(system, f, &fint, load);
+            rnorm = norm(&r);
+        }
+        if rnorm <= opts.tolerance * scale {
+            Ok((opts.max_iterations, rnorm / scale))
+        } else {
+            Err(rnorm / scale)
+        }
+    }
+
+    /// Internal (resisting) nodal forces of the displacement `u` under `law` (N).
+    pub fn internal_forces(&self, law: FemLaw, u: &[Vec3]) -> Result<Vec<Vec3>, FemError> {
+        if u.len() != self.num_nodes() {
+            return Err(FemError::Length {
+                what: "displacement",
+                given: u.len(),
+                nodes: self.num_nodes(),
+            });
+        }
+        Ok(self.internal_forces_only(law, u))
+    }
+
+    fn internal_forces_only(&self, law: FemLaw, u: &[Vec3]) -> Vec<Vec3> {
+        let cells = self.lattice.cells();
+        let per_elem: Vec<[f64; 24]> = cells
+            .par_iter()
+            .map(|cell| {
+                let ue = gather(cell, u);
+                let mut fe = [0.0; 24];
+                self.element(law, &ue, &mut fe, None);
+                fe
+            })
+            .collect();
+        let mut out = vec![Vec3::zeros(); u.len()];
+        for (cell, fe) in cells.iter().zip(&per_elem) {
+            for (a, &n) in cell.iter().enumerate() {
+                for k in 0..3 {
+                    out[n as usize][k] += fe[3 * a + k];
+                }
+            }
+        }
+        out
+    }
+
+    /// Element internal forces and (optionally) tangent for displacements `ue`.
+    fn element(&self, law: FemLaw, ue: &[f64; 24], fe: &mut [f64; 24], ke: Option<&mut [f64]>) {
+        if law == FemLaw::Linear {
+            for (i, fi) in fe.iter_mut().enumerate() {
+                *fi = (0..24).map(|j| self.ke[i * 24 + j] * ue[j]).sum();
+            }
+            if let Some(ke) = ke {
+                ke.copy_from_slice(&self.ke);
+            }
+            return;
+        }
+        let mut ke = ke;
+        if let Some(k) = ke.as_deref_mut() {
+            k.fill(0.0);
+        }
+        let (mu, lambda) = (self.mu, self.lambda);
+        for gr in &self.grads {
+            // Deformation gradient F_iJ = delta_iJ + sum_a u_ai dN_a/dX_J.
+            let mut f = [[0.0; 3]; 3];
+            for (i, row) in f.iter_mut().enumerate() {
+                for (jj, v) in row.iter_mut().enumerate() {
+                    *v = if i == jj { 1.0 } else { 0.0 };
+                    for a in 0..8 {
+                        *v += ue[3 * a + i] * gr[a][jj];
+                    }
+                }
+            }
+            let (p, tangent) = stress_and_tangent(law, &f, mu, lambda);
+            for a in 0..8 {
+                for i in 0..3 {
+                    let mut s = 0.0;
+                    for jj in 0..3 {
+                        s += p[i][jj] * gr[a][jj];
+                    }
+                    fe[3 * a + i] += self.wdet * s;
+                }
+            }
+            if let Some(k) = ke.as_deref_mut() {
+                // H[b][i][J][k] = sum_L A_iJkL dN_b/dX_L, then K_(ai)(bk) = sum_J G_aJ H.
+                for b in 0..8 {
+                    let gb = gr[b];
+                    let mut hb = [[[0.0; 3]; 3]; 3];
+                    for i in 0..3 {
+                        for jj in 0..3 {
+                            for kk in 0..3 {
+                                let t = &tangent[i][jj][kk];
+                                hb[i][jj][kk] = t[0] * gb[0] + t[1] * gb[1] + t[2] * gb[2];
+                            }
+                        }
+                    }
+                    for a in 0..8 {
+                        let ga = gr[a];
+                        for i in 0..3 {
+                            for kk in 0..3 {
+                                let v = ga[0] * hb[i][0][kk]
+                                    + ga[1] * hb[i][1][kk]
+                                    + ga[2] * hb[i][2][kk];
+                                k[(3 * a + i) * 24 + 3 * b + kk] += self.wdet * v;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// Internal forces and the free-free upper-triangle stiffness values.
+    fn assemble(&self, law: FemLaw, system: &System, u: &[Vec3]) -> (Vec<Vec3>, Vec<f64>) {
+        let cells = self.lattice.cells();
+        let mut fint = vec![Vec3::zeros(); u.len()];
+        let mut values = vec![0.0; system.row_idx.len()];
+        const CHUNK: usize = 2048;
+        for chunk in cells.chunks(CHUNK) {
+            let elems: Vec<([f64; 24], Vec<f64>)> = chunk
+                .par_iter()
+                .map(|cell| {
+                    let ue = gather(cell, u);
+                    let mut fe = [0.0; 24];
+                    let mut ke = vec![0.0; 576];
+                    self.element(law, &ue, &mut fe, Some(&mut ke));
+                    (fe, ke)
+                })
+                .collect();
+            for (cell, (fe, ke)) in chunk.iter().zip(&elems) {
+                for (a, &na) in cell.iter().enumerate() {
+                    for i in 0..3 {
+                        fint[na as usize][i] += fe[3 * a + i];
+                    }
+                }
+                system.scatter(cell, ke, &mut values);
+            }
+        }
+        (fint, values)
+    }
+
+    /// Displacement at point `p` (m) interpolated in the cell containing it, or
+    /// `None` if `p` is outside the mesh. `u` is a nodal displacement field.
+    pub fn interpolate(&self, u: &[Vec3], p: [f64; 3]) -> Option<Vec3> {
+        let l = &self.lattice;
+        let h = l.h();
+        let o = l.origin();
+        let dims = l.dims();
+        let tol = 1e-9;
+        let t: [f64; 3] = std::array::from_fn(|k| (p[k] - o[k]) / h);
+        let mut cands: [[i64; 2]; 3] = [[0; 2]; 3];
+        for k in 0..3 {
+            let fl = t[k].floor() as i64;
+            let near = t[k].round();
+            cands[k] = if (t[k] - near).abs() < tol {
+                [near as i64 - 1, near as i64]
+            } else {
+                [fl, fl]
+            };
+        }
+        for &cz in &cands[2] {
+            for &cy in &cands[1] {
+                for &cx in &cands[0] {
+                    let c = [cx, cy, cz];
+                    if (0..3).any(|k| c[k] < 0 || c[k] >= dims[k] as i64) {
+                        continue;
+                    }
+                    let cc = c.map(|v| v as u32);
+                    let Some(ci) = l.cell_at(cc) else { continue };
+                    let xi: [f64; 3] =
+                        std::array::from_fn(|k| (t[k] - c[k] as f64).clamp(0.0, 1.0));
+                    if (0..3)
+                        .any(|k| (t[k] - c[k] as f64) < -tol || (t[k] - c[k] as f64) > 1.0 + tol)
+                    {
+                        continue;
+                    }
+                    let cell = l.cells()[ci as usize];
+                    let mut out = Vec3::zeros();
+                    for (a, off) in CORNER_OFFSETS.iter().enumerate() {
+                        let w: f64 = (0..3)
+                            .map(|k| if off[k] == 1 { xi[k] } else { 1.0 - xi[k] })
+                            .product();
+                        out += u[cell[a] as usize] * w;
+                    }
+                    return Some(out);
+                }
+            }
+        }
+        None
+    }
+
+    /// The displacement `u` evaluated at every point of `points`; `None` if a
+    /// point is outside the mesh.
+    pub fn interpolate_all(&self, u: &[Vec3], points: &[[f64; 3]]) -> Option<Vec<Vec3>> {
+        points.iter().map(|&p| self.interpolate(u, p)).collect()
+    }
+}
+
+/// First Piola-Kirchhoff stress `P` and its derivative `A_iJkL = dP_iJ / dF_kL`.
+#[allow(clippy::type_complexity, clippy::needless_range_loop)]
+fn stress_and_tangent(
+    law: FemLaw,
+    f: &[[f64; 3]; 3],
+    mu: f64,
+    lambda: f64,
+) -> ([[f64; 3]; 3], [[[[f64; 3]; 3]; 3]; 3]) {
+    let d = |i: usize, j: usize| if i == j { 1.0 } else { 0.0 };
+    let mut p = [[0.0; 3]; 3];
+    let mut a = [[[[0.0; 3]; 3]; 3]; 3];
+    match law {
+        FemLaw::Linear | FemLaw::StVenantKirchhoff => {
+            if law == FemLaw::Linear {
+                // Small strain: P = lambda tr(eps) I + 2 mu eps, eps = sym(F - I).
+                let tr = f[0][0] + f[1][1] + f[2][2] - 3.0;
+                for i in 0..3 {
+                    for j in 0..3 {
+                        let eps = 0.5 * (f[i][j] + f[j][i]) - d(i, j);
+                        p[i][j] = lambda * tr * d(i, j) + 2.0 * mu * eps;
+                        for k in 0..3 {
+                            for l in 0..3 {
+                                a[i][j][k][l] = lambda * d(i, j) * d(k, l)
+                                    + mu * (d(i, k) * d(j, l) + d(i, l) * d(j, k));
+                            }
+                        }
+                    }
+                }
+                return (p, a);
+            }
+            // Green strain E = (F^T F - I) / 2, S = lambda tr(E) I + 2 mu E, P = F S.
+            let mut c = [[0.0; 3]; 3];
+            let mut b = [[0.0; 3]; 3];
+            for i in 0..3 {
+                for j in 0..3 {
+                    c[i][j] = (0..3).map(|k| f[k][i] * f[k][j]).sum();
+                    b[i][j] = (0..3).map(|k| f[i][k] * f[j][k]).sum();
+                }
+            }
+            let tr_e = 0.5 * (c[0][0] + c[1][1] + c[2][2] - 3.0);
+            let mut s = [[0.0; 3]; 3];
+            for i in 0..3 {
+                for j in 0..3 {
+                    s[i][j] = lambda * tr_e * d(i, j) + mu * (c[i][j] - d(i, j));
+                }
+            }
+            for i in 0..3 {
+                for j in 0..3 {
+                    p[i][j] = (0..3).map(|m| f[i][m] * s[m][j]).sum();
+                }
+            }
+            // A_iJkL = delta_ik S_LJ + lambda F_iJ F_kL + mu (F_iL F_kJ + (F F^T)_ik delta_JL).
+            for i in 0..3 {
+                for j in 0..3 {
+                    for k in 0..3 {
+                        for l in 0..3 {
+                            a[i][j][k][l] = d(i, k) * s[l][j]
+                                + lambda * f[i][j] * f[k][l]
+                                + mu * (f[i][l] * f[k][j] + b[i][k] * d(j, l));
+                        }
+                    }
+                }
+            }
+        }
+        FemLaw::NeoHookean => {
+            let fm = nalgebra::Matrix3::from_fn(|i, j| f[i][j]);
+            let det = fm.determinant();
+            let finv = fm.try_inverse().unwrap_or_else(nalgebra::Matrix3::identity);
+            // A non-positive J has no energy: return a huge stress so the line
+            // search rejects the step.
+            let ln_j = if det > 0.0 { det.ln() } else { f64::INFINITY };
+            for i in 0..3 {
+                for j in 0..3 {
+                    // P = mu (F - F^-T) + lambda ln J F^-T.
+                    p[i][j] = mu * (f[i][j] - finv[(j, i)]) + lambda * ln_j * finv[(j, i)];
+                    for k in 0..3 {
+                        for l in 0..3 {
+                            a[i][j][k][l] = mu * d(i, k) * d(j, l)
+                                + (mu - lambda * ln_j) * finv[(l, i)] * finv[(j, k)]
+                                + lambda * finv[(j, i)] * finv[(l, k)];
+                        }
+                    }
+                }
+            }
+        }
+    }
+    (p, a)
+}
+
+fn gather(cell: &[u32; 8], u: &[Vec3]) -> [f64; 24] {
+    let mut ue = [0.0; 24];
+    for (a, &n) in cell.iter().enumerate() {
+        for k in 0..3 {
+            ue[3 * a + k] = u[n as usize][k];
+        }
+    }
+    ue
+}
+
+/// Start of a load increment: the previous solution with the prescribed
+/// components set to `load` times their values.
+fn initial_displacement(bc: &FemConstraints, load: f64, prev: Option<&[Vec3]>) -> Vec<Vec3> {
+    bc.values
+        .iter()
+        .enumerate()
+        .map(|(n, v)| {
+            let base = prev.map_or(Vec3::zeros(), |p| p[n]);
+            Vec3::from_fn(|k, _| v[k].map_or(base[k], |x| x * load))
+        })
+        .collect()
+}
+
+/// `load * f - fint` on the free dofs.
+fn residual(system: &System, f: &[Vec3], fint: &[Vec3], load: f64) -> Vec<f64> {
+    let mut r = vec![0.0; system.nfree];
+    for (n, (fe, fi)) in f.iter().zip(fint).enumerate() {
+        for k in 0..3 {
+            let d = system.dof[3 * n + k];
+            if d != FIXED {
+                r[d as usize] = load * fe[k] - fi[k];
+            }
+        }
+    }
+    r
+}
+
+fn free_norm_of(system: &System, f: &[Vec3]) -> f64 {
+    let mut s = 0.0;
+    for (n, fe) in f.iter().enumerate() {
+        for k in 0..3 {
+            if system.dof[3 * n + k] != FIXED {
+                s += fe[k] * fe[k];
+            }
+        }
+    }
+    s.sqrt()
+}
+
+fn norm(v: &[f64]) -> f64 {
+    v.iter().map(|x| x * x).sum::<f64>().sqrt()
+}
+
+const FIXED: u32 = u32::MAX;
+
+/// Free-dof numbering and the compressed-column pattern of the upper triangle
+/// of the free-free stiffness block.
+struct System {
+    dof: Vec<u32>,
+    nfree: usize,
+    col_ptr: Vec<u32>,
+    row_idx: Vec<u32>,
+    symbolic: SymbolicSparseColMat<u32>,
+    /// Fill-reducing ordering of the free dofs (new -> old, old -> new).
+    perm_fwd: Vec<u32>,
+    perm_inv: Vec<u32>,
+    llt_symbolic: std::sync::OnceLock<Result<SymbolicCholesky<u32>, String>>,
+}
+
+impl System {
+    fn new(lattice: &Lattice, bc: &FemConstraints) -> Result<Self, FemError> {
+        let n = lattice.num_nodes();
+        let mut dof = vec![FIXED; 3 * n];
+        let mut nfree = 0u32;
+        for (node, v) in bc.values.iter().enumerate() {
+            for k in 0..3 {
+                if v[k].is_none() {
+                    dof[3 * node + k] = nfree;
+                    nfree += 1;
+                }
+            }
+        }
+        if nfree == 0 {
+            return Err(FemError::NoFreeDofs);
+        }
+        // Node pairs (a <= b) sharing a cell, grouped by the column node b.
+        let mut pairs: Vec<(u32, u32)> = Vec::with_capacity(lattice.num_cells() * 36);
+        for cell in lattice.cells() {
+            for &a in cell {
+                for &b in cell {
+                    if a <= b {
+                        pairs.push((b, a));
+                    }
+                }
+            }
+        }
+        pairs.sort_unstable();
+        pairs.dedup();
+        let mut col_ptr = Vec::with_capacity(nfree as usize + 1);
+        let mut row_idx = Vec::new();
+        col_ptr.push(0u32);
+        let mut start = 0;
+        for b in 0..n as u32 {
+            let mut end = start;
+            while end < pairs.len() && pairs[end].0 == b {
+                end += 1;
+            }
+            for k in 0..3 {
+                let col = dof[3 * b as usize + k];
+                if col == FIXED {
+                    continue;
+                }
+                for &(_, a) in &pairs[start..end] {
+                    for i in 0..3 {
+                        let row = dof[3 * a as usize + i];
+                        if row != FIXED && row <= col {
+                            row_idx.push(row);
+                        }
+                    }
+                }
+                col_ptr.push(row_idx.len() as u32);
+            }
+            start = end;
+        }
+        let node_order = nested_dissection(lattice.node_coords());
+        let mut perm_fwd = Vec::with_capacity(nfree as usize);
+        for &node in &node_order {
+            for k in 0..3 {
+                let d = dof[3 * node as usize + k];
+                if d != FIXED {
+                    perm_fwd.push(d);
+                }
+            }
+        }
+        let mut perm_inv = vec![0u32; nfree as usize];
+        for (new, &old) in perm_fwd.iter().enumerate() {
+            perm_inv[old as usize] = new as u32;
+        }
+        let symbolic = SymbolicSparseColMat::new_checked(
+            nfree as usize,
+            nfree as usize,
+            col_ptr.clone(),
+            None,
+            row_idx.clone(),
+        );
+        Ok(Self {
+            dof,
+            nfree: nfree as usize,
+            col_ptr,
+            row_idx,
+            symbolic,
+            perm_fwd,
+            perm_inv,
+            llt_symbolic: std::sync::OnceLock::new(),
+        })
+    }
+
+    /// Adds the free-free upper-triangle entries of an element matrix.
+    fn scatter(&self, cell: &[u32; 8], ke: &[f64], values: &mut [f64]) {
+        for (a, &na) in cell.iter().enumerate() {
+            for i in 0..3 {
+                let row = self.dof[3 * na as usize + i];
+                if row == FIXED {
+                    continue;
+                }
+                for (b, &nb) in cell.iter().enumerate() {
+                    for k in 0..3 {
+                        let col = self.dof[3 * nb as usize + k];
+                        if col == FIXED || row > col {
+                            continue;
+                        }
+                        let lo = self.col_ptr[col as usize] as usize;
+                        let hi = self.col_ptr[col as usize + 1] as usize;
+                        if let Ok(pos) = self.row_idx[lo..hi].binary_search(&row) {
+                            values[lo + pos] += ke[(3 * a + i) * 24 + 3 * b + k];
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// Cholesky factor values of the matrix with upper triangle `values`.
+    fn factor(&self, values: &[f64]) -> Result<Vec<f64>, FemError> {
+        let sym = self.symbolic_factor()?;
+        let par = faer::get_global_parallelism();
+        let mat = SparseColMatRef::new(self.symbolic.as_ref(), values);
+        let mut l = vec![0.0; sym.len_val()];
+        let mut buf =
+            MemBuffer::try_new(sym.factorize_numeric_llt_scratch::<f64>(par, Default::default()))
+                .map_err(|e| FemError::Factorization(format!("{e:?}")))?;
+        sym.factorize_numeric_llt::<f64>(
+            &mut l,
+            mat,
+            Side::Upper,
+            Default::default(),
+            par,
+            MemStack::new(&mut buf),
+            Default::default(),
+        )
+        .map_err(|e| FemError::NotPositiveDefinite(format!("{e:?}")))?;
+        Ok(l)
+    }
+
+    fn symbolic_factor(&self) -> Result<&SymbolicCholesky<u32>, FemError> {
+        self.llt_symbolic
+            .get_or_init(|| {
+                let perm = PermRef::new_checked(&self.perm_fwd, &self.perm_inv, self.nfree);
+                factorize_symbolic_cholesky(
+                    self.symbolic.as_ref(),
+                    Side::Upper,
+                    SymmetricOrdering::Custom(perm),
+                    Default::default(),
+                )
+                .map_err(|e| format!("{e:?}"))
+            })
+            .as_ref()
+            .map_err(|e| FemError::Factorization(e.clone()))
+    }
+
+    /// Solves `K x = rhs` in place with the factor values `l` of [`System::factor`].
+    fn solve(&self, l: &[f64], rhs: &mut [f64]) {
+        // The factor exists, so the symbolic part was computed successfully.
+        let Ok(sym) = self.symbolic_factor() else {
+            return;
+        };
+        let par = faer::get_global_parallelism();
+        let mut buf = MemBuffer::new(sym.solve_in_place_scratch::<f64>(1, par));
+        LltRef::<u32, f64>::new(sym, l).solve_in_place_with_conj(
+            Conj::No,
+            MatMut::from_column_major_slice_mut(rhs, self.nfree, 1),
+            par,
+            MemStack::new(&mut buf),
+        );
+    }
+
+    /// `K x` for the symmetric matrix stored as its upper triangle.
+    #[allow(clippy::needless_range_loop)]
+    fn sym_mul(&self, values: &[f64], x: &[f64]) -> Vec<f64> {
+        let mut y = vec![0.0; self.nfree];
+        for col in 0..self.nfree {
+            let lo = self.col_ptr[col] as usize;
+            let hi = self.col_ptr[col + 1] as usize;
+            for p in lo..hi {
+                let row = self.row_idx[p] as usize;
+                let v = values[p];
+                y[row] += v * x[col];
+                if row != col {
+                    y[col] += v * x[row];
+                }
+            }
+        }
+        y
+    }
+
+    fn add_free(&self, u: &mut [Vec3], du: &[f64], alpha: f64) {
+        for (n, un) in u.iter_mut().enumerate() {
+            for k in 0..3 {
+                let d = self.dof[3 * n + k];
+                if d != FIXED {
+                    un[k] += alpha * du[d as usize];
+                }
+            }
+        }
+    }
+}
+
+/// Q1 solution on `lattice` refined `refinement` times, evaluated at the rest
+/// positions of `lattice`'s own nodes (they are nodes of the refined mesh).
+pub fn displacement_at_coarse_nodes(fem: &Fem, lattice: &Lattice, u: &[Vec3]) -> Option<Vec<Vec3>> {
+    fem.interpolate_all(u, lattice.nodes())
+}
+
+/// Geometric nested-dissection order of lattice nodes (by grid coordinates):
+/// split along the longest extent at a grid plane; the plane's nodes separate
+/// the two halves for the 27-node stencil of hexahedra, so they go last.
+fn nested_dissection(coords: &[[u32; 3]]) -> Vec<u32> {
+    let mut out = Vec::with_capacity(coords.len());
+    let mut stack: Vec<(Vec<u32>, bool)> = vec![((0..coords.len() as u32).collect(), false)];
+    // Iterative post-order: a set is split into (left, right, separator);
+    // emitted order is left, right, separator.
+    while let Some((set, is_leaf)) = stack.pop() {
+        if is_leaf || set.len() <= 48 {
+            out.extend_from_slice(&set);
+            continue;
+        }
+        let mut lo = [u32::MAX; 3];
+        let mut hi = [0u32; 3];
+        for &n in &set {
+            let c = coords[n as usize];
+            for k in 0..3 {
+                lo[k] = lo[k].min(c[k]);
+                hi[k] = hi[k].max(c[k]);
+            }
+        }
+        let axis = (0..3).max_by_key(|&k| (hi[k] - lo[k], 3 - k)).unwrap_or(0);
+        if hi[axis] - lo[axis] < 2 {
+            out.extend_from_slice(&set);
+            continue;
+        }
+        let mid = lo[axis] + (hi[axis] - lo[axis]) / 2;
+        let (mut left, mut sep, mut right) = (Vec::new(), Vec::new(), Vec::new());
+        for &n in &set {
+            let c = coords[n as usize][axis];
+            if c < mid {
+                left.push(n);
+            } else if c == mid {
+                sep.push(n);
+            } else {
+                right.push(n);
+            }
+        }
+        // Pushed in reverse: popped as left, right, then the separator.
+        stack.push((sep, true));
+        stack.push((right, false));
+        stack.push((left, false));
+    }
+    out
+}

@@ -20,9 +20,18 @@ pub mod modes;
 pub mod solver;
 pub mod sparse;
 
+pub use constraints::{ConstraintSpec, Constraints, NodeSelector};
+pub use loads::{Damping, Load, LoadSpec};
 pub use material::{Material, MaterialError};
-pub use model::{CellCoefficients, Model, ModelError, Parameterization};
-pub use sparse::BlockCsr;
+pub use material_test::{MeasuredMaterial, measure_material};
+pub use model::{
+    CellCoefficients, CellDiagnostics, ForceWorkspace, Model, ModelError, PARAMETERIZATION_NAMES,
+    PaperModel, Parameterization, SpringsOnly, Volumetric, parameterization_by_name,
+};
+pub use solver::{
+    Integrator, Problem, SolverError, State, StaticOptions, integrator_by_name, solve_static,
+};
+pub use sparse::{BlockCsr, Factorization, LinearSolveError};
 
 /// 3-vectors of the simulation (`f64`).
 pub type Vec3 = nalgebra::Vector3<f64>;

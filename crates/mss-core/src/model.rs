@@ -1,15 +1,27 @@
 //! The model: per-cell springs, lumped masses, correction forces (MODEL.md).
 //!
-//! SKELETON: the bodies marked `todo!` are being written; signatures are the
-//! contract other modules build against. Extend, do not break, without telling
-//! the integrator.
+//! Forces are computed per cell (the cell's 16 springs, then its correction
+//! forces from those springs' forces, then the optional volumetric term) into a
+//! per-cell buffer of 8 corner forces, and then gathered per node over a fixed
+//! node -> (cell, corner) adjacency. The gather order does not depend on the
+//! number of threads, so the forces are bitwise reproducible.
+//!
+//! The kernel is written once over a scalar type ([`kernel`]); the Jacobian is
+//! that same kernel evaluated with forward-mode dual numbers, hence exact
+//! (including the derivative of the current cell axes in the corrections).
 
 use std::fmt::Debug;
 
 use hexmesh::Lattice;
 use thiserror::Error;
 
-use crate::{BlockCsr, Material, MaterialError, Vec3};
+use rayon::prelude::*;
+
+use crate::{BlockCsr, Mat3, Material, MaterialError, Vec3};
+
+pub(crate) mod kernel;
+
+use kernel::{CellParams, Correction};
 
 /// Why a model could not be built.
 #[derive(Debug, Error, Clone, PartialEq)]
@@ -34,6 +46,22 @@ pub enum ModelError {
         given: usize,
         /// Cells in the lattice.
         cells: usize,
+    },
+    /// The parameterization gave unusable cell constants.
+    #[error(
+        "parameterization '{name}' gave invalid cell constants (k_edge {k_edge}, k_diag {k_diag}, correction {correction:?}, lambda {lambda}): the correction system is singular or a value is not finite; choose a Poisson's ratio inside the supported range"
+    )]
+    BadCoefficients {
+        /// Parameterization name.
+        name: &'static str,
+        /// Edge stiffness given.
+        k_edge: f64,
+        /// Diagonal stiffness given.
+        k_diag: f64,
+        /// Correction coefficient given.
+        correction: Option<f64>,
+        /// Volumetric lambda given.
+        lambda: f64,
     },
 }
 
@@ -118,26 +146,113 @@ impl Parameterization for SpringsOnly {
     }
 }
 
-/// The built-in parameterizations by name: `"paper"` (default), `"springs"`.
+/// The paper's model evaluated at the same shear modulus and nu' = 0 (springs
+/// and correction forces), plus a one-point volumetric energy
+/// `lambda h^3 (J - 1)^2 / 2` per cell (MODEL.md, last section). Exact E and nu in
+/// uniaxial tension, and much closer to converged FEM than the paper's model.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Volumetric;
+
+impl Volumetric {
+    /// Lower bound (exclusive) of Poisson's ratio for this parameterization.
+    pub const POISSON_MIN: f64 = -1.0;
+}
+
+impl Parameterization for Volumetric {
+    fn name(&self) -> &'static str {
+        "volumetric"
+    }
+    fn validate(&self, material: &Material) -> Result<(), MaterialError> {
+        Material::with_poisson_range(
+            material.young,
+            material.poisson,
+            material.density,
+            Self::POISSON_MIN,
+            Material::POISSON_MAX,
+        )
+        .map(|_| ())
+    }
+    fn coefficients(&self, material: &Material, h: f64) -> CellCoefficients {
+        let nu = material.poisson;
+        CellCoefficients {
+            k_edge: material.young * h / (8.0 * (1.0 + nu)),
+            k_diag: 3.0 * material.young * h / (8.0 * (1.0 + nu)),
+            correction: Some(-0.5),
+            volumetric_lambda: material.lambda(),
+        }
+    }
+}
+
+/// The built-in parameterizations by name: `"paper"` (default), `"springs"`,
+/// `"volumetric"`.
 pub fn parameterization_by_name(name: &str) -> Option<Box<dyn Parameterization>> {
     match name {
         "paper" => Some(Box::new(PaperModel)),
         "springs" => Some(Box::new(SpringsOnly)),
+        "volumetric" => Some(Box::new(Volumetric)),
         _ => None,
     }
 }
 
 /// Names accepted by [`parameterization_by_name`].
-pub const PARAMETERIZATION_NAMES: &[&str] = &["paper", "springs"];
+pub const PARAMETERIZATION_NAMES: &[&str] = &["paper", "springs", "volumetric"];
+
+/// Per-cell state measures for output (VTK) and inspection.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct CellDiagnostics {
+    /// Volumetric strain `J - 1`, with `J = det F` at the cell centre.
+    pub volumetric_strain: f64,
+    /// Equivalent (von Mises-like) shear strain `sqrt(2/3 dev(E) : dev(E))` of
+    /// the Green-Lagrange strain `E` at the cell centre.
+    pub shear_strain: f64,
+    /// Magnitude of the cell's correction forces (N): the root of the sum of the
+    /// squared norms of its 8 nodal correction forces (0 without corrections).
+    pub correction_force: f64,
+}
+
+/// Scratch memory for [`Model::internal_forces_with`]: one force per cell
+/// corner. Reuse it across calls to keep the hot path free of allocation.
+#[derive(Debug, Clone, Default)]
+pub struct ForceWorkspace {
+    corner_forces: Vec<[f64; 3]>,
+}
+
+impl ForceWorkspace {
+    /// Bytes held.
+    pub fn memory_bytes(&self) -> usize {
+        self.corner_forces.capacity() * std::mem::size_of::<[f64; 3]>()
+    }
+}
+
+/// Cells per parallel task: large enough to amortize scheduling, small enough
+/// to balance 2-16 threads on 10^4-cell models.
+const CHUNK: usize = 512;
 
 /// A lattice turned into a mass-spring model. Positions are absolute (m).
 #[derive(Debug, Clone)]
 pub struct Model {
-    // Fields are private: see the module docs of the implementation.
     rest: Vec<Vec3>,
     cells: Vec<[u32; 8]>,
     h: f64,
     masses: Vec<f64>,
+    /// Kernel constants per material.
+    params: Vec<CellParams>,
+    /// Parameterization output per material.
+    coefficients: Vec<CellCoefficients>,
+    materials: Vec<Material>,
+    /// Material of each cell; empty when there is a single material.
+    cell_material: Vec<u32>,
+    /// CSR node -> cell corners `8 * cell + corner`, ascending.
+    adj_offsets: Vec<u32>,
+    adj: Vec<u32>,
+    num_springs: usize,
+    param_name: &'static str,
+    /// Upper bound of omega_max^2 (1/s^2) at rest.
+    omega_max_sq: f64,
+}
+
+fn to_arr(v: &Vec3) -> [f64; 3] {
+    [v.x, v.y, v.z]
 }
 
 impl Model {
@@ -147,8 +262,155 @@ impl Model {
         material: Material,
         param: &dyn Parameterization,
     ) -> Result<Self, ModelError> {
-        let _ = (lattice, material, param);
-        todo!()
+        Self::build(lattice, &[material], None, param)
+    }
+
+    /// Builds the model of `lattice` with material `materials[cell_material[c]]`
+    /// in cell `c`.
+    pub fn with_cell_materials(
+        lattice: &Lattice,
+        materials: &[Material],
+        cell_material: &[u32],
+        param: &dyn Parameterization,
+    ) -> Result<Self, ModelError> {
+        if cell_material.len() != lattice.num_cells() {
+            return Err(ModelError::MaterialCount {
+                given: cell_material.len(),
+                cells: lattice.num_cells(),
+            });
+        }
+        if let Some((cell, &index)) = cell_material
+            .iter()
+            .enumerate()
+            .find(|&(_, &m)| m as usize >= materials.len())
+        {
+            return Err(ModelError::MaterialIndex {
+                cell,
+                index,
+                count: materials.len(),
+            });
+        }
+        Self::build(lattice, materials, Some(cell_material), param)
+    }
+
+    fn build(
+        lattice: &Lattice,
+        materials: &[Material],
+        cell_material: Option<&[u32]>,
+        param: &dyn Parameterization,
+    ) -> Result<Self, ModelError> {
+        let h = lattice.h();
+        let mut params = Vec::with_capacity(materials.len());
+        let mut coefficients = Vec::with_capacity(materials.len());
+        for m in materials {
+            param.validate(m)?;
+            let co = param.coefficients(m, h);
+            let bad = || ModelError::BadCoefficients {
+                name: param.name(),
+                k_edge: co.k_edge,
+                k_diag: co.k_diag,
+                correction: co.correction,
+                lambda: co.volumetric_lambda,
+            };
+            if !(co.k_edge.is_finite()
+                && co.k_diag.is_finite()
+                && co.volumetric_lambda.is_finite()
+                && co.correction.is_none_or(f64::is_finite))
+            {
+                return Err(bad());
+            }
+            let correction = match co.correction {
+                Some(c) => Some(Correction::new(c).ok_or_else(bad)?),
+                None => None,
+            };
+            params.push(CellParams {
+                k_edge: co.k_edge,
+                k_diag: co.k_diag,
+                rest_edge: h,
+                rest_diag: 3f64.sqrt() * h,
+                correction,
+                vol_lambda_h3: co.volumetric_lambda * h * h * h,
+                grad_scale: 0.25 / h,
+            });
+            coefficients.push(co);
+        }
+        let rest: Vec<Vec3> = lattice
+            .nodes()
+            .iter()
+            .map(|p| Vec3::new(p[0], p[1], p[2]))
+            .collect();
+        let cells = lattice.cells().to_vec();
+        let n = rest.len();
+        // Node -> corner adjacency by counting sort, so entries are ascending.
+        let mut adj_offsets = vec![0u32; n + 1];
+        for cell in &cells {
+            for &v in cell {
+                adj_offsets[v as usize + 1] += 1;
+            }
+        }
+        for i in 0..n {
+            adj_offsets[i + 1] += adj_offsets[i];
+        }
+        let mut fill = adj_offsets.clone();
+        let mut adj = vec![0u32; cells.len() * 8];
+        for (c, cell) in cells.iter().enumerate() {
+            for (k, &v) in cell.iter().enumerate() {
+                adj[fill[v as usize] as usize] = (8 * c + k) as u32;
+                fill[v as usize] += 1;
+            }
+        }
+        let cell_material: Vec<u32> = match cell_material {
+            Some(cm) if materials.len() > 1 => cm.to_vec(),
+            _ => Vec::new(),
+        };
+        let mat_of = |c: usize| cell_material.get(c).map_or(0, |&m| m as usize);
+        let masses: Vec<f64> = (0..n)
+            .map(|v| {
+                let (lo, hi) = (adj_offsets[v] as usize, adj_offsets[v + 1] as usize);
+                adj[lo..hi]
+                    .iter()
+                    .map(|&e| materials[mat_of(e as usize / 8)].density * h * h * h / 8.0)
+                    .sum()
+            })
+            .collect();
+        // Gershgorin on M^-1 K at rest: the row sums of |K| are bounded by the sum of
+        // the cells' row sums, and every cell of a material has the same rest matrix.
+        let row_abs: Vec<[f64; 24]> = params
+            .iter()
+            .map(|p| {
+                let x: [[f64; 3]; 8] =
+                    std::array::from_fn(|k| hexmesh::CORNER_OFFSETS[k].map(|o| o as f64 * h));
+                let jac = kernel::cell_jacobian(p, &x);
+                std::array::from_fn(|r| jac[r].iter().map(|v| v.abs()).sum())
+            })
+            .collect();
+        let mut omega_max_sq = 0.0f64;
+        for v in 0..n {
+            let (lo, hi) = (adj_offsets[v] as usize, adj_offsets[v + 1] as usize);
+            for d in 0..3 {
+                let s: f64 = adj[lo..hi]
+                    .iter()
+                    .map(|&e| row_abs[mat_of(e as usize / 8)][3 * (e as usize % 8) + d])
+                    .sum();
+                omega_max_sq = omega_max_sq.max(s / masses[v]);
+            }
+        }
+        let num_springs = lattice.num_unique_edges() + 4 * cells.len();
+        Ok(Self {
+            rest,
+            cells,
+            h,
+            masses,
+            params,
+            coefficients,
+            materials: materials.to_vec(),
+            cell_material,
+            adj_offsets,
+            adj,
+            num_springs,
+            param_name: param.name(),
+            omega_max_sq,
+        })
     }
 
     /// Rest positions of the nodes (m).
@@ -171,19 +433,302 @@ impl Model {
     pub fn num_nodes(&self) -> usize {
         self.rest.len()
     }
-    /// Internal forces at positions `x` (N), written to `out`.
+    /// Number of cells.
+    pub fn num_cells(&self) -> usize {
+        self.cells.len()
+    }
+    /// Sum of the node masses (kg).
+    pub fn total_mass(&self) -> f64 {
+        self.masses.iter().sum()
+    }
+    /// Number of merged springs: unique edges plus 4 body diagonals per cell.
+    pub fn num_springs(&self) -> usize {
+        self.num_springs
+    }
+    /// Name of the parameterization the model was built with.
+    pub fn parameterization_name(&self) -> &'static str {
+        self.param_name
+    }
+    /// The materials, indexed by [`Model::cell_material`].
+    pub fn materials(&self) -> &[Material] {
+        &self.materials
+    }
+    /// Material index of cell `cell`.
+    pub fn cell_material(&self, cell: usize) -> u32 {
+        self.cell_material.get(cell).copied().unwrap_or(0)
+    }
+    /// The parameterization's constants for cell `cell`.
+    pub fn cell_coefficients(&self, cell: usize) -> CellCoefficients {
+        self.coefficients[self.cell_material(cell) as usize]
+    }
+    /// Approximate heap memory of the model (bytes), excluding workspaces.
+    pub fn memory_bytes(&self) -> usize {
+        self.rest.capacity() * 24
+            + self.cells.capacity() * 32
+            + self.masses.capacity() * 8
+            + self.cell_material.capacity() * 4
+            + self.adj_offsets.capacity() * 4
+            + self.adj.capacity() * 4
+    }
+
+    #[inline(always)]
+    fn params_of(&self, cell: usize) -> &CellParams {
+        if self.cell_material.is_empty() {
+            &self.params[0]
+        } else {
+            &self.params[self.cell_material[cell] as usize]
+        }
+    }
+
+    #[inline(always)]
+    fn corners(&self, x: &[Vec3], cell: usize) -> [[f64; 3]; 8] {
+        let c = &self.cells[cell];
+        std::array::from_fn(|k| to_arr(&x[c[k] as usize]))
+    }
+
+    /// A workspace sized for this model.
+    pub fn workspace(&self) -> ForceWorkspace {
+        ForceWorkspace {
+            corner_forces: vec![[0.0; 3]; 8 * self.cells.len()],
+        }
+    }
+
+    /// Internal forces at positions `x` (N), written to `out` (allocating
+    /// convenience wrapper of [`Model::internal_forces_with`]).
     pub fn internal_forces(&self, x: &[Vec3], out: &mut [Vec3]) {
-        let _ = (x, out);
-        todo!()
+        let mut ws = self.workspace();
+        self.internal_forces_with(x, &mut ws, out);
     }
-    /// Jacobian d(internal force)/dx at `x` (N/m), pattern of
-    /// [`BlockCsr::lattice_pattern`].
+
+    /// Internal forces at positions `x` (N), written to `out`, using `ws` as
+    /// scratch (resized if needed). Bitwise identical for any thread count.
+    ///
+    /// Panics if `x` or `out` does not have one entry per node.
+    pub fn internal_forces_with(&self, x: &[Vec3], ws: &mut ForceWorkspace, out: &mut [Vec3]) {
+        self.forces_impl(x, ws, out, true);
+    }
+
+    /// As [`Model::internal_forces_with`] but one cell at a time, without SIMD
+    /// batching: the reference path, for tests and benchmarks. Bitwise equal.
+    pub fn internal_forces_scalar_with(
+        &self,
+        x: &[Vec3],
+        ws: &mut ForceWorkspace,
+        out: &mut [Vec3],
+    ) {
+        self.forces_impl(x, ws, out, false);
+    }
+
+    fn forces_impl(&self, x: &[Vec3], ws: &mut ForceWorkspace, out: &mut [Vec3], batched: bool) {
+        assert_eq!(x.len(), self.num_nodes(), "positions: one per node");
+        assert_eq!(out.len(), self.num_nodes(), "forces: one per node");
+        ws.corner_forces.resize(8 * self.cells.len(), [0.0; 3]);
+        // SAFETY: Vector3<f64> is a repr(C) wrapper of [[f64; 3]; 1], so the slice
+        // has the layout of a slice of [f64; 3] of the same length.
+        let xs: &[[f64; 3]] =
+            unsafe { std::slice::from_raw_parts(x.as_ptr().cast::<[f64; 3]>(), x.len()) };
+        ws.corner_forces
+            .par_chunks_mut(8 * CHUNK)
+            .enumerate()
+            .for_each(|(ci, chunk)| {
+                let first = ci * CHUNK;
+                let cells = &self.cells[first..first + chunk.len() / 8];
+                if batched && self.cell_material.is_empty() {
+                    kernel::forces_batch(&self.params[0], cells, xs, chunk);
+                } else {
+                    for (k, f) in chunk.chunks_exact_mut(8).enumerate() {
+                        let cell = first + k;
+                        let xc = self.corners(x, cell);
+                        let mut fc = [[0.0; 3]; 8];
+                        kernel::cell_forces(self.params_of(cell), &xc, &mut fc);
+                        f.copy_from_slice(&fc);
+                    }
+                }
+            });
+        let cf = &ws.corner_forces;
+        out.par_chunks_mut(4 * CHUNK)
+            .enumerate()
+            .for_each(|(ci, chunk)| {
+                for (k, o) in chunk.iter_mut().enumerate() {
+                    let v = ci * 4 * CHUNK + k;
+                    let (lo, hi) = (
+                        self.adj_offsets[v] as usize,
+                        self.adj_offsets[v + 1] as usize,
+                    );
+                    let mut acc = [0.0; 3];
+                    for &e in &self.adj[lo..hi] {
+                        let f = cf[e as usize];
+                        acc[0] += f[0];
+                        acc[1] += f[1];
+                        acc[2] += f[2];
+                    }
+                    *o = Vec3::new(acc[0], acc[1], acc[2]);
+                }
+            });
+    }
+
+    /// The 8 corner forces of one cell at positions `x` (N).
+    pub fn cell_forces(&self, x: &[Vec3], cell: usize) -> [Vec3; 8] {
+        let mut fc = [[0.0; 3]; 8];
+        kernel::cell_forces(self.params_of(cell), &self.corners(x, cell), &mut fc);
+        fc.map(|f| Vec3::new(f[0], f[1], f[2]))
+    }
+
+    /// Jacobian d(internal force)/dx at `x` (N/m), exact, with the pattern of
+    /// [`BlockCsr::lattice_pattern`]. It is minus the stiffness matrix: negative
+    /// semi-definite at rest, and not symmetric at large strain when the model
+    /// has correction forces.
     pub fn tangent(&self, x: &[Vec3]) -> BlockCsr {
-        let _ = x;
-        todo!()
+        assert_eq!(x.len(), self.num_nodes(), "positions: one per node");
+        let mut m = BlockCsr::lattice_pattern(self.num_nodes(), &self.cells);
+        let mut buf: Vec<[[f64; 24]; 24]> = Vec::new();
+        // Cell Jacobians in parallel, added in a fixed order: deterministic.
+        let batch = 16 * CHUNK;
+        for start in (0..self.cells.len()).step_by(batch) {
+            let end = (start + batch).min(self.cells.len());
+            (start..end)
+                .into_par_iter()
+                .map(|c| kernel::cell_jacobian(self.params_of(c), &self.corners(x, c)))
+                .collect_into_vec(&mut buf);
+            for (c, jac) in (start..end).zip(&buf) {
+                add_cell_matrix(&mut m, &self.cells[c], jac);
+            }
+        }
+        m
     }
-    /// Stable explicit time step estimate (s), with safety margin.
+
+    /// The stiffness matrix `-tangent(x)` (N/m).
+    pub fn stiffness(&self, x: &[Vec3]) -> BlockCsr {
+        let mut m = self.tangent(x);
+        for b in &mut m.blocks {
+            *b = -*b;
+        }
+        m
+    }
+
+    /// The rest stiffness matrix `-tangent(rest)` (N/m), symmetric positive
+    /// semi-definite.
+    pub fn rest_stiffness(&self) -> BlockCsr {
+        self.stiffness(&self.rest)
+    }
+
+    /// Potential energy of the springs and the volumetric term (J). The
+    /// correction forces are not conservative and have no energy.
+    pub fn energy(&self, x: &[Vec3]) -> f64 {
+        assert_eq!(x.len(), self.num_nodes(), "positions: one per node");
+        // Fixed-size chunks summed in order: deterministic.
+        let parts: Vec<f64> = (0..self.cells.len())
+            .into_par_iter()
+            .with_min_len(CHUNK)
+            .fold_chunks(
+                CHUNK,
+                || 0.0,
+                |acc, c| acc + kernel::cell_energy(self.params_of(c), &self.corners(x, c)),
+            )
+            .collect();
+        parts.iter().sum()
+    }
+
+    /// Upper bound of the highest angular eigenfrequency at rest (rad/s), from
+    /// Gershgorin discs of `M^-1 K` (springs, corrections and volumetric term).
+    pub fn omega_max_bound(&self) -> f64 {
+        self.omega_max_sq.sqrt()
+    }
+
+    /// Critical time step `2 / omega_max` of explicit integration (s), from an
+    /// upper bound of omega_max at rest: never above the true limit at rest.
+    pub fn critical_time_step(&self) -> f64 {
+        2.0 / self.omega_max_bound()
+    }
+
+    /// Stable explicit time step (s): 0.9 of [`Model::critical_time_step`], a
+    /// margin for the stiffening of springs under compression at large strain.
     pub fn stable_time_step(&self) -> f64 {
-        todo!()
+        0.9 * self.critical_time_step()
+    }
+
+    /// Per-cell strain measures and correction-force magnitude at `x`.
+    pub fn cell_diagnostics(&self, x: &[Vec3]) -> Vec<CellDiagnostics> {
+        assert_eq!(x.len(), self.num_nodes(), "positions: one per node");
+        (0..self.cells.len())
+            .into_par_iter()
+            .map(|c| {
+                let p = self.params_of(c);
+                let xc = self.corners(x, c);
+                let (cols, jac) = kernel::deformation_gradient(&xc, p.grad_scale);
+                let f = Mat3::from_columns(&cols.map(|c| Vec3::new(c[0], c[1], c[2])));
+                let green = 0.5 * (f.transpose() * f - Mat3::identity());
+                let dev = green - Mat3::identity() * (green.trace() / 3.0);
+                let shear = (2.0 / 3.0 * dev.norm_squared()).sqrt();
+                let correction_force = if p.correction.is_some() {
+                    let mut full = [[0.0; 3]; 8];
+                    kernel::cell_forces(p, &xc, &mut full);
+                    let mut springs = [[0.0; 3]; 8];
+                    let q = CellParams {
+                        correction: None,
+                        vol_lambda_h3: 0.0,
+                        ..*p
+                    };
+                    kernel::cell_forces(&q, &xc, &mut springs);
+                    let mut vol = [[0.0; 3]; 8];
+                    if p.vol_lambda_h3 != 0.0 {
+                        let r = CellParams {
+                            correction: None,
+                            k_edge: 0.0,
+                            k_diag: 0.0,
+                            ..*p
+                        };
+                        kernel::cell_forces(&r, &xc, &mut vol);
+                    }
+                    (0..8)
+                        .map(|k| {
+                            (0..3)
+                                .map(|d| (full[k][d] - springs[k][d] - vol[k][d]).powi(2))
+                                .sum::<f64>()
+                        })
+                        .sum::<f64>()
+                        .sqrt()
+                } else {
+                    0.0
+                };
+                CellDiagnostics {
+                    volumetric_strain: jac - 1.0,
+                    shear_strain: shear,
+                    correction_force,
+                }
+            })
+            .collect()
+    }
+
+    /// Cells whose Jacobian `J = det F` at the centre is `<= 0` (inverted).
+    pub fn inverted_cells(&self, x: &[Vec3]) -> Vec<u32> {
+        assert_eq!(x.len(), self.num_nodes(), "positions: one per node");
+        (0..self.cells.len())
+            .filter(|&c| {
+                let p = self.params_of(c);
+                kernel::deformation_gradient(&self.corners(x, c), p.grad_scale).1 <= 0.0
+            })
+            .map(|c| c as u32)
+            .collect()
+    }
+}
+
+/// Adds a 24x24 cell matrix (rows and columns corner-major) to `m`.
+fn add_cell_matrix(m: &mut BlockCsr, cell: &[u32; 8], jac: &[[f64; 24]; 24]) {
+    for (b, &rb) in cell.iter().enumerate() {
+        let lo = m.row_offsets[rb as usize] as usize;
+        let hi = m.row_offsets[rb as usize + 1] as usize;
+        for (a, &ca) in cell.iter().enumerate() {
+            let k = lo
+                + m.col_indices[lo..hi]
+                    .binary_search(&ca)
+                    .expect("cell pair in the lattice pattern");
+            let blk = &mut m.blocks[k];
+            for e in 0..3 {
+                for d in 0..3 {
+                    blk[(e, d)] += jac[3 * b + e][3 * a + d];
+                }
+            }
+        }
     }
 }

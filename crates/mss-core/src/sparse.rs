@@ -100,3 +100,353 @@ impl BlockCsr {
         worst
     }
 }
+
+/// Why a sparse linear solve failed.
+#[derive(Debug, thiserror::Error, Clone, PartialEq)]
+pub enum LinearSolveError {
+    /// The matrix restricted to the free dofs is singular: typically the
+    /// constraints leave mechanisms (rigid motions or hourglass modes) free.
+    #[error(
+        "the system matrix is singular on the free degrees of freedom ({detail}): constraints probably leave rigid or hourglass mechanisms; fix more nodes (e.g. a whole face)"
+    )]
+    Singular {
+        /// What detected it.
+        detail: String,
+    },
+    /// The Cholesky factorization met a non-positive pivot.
+    #[error(
+        "the system matrix is not positive definite on the free degrees of freedom (non-positive pivot at free dof {index}); use the general (LU) solve, or the constraints leave mechanisms"
+    )]
+    NotPositiveDefinite {
+        /// Free-dof index where the factorization stopped.
+        index: usize,
+    },
+    /// Vector lengths do not match the matrix.
+    #[error("{what} has {given} entries, the matrix has {rows} block rows")]
+    Shape {
+        /// Which argument.
+        what: &'static str,
+        /// Entries given.
+        given: usize,
+        /// Block rows of the matrix.
+        rows: usize,
+    },
+    /// Every dof is fixed or the matrix is empty: nothing to solve.
+    #[error("no free degree of freedom")]
+    NoFreeDof,
+    /// Internal failure of the sparse library (out of memory, index overflow).
+    #[error("sparse factorization failed: {0}")]
+    Library(String),
+}
+
+/// Numbering of the free dofs (3 per node) of a constrained system.
+#[derive(Debug, Clone)]
+struct DofMap {
+    /// Free index of each dof `3 node + d`, or `u32::MAX` if fixed.
+    index: Vec<u32>,
+    free: usize,
+}
+
+impl DofMap {
+    fn new(fixed: &[[bool; 3]]) -> Self {
+        let mut free = 0usize;
+        let index = fixed
+            .iter()
+            .flat_map(|f| f.iter())
+            .map(|&f| {
+                if f {
+                    u32::MAX
+                } else {
+                    free += 1;
+                    (free - 1) as u32
+                }
+            })
+            .collect();
+        Self { index, free }
+    }
+}
+
+/// A factorization of a [`BlockCsr`] restricted to its free dofs, reusable for
+/// several right-hand sides (e.g. within a Newton step).
+pub struct Factorization {
+    map: DofMap,
+    kind: FactorKind,
+    /// The restricted matrix, kept for the residual check.
+    matrix: faer::sparse::SparseColMat<u32, f64>,
+}
+
+enum FactorKind {
+    Lu(Box<faer::sparse::linalg::solvers::Lu<u32, f64>>),
+    Llt(faer::sparse::linalg::solvers::Llt<u32, f64>),
+}
+
+impl std::fmt::Debug for Factorization {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Factorization")
+            .field("free_dofs", &self.map.free)
+            .field(
+                "kind",
+                &match self.kind {
+                    FactorKind::Lu(_) => "LU",
+                    FactorKind::Llt(_) => "Cholesky",
+                },
+            )
+            .finish()
+    }
+}
+
+impl Factorization {
+    /// Number of free dofs.
+    pub fn num_free_dofs(&self) -> usize {
+        self.map.free
+    }
+
+    /// Solves `A X = B` for several right-hand sides given directly in the free-dof
+    /// numbering (the order of [`BlockCsr::to_faer_free`]), without residual check.
+    pub fn solve_free(&self, rhs: faer::MatRef<'_, f64>) -> faer::Mat<f64> {
+        use faer::linalg::solvers::Solve;
+        match &self.kind {
+            FactorKind::Lu(lu) => lu.solve(rhs),
+            FactorKind::Llt(llt) => llt.solve(rhs),
+        }
+    }
+
+    /// Solves `A u = rhs` on the free dofs; `u` is 0 on the fixed dofs and the
+    /// fixed dofs' entries of `rhs` are ignored.
+    pub fn solve(&self, rhs: &[Vec3]) -> Result<Vec<Vec3>, LinearSolveError> {
+        use faer::linalg::solvers::Solve;
+        let rows = self.map.index.len() / 3;
+        if rhs.len() != rows {
+            return Err(LinearSolveError::Shape {
+                what: "right-hand side",
+                given: rhs.len(),
+                rows,
+            });
+        }
+        let mut b = faer::Mat::<f64>::zeros(self.map.free, 1);
+        for (dof, &fi) in self.map.index.iter().enumerate() {
+            if fi != u32::MAX {
+                b[(fi as usize, 0)] = rhs[dof / 3][dof % 3];
+            }
+        }
+        let x = match &self.kind {
+            FactorKind::Lu(lu) => lu.solve(&b),
+            FactorKind::Llt(llt) => llt.solve(&b),
+        };
+        // Backward-stable solves of a singular system give residuals of the
+        // order of the right-hand side: check it.
+        let ax = &self.matrix * &x;
+        let mut r2 = 0.0;
+        let mut b2 = 0.0;
+        let mut finite = true;
+        for i in 0..self.map.free {
+            finite &= x[(i, 0)].is_finite();
+            r2 += (ax[(i, 0)] - b[(i, 0)]).powi(2);
+            b2 += b[(i, 0)].powi(2);
+        }
+        if !finite {
+            return Err(LinearSolveError::Singular {
+                detail: "non-finite solution".into(),
+            });
+        }
+        if r2.sqrt() > 1e-6 * b2.sqrt() {
+            return Err(LinearSolveError::Singular {
+                detail: format!("relative residual {:.2e}", (r2 / b2).sqrt()),
+            });
+        }
+        let mut out = vec![Vec3::zeros(); rows];
+        for (dof, &fi) in self.map.index.iter().enumerate() {
+            if fi != u32::MAX {
+                out[dof / 3][dof % 3] = x[(fi as usize, 0)];
+            }
+        }
+        Ok(out)
+    }
+}
+
+fn node_mask(fixed: &[bool]) -> Vec<[bool; 3]> {
+    fixed.iter().map(|&f| [f; 3]).collect()
+}
+
+impl BlockCsr {
+    /// Adds `s` to every diagonal entry (all blocks `(i, i)` are in the pattern
+    /// of [`BlockCsr::lattice_pattern`]); panics if a diagonal block is missing.
+    pub fn add_diagonal(&mut self, s: f64) {
+        for i in 0..self.num_rows() {
+            let k = self.find(i, i).expect("diagonal block in the pattern");
+            for d in 0..3 {
+                self.blocks[k][(d, d)] += s;
+            }
+        }
+    }
+
+    /// Largest absolute diagonal entry.
+    pub fn max_diagonal(&self) -> f64 {
+        (0..self.num_rows())
+            .filter_map(|i| self.find(i, i))
+            .map(|k| {
+                (0..3)
+                    .map(|d| self.blocks[k][(d, d)].abs())
+                    .fold(0.0, f64::max)
+            })
+            .fold(0.0, f64::max)
+    }
+
+    /// Number of stored scalar entries (9 per block).
+    pub fn nnz(&self) -> usize {
+        9 * self.blocks.len()
+    }
+
+    /// The scalar matrix (3 dofs per node, dof `3 node + d`) restricted to the
+    /// free dofs (`fixed[node][d] == false`), in faer's compressed-column form.
+    /// With `lower_only`, only entries with row >= column are kept.
+    pub fn to_faer_free(
+        &self,
+        fixed: &[[bool; 3]],
+        lower_only: bool,
+    ) -> Result<faer::sparse::SparseColMat<u32, f64>, LinearSolveError> {
+        let map = self.check(fixed)?;
+        self.restricted(&map, lower_only)
+    }
+
+    /// The whole scalar matrix (3 dofs per node) in faer's compressed-column form.
+    pub fn to_faer(&self) -> Result<faer::sparse::SparseColMat<u32, f64>, LinearSolveError> {
+        self.to_faer_free(&vec![[false; 3]; self.num_rows()], false)
+    }
+
+    fn check(&self, fixed: &[[bool; 3]]) -> Result<DofMap, LinearSolveError> {
+        if fixed.len() != self.num_rows() {
+            return Err(LinearSolveError::Shape {
+                what: "fixed mask",
+                given: fixed.len(),
+                rows: self.num_rows(),
+            });
+        }
+        let map = DofMap::new(fixed);
+        if map.free == 0 {
+            return Err(LinearSolveError::NoFreeDof);
+        }
+        Ok(map)
+    }
+
+    fn restricted(
+        &self,
+        map: &DofMap,
+        lower_only: bool,
+    ) -> Result<faer::sparse::SparseColMat<u32, f64>, LinearSolveError> {
+        use faer::sparse::Triplet;
+        let mut trips = Vec::with_capacity(if lower_only { 5 } else { 9 } * self.blocks.len());
+        for i in 0..self.num_rows() {
+            for k in self.row_offsets[i] as usize..self.row_offsets[i + 1] as usize {
+                let j = self.col_indices[k] as usize;
+                let b = &self.blocks[k];
+                for e in 0..3 {
+                    let r = map.index[3 * i + e];
+                    if r == u32::MAX {
+                        continue;
+                    }
+                    for d in 0..3 {
+                        let c = map.index[3 * j + d];
+                        if c == u32::MAX || (lower_only && r < c) {
+                            continue;
+                        }
+                        trips.push(Triplet::new(r, c, b[(e, d)]));
+                    }
+                }
+            }
+        }
+        faer::sparse::SparseColMat::try_new_from_triplets(map.free, map.free, &trips)
+            .map_err(|e| LinearSolveError::Library(format!("{e:?}")))
+    }
+
+    /// LU factorization (partial pivoting; for general, possibly non-symmetric
+    /// matrices) restricted to the free dofs.
+    pub fn factor_lu(&self, fixed: &[[bool; 3]]) -> Result<Factorization, LinearSolveError> {
+        let map = self.check(fixed)?;
+        let matrix = self.restricted(&map, false)?;
+        let lu = matrix.sp_lu().map_err(|e| match e {
+            faer::sparse::linalg::LuError::SymbolicSingular { index } => {
+                LinearSolveError::Singular {
+                    detail: format!("structurally singular at free dof {index}"),
+                }
+            }
+            other => LinearSolveError::Library(format!("{other:?}")),
+        })?;
+        Ok(Factorization {
+            map,
+            kind: FactorKind::Lu(Box::new(lu)),
+            matrix,
+        })
+    }
+
+    /// Memory (bytes) that the values of a sparse Cholesky factor of the matrix
+    /// restricted to the free dofs would take (symbolic analysis only): check it
+    /// before factoring large 3D systems, whose fill-in grows fast.
+    pub fn cholesky_factor_bytes(&self, fixed: &[[bool; 3]]) -> Result<usize, LinearSolveError> {
+        let map = self.check(fixed)?;
+        let lower = self.restricted(&map, true)?;
+        let sym = faer::sparse::linalg::cholesky::factorize_symbolic_cholesky(
+            lower.symbolic(),
+            faer::Side::Lower,
+            Default::default(),
+            Default::default(),
+        )
+        .map_err(|e| LinearSolveError::Library(format!("{e:?}")))?;
+        Ok(sym.len_val() * std::mem::size_of::<f64>())
+    }
+
+    /// Cholesky factorization restricted to the free dofs, for a symmetric
+    /// positive definite matrix (only the lower triangle is read).
+    pub fn factor_cholesky(&self, fixed: &[[bool; 3]]) -> Result<Factorization, LinearSolveError> {
+        let map = self.check(fixed)?;
+        let lower = self.restricted(&map, true)?;
+        let llt = lower.sp_cholesky(faer::Side::Lower).map_err(|e| match e {
+            faer::sparse::linalg::LltError::Numeric(
+                faer::linalg::cholesky::llt::factor::LltError::NonPositivePivot { index },
+            ) => LinearSolveError::NotPositiveDefinite { index },
+            other => LinearSolveError::Library(format!("{other:?}")),
+        })?;
+        // The residual check needs the full matrix.
+        let matrix = self.restricted(&map, false)?;
+        Ok(Factorization {
+            map,
+            kind: FactorKind::Llt(llt),
+            matrix,
+        })
+    }
+
+    /// Solves `A u = rhs` with whole nodes fixed (`u = 0` there) by sparse LU.
+    pub fn solve(&self, rhs: &[Vec3], fixed: &[bool]) -> Result<Vec<Vec3>, LinearSolveError> {
+        self.solve_dofs(rhs, &node_mask(fixed))
+    }
+
+    /// Solves `A u = rhs` with individual dofs fixed (`u = 0` there, e.g.
+    /// rollers) by sparse LU.
+    pub fn solve_dofs(
+        &self,
+        rhs: &[Vec3],
+        fixed: &[[bool; 3]],
+    ) -> Result<Vec<Vec3>, LinearSolveError> {
+        self.factor_lu(fixed)?.solve(rhs)
+    }
+
+    /// Solves `A u = rhs` with whole nodes fixed, for a symmetric positive
+    /// definite `A` (e.g. a rest stiffness), by sparse Cholesky.
+    pub fn solve_symmetric(
+        &self,
+        rhs: &[Vec3],
+        fixed: &[bool],
+    ) -> Result<Vec<Vec3>, LinearSolveError> {
+        self.solve_symmetric_dofs(rhs, &node_mask(fixed))
+    }
+
+    /// Solves `A u = rhs` with individual dofs fixed, for a symmetric positive
+    /// definite `A`, by sparse Cholesky.
+    pub fn solve_symmetric_dofs(
+        &self,
+        rhs: &[Vec3],
+        fixed: &[[bool; 3]],
+    ) -> Result<Vec<Vec3>, LinearSolveError> {
+        self.factor_cholesky(fixed)?.solve(rhs)
+    }
+}

@@ -1,0 +1,611 @@
+//! Loading surface meshes: OBJ (tobj), STL ASCII and binary (stl_io), and
+//! user formats through [`MeshLoader`].
+//!
+//! Every loader's output goes through the same cleaning and checks
+//! ([`clean_mesh`]): non-finite coordinates and out-of-range indices are errors;
+//! duplicate vertices are welded (exactly, or within a tolerance); triangles
+//! with a repeated index or zero area are dropped; a mesh left without
+//! triangles, or whose bounding box has zero extent along some axis (it cannot
+//! enclose any volume), is an error. Nothing here panics on any input.
+
+use std::collections::HashMap;
+use std::io::{BufRead, Cursor};
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex, OnceLock};
+
+use thiserror::Error;
+
+use crate::TriMesh;
+
+/// Why a mesh could not be loaded. Every variant names the file (or the name
+/// given to [`load_mesh_bytes`]).
+#[derive(Debug, Error)]
+pub enum LoadError {
+    /// The file could not be read (missing, permissions, ...).
+    #[error("cannot read mesh file {file}: {source}")]
+    Io {
+        /// The file.
+        file: PathBuf,
+        /// The underlying error.
+        source: std::io::Error,
+    },
+    /// The file has no bytes.
+    #[error("mesh file {file} is empty")]
+    Empty {
+        /// The file.
+        file: PathBuf,
+    },
+    /// No loader is registered for the file's extension.
+    #[error("mesh file {file}: unknown format (extension {extension:?}); known: {known}")]
+    UnknownFormat {
+        /// The file.
+        file: PathBuf,
+        /// Its extension (lower case, possibly empty).
+        extension: String,
+        /// The registered extensions, comma separated.
+        known: String,
+    },
+    /// A binary STL file is shorter than its triangle count says.
+    #[error(
+        "binary STL {file} is truncated: header announces {triangles} triangles \
+         ({expected} bytes) but the file has {actual} bytes"
+    )]
+    TruncatedStl {
+        /// The file.
+        file: PathBuf,
+        /// Triangle count in the header.
+        triangles: u32,
+        /// Expected file length.
+        expected: u64,
+        /// Actual file length.
+        actual: u64,
+    },
+    /// Text that could not be parsed.
+    #[error("cannot parse {file}{}: {message}", line.map(|l| format!(" (line {l})")).unwrap_or_default())]
+    Parse {
+        /// The file.
+        file: PathBuf,
+        /// 1-based line number, where known.
+        line: Option<usize>,
+        /// What is wrong.
+        message: String,
+    },
+    /// A vertex coordinate is NaN or infinite.
+    #[error("mesh {file}: vertex {vertex} has a non-finite coordinate {value:?}")]
+    NonFinite {
+        /// The file.
+        file: PathBuf,
+        /// 0-based vertex index.
+        vertex: usize,
+        /// The vertex.
+        value: [f64; 3],
+    },
+    /// A triangle refers to a vertex that does not exist.
+    #[error(
+        "mesh {file}: triangle {triangle} refers to vertex {index}, but there are {vertices} vertices"
+    )]
+    IndexOutOfRange {
+        /// The file.
+        file: PathBuf,
+        /// 0-based triangle index.
+        triangle: usize,
+        /// The offending 0-based index.
+        index: u64,
+        /// Number of vertices.
+        vertices: usize,
+    },
+    /// No (non-degenerate) triangle is left.
+    #[error("mesh {file} has no triangles ({dropped} degenerate triangles dropped)")]
+    NoTriangles {
+        /// The file.
+        file: PathBuf,
+        /// Degenerate triangles dropped.
+        dropped: usize,
+    },
+    /// The bounding box is flat along some axis: the surface encloses no volume.
+    #[error(
+        "mesh {file} has zero extent along {axis} (bounding box {min:?} .. {max:?}): it encloses no volume"
+    )]
+    ZeroExtent {
+        /// The file.
+        file: PathBuf,
+        /// "x", "y" or "z".
+        axis: &'static str,
+        /// Bounding box minimum.
+        min: [f64; 3],
+        /// Bounding box maximum.
+        max: [f64; 3],
+    },
+}
+
+/// Built-in mesh formats.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MeshFormat {
+    /// Wavefront OBJ (text).
+    Obj,
+    /// STL, ASCII or binary (detected from the content).
+    Stl,
+}
+
+impl MeshFormat {
+    /// The format for a file extension (case-insensitive), if built in.
+    pub fn from_extension(ext: &str) -> Option<Self> {
+        match ext.to_ascii_lowercase().as_str() {
+            "obj" => Some(Self::Obj),
+            "stl" => Some(Self::Stl),
+            _ => None,
+        }
+    }
+}
+
+/// What cleaning did to a loaded mesh.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct LoadReport {
+    /// Vertices as read.
+    pub vertices_read: usize,
+    /// Triangles as read (after polygon triangulation).
+    pub triangles_read: usize,
+    /// Vertices removed by welding.
+    pub vertices_welded: usize,
+    /// Triangles dropped for a repeated vertex index.
+    pub degenerate_repeated: usize,
+    /// Triangles dropped for zero area.
+    pub degenerate_zero_area: usize,
+    /// Vertices not used by any triangle (kept, but ignored by everything else).
+    pub unused_vertices: usize,
+}
+
+/// A loaded, cleaned mesh and what cleaning did.
+#[derive(Debug, Clone)]
+pub struct LoadedMesh {
+    /// The cleaned mesh.
+    pub mesh: TriMesh,
+    /// Counts of what was read, welded and dropped.
+    pub report: LoadReport,
+}
+
+/// A mesh file format. Implement it and [`register_loader`] it to add formats.
+pub trait MeshLoader: Send + Sync {
+    /// File extensions served, lower case, without the dot.
+    fn extensions(&self) -> &[&str];
+    /// Parses `bytes` (the whole file) into a raw mesh; `name` is used in
+    /// errors. Cleaning and checks are done by the caller.
+    fn load(&self, bytes: &[u8], name: &str) -> Result<TriMesh, LoadError>;
+}
+
+/// The built-in OBJ loader (tobj; all objects and groups merged, polygons
+/// triangulated, normals, texture coordinates, lines and points ignored).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct ObjLoader;
+
+/// The built-in STL loader (stl_io), ASCII or binary detected from the
+/// content: binary if the file is exactly `84 + 50 n` bytes long with `n` the
+/// little-endian u32 at offset 80, ASCII otherwise (a binary file whose header
+/// starts with "solid" still loads as binary).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct StlLoader;
+
+fn file(name: &str) -> PathBuf {
+    PathBuf::from(name)
+}
+
+impl MeshLoader for ObjLoader {
+    fn extensions(&self) -> &[&str] {
+        &["obj"]
+    }
+
+    fn load(&self, bytes: &[u8], name: &str) -> Result<TriMesh, LoadError> {
+        // tobj's option fields depend on its features: keep the struct update.
+        #[allow(clippy::needless_update)]
+        let options = tobj::LoadOptions {
+            single_index: false,
+            triangulate: true,
+            ignore_points: true,
+            ignore_lines: true,
+            ..Default::default()
+        };
+        // tobj reads a polyline of 3+ points ("l 1 2 3") as a polygon even
+        // with ignore_lines: blank line and point elements (keeping line numbers).
+        let filtered = strip_line_elements(bytes);
+        let mut reader = Cursor::new(filtered.as_deref().unwrap_or(bytes));
+        let (models, _materials) = tobj::load_obj_buf(&mut reader, &options, |_| {
+            // Materials are irrelevant to geometry; never touch other files.
+            Err(tobj::LoadError::OpenFileFailed)
+        })
+        .map_err(|e| {
+            let (line, message) =
+                locate_obj_problem(bytes).unwrap_or((None, format!("OBJ parser: {e}")));
+            LoadError::Parse {
+                file: file(name),
+                line,
+                message,
+            }
+        })?;
+        let mut mesh = TriMesh::default();
+        for model in &models {
+            let m = &model.mesh;
+            let base = mesh.vertices.len() as u64;
+            for p in m.positions.chunks_exact(3) {
+                // tobj is built with `use_f64`.
+                mesh.vertices.push([p[0], p[1], p[2]]);
+            }
+            for (t, tri) in m.indices.chunks_exact(3).enumerate() {
+                let mut out = [0u32; 3];
+                for k in 0..3 {
+                    let idx = base + tri[k] as u64;
+                    if idx >= mesh.vertices.len() as u64 || idx > u32::MAX as u64 {
+                        return Err(LoadError::IndexOutOfRange {
+                            file: file(name),
+                            triangle: mesh.triangles.len() + t,
+                            index: idx,
+                            vertices: mesh.vertices.len(),
+                        });
+                    }
+                    out[k] = idx as u32;
+                }
+                mesh.triangles.push(out);
+            }
+        }
+        Ok(mesh)
+    }
+}
+
+/// `bytes` with every `l` and `p` element line blanked, or `None` if it has none.
+fn strip_line_elements(bytes: &[u8]) -> Option<Vec<u8>> {
+    let is_element = |line: &[u8]| {
+        let t = line.trim_ascii_start();
+        (t.starts_with(b"l") || t.starts_with(b"p"))
+            && t.get(1).is_none_or(|c| c.is_ascii_whitespace())
+    };
+    if !bytes.split(|&b| b == b'\n').any(is_element) {
+        return None;
+    }
+    let mut out = Vec::with_capacity(bytes.len());
+    for (i, line) in bytes.split(|&b| b == b'\n').enumerate() {
+        if i > 0 {
+            out.push(b'\n');
+        }
+        if !is_element(line) {
+            out.extend_from_slice(line);
+        }
+    }
+    Some(out)
+}
+
+/// Finds the first line of an OBJ text that is clearly wrong, to give a line
+/// number for an error tobj reports without one.
+fn locate_obj_problem(bytes: &[u8]) -> Option<(Option<usize>, String)> {
+    let mut vertices = 0i64;
+    for (no, line) in Cursor::new(bytes).lines().enumerate() {
+        let Ok(line) = line else {
+            return Some((Some(no + 1), "line is not valid UTF-8 text".into()));
+        };
+        let mut tokens = line.split_whitespace();
+        match tokens.next() {
+            Some("v") => {
+                let coords: Vec<&str> = tokens.collect();
+                if coords.len() < 3 || coords.iter().any(|c| c.parse::<f64>().is_err()) {
+                    return Some((Some(no + 1), format!("bad vertex line {line:?}")));
+                }
+                vertices += 1;
+            }
+            Some("f") => {
+                for tok in tokens {
+                    let first = tok.split('/').next().unwrap_or("");
+                    match first.parse::<i64>() {
+                        Ok(i) if i > 0 && i <= vertices => {}
+                        Ok(i) if i < 0 && -i <= vertices => {}
+                        Ok(i) => {
+                            return Some((
+                                Some(no + 1),
+                                format!(
+                                    "face refers to vertex {i}, but only {vertices} are defined"
+                                ),
+                            ));
+                        }
+                        Err(_) => {
+                            return Some((Some(no + 1), format!("bad face line {line:?}")));
+                        }
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+    None
+}
+
+impl MeshLoader for StlLoader {
+    fn extensions(&self) -> &[&str] {
+        &["stl"]
+    }
+
+    fn load(&self, bytes: &[u8], name: &str) -> Result<TriMesh, LoadError> {
+        let len = bytes.len() as u64;
+        let parse = |message: String| LoadError::Parse {
+            file: file(name),
+            line: None,
+            message,
+        };
+        let binary_count = (bytes.len() >= 84)
+            .then(|| u32::from_le_bytes([bytes[80], bytes[81], bytes[82], bytes[83]]));
+        let is_binary = binary_count.is_some_and(|n| 84 + 50 * n as u64 == len);
+        let triangles: Vec<stl_io::Triangle> = if is_binary {
+            // stl_io decides ASCII vs binary by a leading "solid ": blank the
+            // header (which carries no geometry) so it cannot misread this file.
+            let mut copy = bytes.to_vec();
+            copy[..80].fill(0);
+            let mut reader = Cursor::new(copy);
+            let iter = stl_io::create_stl_reader(&mut reader)
+                .map_err(|e| parse(format!("binary STL: {e}")))?;
+            iter.collect::<Result<_, _>>()
+                .map_err(|e| parse(format!("binary STL: {e}")))?
+        } else {
+            let text_start = bytes.iter().take(512).all(|&b| b != 0);
+            let starts_solid = bytes.trim_ascii_start().starts_with(b"solid");
+            if !(text_start && starts_solid) {
+                if let Some(n) = binary_count {
+                    let expected = 84 + 50 * n as u64;
+                    if expected > len {
+                        return Err(LoadError::TruncatedStl {
+                            file: file(name),
+                            triangles: n,
+                            expected,
+                            actual: len,
+                        });
+                    }
+                    return Err(parse(format!(
+                        "binary STL length {len} does not match its {n} triangles \
+                         ({expected} bytes), and the file is not ASCII STL"
+                    )));
+                }
+                return Err(parse(format!(
+                    "file of {len} bytes is neither ASCII STL (no leading \"solid\") \
+                     nor binary STL (shorter than the 84-byte header)"
+                )));
+            }
+            // stl_io wants "solid " with a space: normalize the first line.
+            let text = bytes.trim_ascii_start();
+            let rest = match text.iter().position(|&b| b == b'\n') {
+                Some(i) => &text[i + 1..],
+                None => &[][..],
+            };
+            let mut fixed = b"solid mesh\n".to_vec();
+            fixed.extend_from_slice(rest);
+            let mut reader = Cursor::new(fixed);
+            let iter = stl_io::create_stl_reader(&mut reader)
+                .map_err(|e| parse(format!("ASCII STL: {e}")))?;
+            iter.collect::<Result<_, _>>()
+                .map_err(|e| parse(format!("ASCII STL: {e}")))?
+        };
+        let mut mesh = TriMesh::default();
+        for (t, tri) in triangles.iter().enumerate() {
+            let base = (3 * t) as u32;
+            for v in &tri.vertices {
+                mesh.vertices.push(v.0.map(|c| c as f64));
+            }
+            mesh.triangles.push([base, base + 1, base + 2]);
+        }
+        Ok(mesh)
+    }
+}
+
+type Registry = Mutex<Vec<Arc<dyn MeshLoader>>>;
+
+fn registry() -> &'static Registry {
+    static REGISTRY: OnceLock<Registry> = OnceLock::new();
+    REGISTRY.get_or_init(|| Mutex::new(vec![Arc::new(ObjLoader), Arc::new(StlLoader)]))
+}
+
+/// Registers a loader for more file formats. A later registration wins for an
+/// extension served by several loaders.
+pub fn register_loader(loader: Arc<dyn MeshLoader>) {
+    registry()
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .push(loader);
+}
+
+fn loader_for(ext: &str) -> Option<Arc<dyn MeshLoader>> {
+    let reg = registry().lock().unwrap_or_else(|e| e.into_inner());
+    reg.iter()
+        .rev()
+        .find(|l| l.extensions().iter().any(|e| e.eq_ignore_ascii_case(ext)))
+        .cloned()
+}
+
+fn known_extensions() -> String {
+    let reg = registry().lock().unwrap_or_else(|e| e.into_inner());
+    let mut all: Vec<String> = reg
+        .iter()
+        .flat_map(|l| l.extensions().iter().map(|e| e.to_string()))
+        .collect();
+    all.sort();
+    all.dedup();
+    all.join(", ")
+}
+
+/// Loads and cleans a mesh file; the format comes from the extension (for STL,
+/// ASCII or binary is detected from the content). Exact duplicates are welded.
+pub fn load_mesh(path: &Path) -> Result<LoadedMesh, LoadError> {
+    let name = path.display().to_string();
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    let loader = loader_for(&ext).ok_or_else(|| LoadError::UnknownFormat {
+        file: path.to_path_buf(),
+        extension: ext.clone(),
+        known: known_extensions(),
+    })?;
+    let bytes = std::fs::read(path).map_err(|source| LoadError::Io {
+        file: path.to_path_buf(),
+        source,
+    })?;
+    load_with(&*loader, &bytes, &name)
+}
+
+/// Loads and cleans a mesh held in memory (for instance embedded in a binary
+/// with `include_bytes!`); `name` is used in errors.
+pub fn load_mesh_bytes(
+    bytes: &[u8],
+    format: MeshFormat,
+    name: &str,
+) -> Result<LoadedMesh, LoadError> {
+    match format {
+        MeshFormat::Obj => load_with(&ObjLoader, bytes, name),
+        MeshFormat::Stl => load_with(&StlLoader, bytes, name),
+    }
+}
+
+fn load_with(loader: &dyn MeshLoader, bytes: &[u8], name: &str) -> Result<LoadedMesh, LoadError> {
+    if bytes.is_empty() {
+        return Err(LoadError::Empty { file: file(name) });
+    }
+    let raw = loader.load(bytes, name)?;
+    clean_mesh(raw, 0.0, name)
+}
+
+/// Validates and cleans a raw mesh: rejects non-finite coordinates and
+/// out-of-range indices; welds vertices closer than `weld_tolerance` (0 =
+/// exact duplicates only; a tolerance snaps each vertex to the first vertex
+/// found within it on a hash grid); drops triangles with a repeated index or
+/// zero area; rejects a mesh without triangles or with a flat bounding box.
+pub fn clean_mesh(raw: TriMesh, weld_tolerance: f64, name: &str) -> Result<LoadedMesh, LoadError> {
+    let mut report = LoadReport {
+        vertices_read: raw.vertices.len(),
+        triangles_read: raw.triangles.len(),
+        ..Default::default()
+    };
+    for (i, v) in raw.vertices.iter().enumerate() {
+        if v.iter().any(|c| !c.is_finite()) {
+            return Err(LoadError::NonFinite {
+                file: file(name),
+                vertex: i,
+                value: *v,
+            });
+        }
+    }
+    for (t, tri) in raw.triangles.iter().enumerate() {
+        if let Some(&bad) = tri.iter().find(|&&i| i as usize >= raw.vertices.len()) {
+            return Err(LoadError::IndexOutOfRange {
+                file: file(name),
+                triangle: t,
+                index: bad as u64,
+                vertices: raw.vertices.len(),
+            });
+        }
+    }
+    // Weld: map every vertex to a representative.
+    let mut remap = vec![0u32; raw.vertices.len()];
+    let mut vertices: Vec<[f64; 3]> = Vec::with_capacity(raw.vertices.len());
+    if weld_tolerance > 0.0 && weld_tolerance.is_finite() {
+        let cell = |p: [f64; 3]| p.map(|c| (c / weld_tolerance).floor() as i64);
+        let mut grid: HashMap<[i64; 3], Vec<u32>> = HashMap::new();
+        for (i, &p) in raw.vertices.iter().enumerate() {
+            let c = cell(p);
+            let mut found = None;
+            'search: for dz in -1..=1 {
+                for dy in -1..=1 {
+                    for dx in -1..=1 {
+                        if let Some(list) = grid.get(&[c[0] + dx, c[1] + dy, c[2] + dz]) {
+                            for &j in list {
+                                let q = vertices[j as usize];
+                                let d2: f64 = (0..3).map(|k| (p[k] - q[k]).powi(2)).sum();
+                                if d2 <= weld_tolerance * weld_tolerance {
+                                    found = Some(j);
+                                    break 'search;
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+            remap[i] = found.unwrap_or_else(|| {
+                vertices.push(p);
+                let j = (vertices.len() - 1) as u32;
+                grid.entry(c).or_default().push(j);
+                j
+            });
+        }
+    } else {
+        // -0.0 and 0.0 are the same point: normalize before hashing bits.
+        let key = |p: [f64; 3]| p.map(|c| (c + 0.0).to_bits());
+        let mut seen: HashMap<[u64; 3], u32> = HashMap::with_capacity(raw.vertices.len());
+        for (i, &p) in raw.vertices.iter().enumerate() {
+            remap[i] = *seen.entry(key(p)).or_insert_with(|| {
+                vertices.push(p);
+                (vertices.len() - 1) as u32
+            });
+        }
+    }
+    report.vertices_welded = raw.vertices.len() - vertices.len();
+    let mut triangles = Vec::with_capacity(raw.triangles.len());
+    for tri in &raw.triangles {
+        let t = tri.map(|i| remap[i as usize]);
+        if t[0] == t[1] || t[1] == t[2] || t[2] == t[0] {
+            report.degenerate_repeated += 1;
+            continue;
+        }
+        let [a, b, c] = t.map(|i| vertices[i as usize]);
+        let u = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+        let w = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
+        let n = [
+            u[1] * w[2] - u[2] * w[1],
+            u[2] * w[0] - u[0] * w[2],
+            u[0] * w[1] - u[1] * w[0],
+        ];
+        if n == [0.0; 3] {
+            report.degenerate_zero_area += 1;
+            continue;
+        }
+        triangles.push(t);
+    }
+    if triangles.is_empty() {
+        return Err(LoadError::NoTriangles {
+            file: file(name),
+            dropped: report.degenerate_repeated + report.degenerate_zero_area,
+        });
+    }
+    let mut used = vec![false; vertices.len()];
+    for t in &triangles {
+        for &i in t {
+            used[i as usize] = true;
+        }
+    }
+    report.unused_vertices = used.iter().filter(|u| !**u).count();
+    let mesh = TriMesh {
+        vertices,
+        triangles,
+    };
+    // Extent of the vertices used by triangles only.
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for t in &mesh.triangles {
+        for &i in t {
+            let p = mesh.vertices[i as usize];
+            for k in 0..3 {
+                lo[k] = lo[k].min(p[k]);
+                hi[k] = hi[k].max(p[k]);
+            }
+        }
+    }
+    if let Some(k) = (0..3).find(|&k| hi[k] <= lo[k]) {
+        return Err(LoadError::ZeroExtent {
+            file: file(name),
+            axis: ["x", "y", "z"][k],
+            min: lo,
+            max: hi,
+        });
+    }
+    if report.vertices_welded + report.degenerate_repeated + report.degenerate_zero_area > 0 {
+        log::info!(
+            "{name}: welded {} vertices, dropped {} + {} degenerate triangles",
+            report.vertices_welded,
+            report.degenerate_repeated,
+            report.degenerate_zero_area
+        );
+    }
+    Ok(LoadedMesh { mesh, report })
+}

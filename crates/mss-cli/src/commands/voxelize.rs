@@ -1,0 +1,192 @@
+//! `mss voxelize`: voxelizes a surface mesh and writes the lattice, its
+//! boundary skin, the embedded surface and `stats.json`.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use clap::Args;
+use mss_io::scene::{KeepComponents, MeshSource, VoxelResolution};
+use mss_io::vtk::{Field, LatticeFrame, VtuEncoding, write_vtu};
+use serde::Serialize;
+
+use crate::{GlobalArgs, progress, setup};
+
+/// Arguments of `mss voxelize`.
+#[derive(Debug, Clone, Args)]
+pub struct VoxelizeArgs {
+    /// Surface mesh (OBJ or STL), or "builtin:critter".
+    #[arg(value_name = "MESH")]
+    pub mesh: String,
+    /// Cells along the longest axis of the mesh's bounding box [default: 24].
+    #[arg(long, value_name = "N", conflicts_with = "size")]
+    pub cells: Option<u32>,
+    /// Cell edge in metres (instead of --cells).
+    #[arg(long, value_name = "H")]
+    pub size: Option<f64>,
+    /// Occupancy rule: centre (cell centre inside), any (cell overlaps the
+    /// solid), fraction (at least --fraction of the cell inside).
+    #[arg(long, value_name = "RULE", default_value = "centre")]
+    pub rule: String,
+    /// Minimum inside fraction for --rule fraction.
+    #[arg(long, value_name = "F", default_value_t = 0.5)]
+    pub fraction: f64,
+    /// Keep every connected component (default: only the largest).
+    #[arg(long)]
+    pub all_components: bool,
+    /// Refuse lattices with more cells than this.
+    #[arg(long, value_name = "N", default_value_t = 2_000_000)]
+    pub max_cells: u64,
+}
+
+/// What `mss voxelize` measured (printed, and written as `stats.json`).
+#[derive(Debug, Clone, Serialize)]
+pub struct VoxelizeSummary {
+    /// Mesh name.
+    pub mesh: String,
+    /// Mesh vertices.
+    pub mesh_vertices: usize,
+    /// Mesh triangles.
+    pub mesh_triangles: usize,
+    /// Cells.
+    pub cells: usize,
+    /// Nodes.
+    pub nodes: usize,
+    /// Springs of the paper's lattice: unique cell edges plus 4 body diagonals per cell.
+    pub springs: usize,
+    /// Cell edge (m).
+    pub cell_size: f64,
+    /// Grid dimensions (cells).
+    pub grid: [u32; 3],
+    /// Connected components kept.
+    pub components_kept: usize,
+    /// Connected components dropped.
+    pub components_dropped: usize,
+    /// Lattice volume (m^3).
+    pub lattice_volume: f64,
+    /// Volume enclosed by the mesh (m^3).
+    pub mesh_volume: f64,
+    /// Seconds to load the mesh.
+    pub load_seconds: f64,
+    /// Seconds to voxelize.
+    pub voxelize_seconds: f64,
+    /// Seconds to write the files.
+    pub write_seconds: f64,
+    /// Output folder.
+    pub output_folder: String,
+}
+
+/// Runs `mss voxelize`.
+pub fn run(args: &VoxelizeArgs, global: &GlobalArgs) -> anyhow::Result<()> {
+    let out_dir = global.out.clone().unwrap_or_else(|| PathBuf::from("out"));
+    let resolution = match (args.cells, args.size) {
+        (_, Some(h)) => VoxelResolution::CellSize(h),
+        (Some(n), None) => VoxelResolution::Cells(n),
+        (None, None) => VoxelResolution::Cells(mss_io::scene::DEFAULT_CELLS),
+    };
+    if !(args.fraction > 0.0 && args.fraction <= 1.0) {
+        bail!("--fraction {}: must be in (0, 1]", args.fraction);
+    }
+    let components = if args.all_components {
+        KeepComponents::All
+    } else {
+        KeepComponents::Largest
+    };
+    let opts = setup::voxelize_options(
+        resolution,
+        &args.rule,
+        args.fraction,
+        components,
+        args.max_cells,
+    )?;
+    let source = match args.mesh.strip_prefix(mss_io::scene::BUILTIN_PREFIX) {
+        Some(name) => MeshSource::Builtin(name.to_owned()),
+        None => MeshSource::File(PathBuf::from(&args.mesh)),
+    };
+    setup::prepare_output_folder(&out_dir)?;
+    let t0 = Instant::now();
+    let (mesh_name, loaded) = setup::load_mesh(&source)?;
+    let load_seconds = t0.elapsed().as_secs_f64();
+    let t1 = Instant::now();
+    let spinner = progress::spinner(&format!("voxelizing {mesh_name}"), global.chatty());
+    let vox = hexmesh::voxelize::voxelize(&loaded.mesh, &opts);
+    spinner.finish_and_clear();
+    let vox = vox.with_context(|| format!("cannot voxelize {mesh_name}"))?;
+    let voxelize_seconds = t1.elapsed().as_secs_f64();
+    let t2 = Instant::now();
+    let lattice = &vox.lattice;
+    write_outputs(&out_dir, lattice, &loaded.mesh)?;
+    let summary = VoxelizeSummary {
+        mesh: mesh_name,
+        mesh_vertices: loaded.mesh.vertices.len(),
+        mesh_triangles: loaded.mesh.triangles.len(),
+        cells: lattice.num_cells(),
+        nodes: lattice.num_nodes(),
+        springs: lattice.num_unique_edges() + 4 * lattice.num_cells(),
+        cell_size: lattice.h(),
+        grid: lattice.dims(),
+        components_kept: vox.stats.components_kept,
+        components_dropped: vox.stats.components_dropped,
+        lattice_volume: lattice.volume(),
+        mesh_volume: loaded.mesh.signed_volume().abs(),
+        load_seconds,
+        voxelize_seconds,
+        write_seconds: t2.elapsed().as_secs_f64(),
+        output_folder: out_dir.display().to_string(),
+    };
+    let json = serde_json::to_string_pretty(&summary).context("cannot encode the statistics")?;
+    mss_io::atomic::write_atomic(&out_dir.join("stats.json"), |w| {
+        w.write_all(json.as_bytes())?;
+        w.write_all(b"\n")
+    })?;
+    if global.chatty() {
+        print_summary(&summary);
+    }
+    Ok(())
+}
+
+fn write_outputs(
+    dir: &Path,
+    lattice: &hexmesh::Lattice,
+    mesh: &hexmesh::TriMesh,
+) -> anyhow::Result<()> {
+    let coords: Vec<f64> = lattice.cell_coords().iter().map(|c| c[2] as f64).collect();
+    let frame = LatticeFrame::new(lattice.nodes(), lattice.cells())
+        .with_cell_field(Field::scalars("layer", &coords));
+    write_vtu(&dir.join("lattice.vtu"), &frame, VtuEncoding::default())?;
+    let skin = hexmesh::boundary_skin(lattice);
+    let skin_pos = skin.positions(lattice.nodes());
+    mss_io::skin::write_obj(&dir.join("skin.obj"), &skin_pos, &skin.triangles)?;
+    let embedding = hexmesh::Embedding::new(lattice, mesh);
+    let surface = embedding.deform(lattice.nodes());
+    mss_io::skin::write_obj(&dir.join("surface.obj"), &surface, &mesh.triangles)?;
+    Ok(())
+}
+
+fn print_summary(s: &VoxelizeSummary) {
+    println!(
+        "mesh         {}: {} vertices, {} triangles, volume {:.4e} m^3",
+        s.mesh, s.mesh_vertices, s.mesh_triangles, s.mesh_volume
+    );
+    println!(
+        "lattice      {} cells, {} nodes, {} springs, cell size {:.4} m, grid {:?}",
+        s.cells, s.nodes, s.springs, s.cell_size, s.grid
+    );
+    println!(
+        "volume       {:.4e} m^3 ({:+.1}% of the mesh)",
+        s.lattice_volume,
+        100.0 * (s.lattice_volume / s.mesh_volume - 1.0)
+    );
+    println!(
+        "components   {} kept, {} dropped",
+        s.components_kept, s.components_dropped
+    );
+    println!(
+        "timings      load {:.3} s, voxelize {:.3} s, write {:.3} s",
+        s.load_seconds, s.voxelize_seconds, s.write_seconds
+    );
+    println!(
+        "output       {}: lattice.vtu, skin.obj, surface.obj, stats.json",
+        s.output_folder
+    );
+}

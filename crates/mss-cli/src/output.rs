@@ -1,0 +1,216 @@
+//! Writing the frames of a run: lattice (`.vtu` + `.pvd`, legacy `.vtk`),
+//! deformed boundary skin (`.obj`, `.stl`) and the embedded input surface.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use hexmesh::{Embedding, Lattice, Skin, TriMesh};
+use mss_core::Vec3;
+use mss_core::solver::{Problem, State};
+use mss_io::scene::OutputSection;
+use mss_io::vtk::{Field, FrameExporter, LatticeFrame, exporter_by_name};
+
+/// File name stem of the lattice frames (`lattice_0000.vtu`, `lattice.pvd`).
+pub const LATTICE_PREFIX: &str = "lattice";
+/// File name stem of the boundary skins (`skin_0000.obj`).
+pub const SKIN_PREFIX: &str = "skin";
+/// File name stem of the embedded input surface (`surface_0000.obj`).
+pub const SURFACE_PREFIX: &str = "surface";
+
+/// Writes the frames of one run into one folder.
+pub struct FrameWriter {
+    dir: PathBuf,
+    vtu: Option<Box<dyn FrameExporter>>,
+    vtk: Option<Box<dyn FrameExporter>>,
+    skin: Option<Skin>,
+    skin_obj: bool,
+    skin_stl: bool,
+    embedded: Option<(Embedding, Vec<[u32; 3]>)>,
+    cells: Vec<[u32; 8]>,
+    next_index: usize,
+    files: usize,
+    bytes: u64,
+}
+
+fn to_arr(v: &[Vec3]) -> Vec<[f64; 3]> {
+    v.iter().map(|p| [p.x, p.y, p.z]).collect()
+}
+
+impl FrameWriter {
+    /// Prepares the writers the `[output]` table asks for (the folder must exist).
+    pub fn new(
+        dir: &Path,
+        out: &OutputSection,
+        lattice: &Lattice,
+        mesh: &TriMesh,
+    ) -> anyhow::Result<Self> {
+        let vtu = if out.vtu {
+            Some(exporter_by_name("vtu", dir, LATTICE_PREFIX)?)
+        } else {
+            None
+        };
+        let vtk = if out.vtk {
+            Some(exporter_by_name("vtk", dir, LATTICE_PREFIX)?)
+        } else {
+            None
+        };
+        let skin = (out.skin_obj || out.skin_stl).then(|| hexmesh::boundary_skin(lattice));
+        let embedded = if out.embedded {
+            Some((Embedding::new(lattice, mesh), mesh.triangles.clone()))
+        } else {
+            None
+        };
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            vtu,
+            vtk,
+            skin,
+            skin_obj: out.skin_obj,
+            skin_stl: out.skin_stl,
+            embedded,
+            cells: lattice.cells().to_vec(),
+            next_index: 0,
+            files: 0,
+            bytes: 0,
+        })
+    }
+
+    /// Frames written so far.
+    pub fn frames(&self) -> usize {
+        self.next_index
+    }
+
+    /// Files written so far and their total size (bytes).
+    pub fn files_and_bytes(&self) -> (usize, u64) {
+        (self.files, self.bytes)
+    }
+
+    fn count(&mut self, path: &Path) {
+        self.files += 1;
+        self.bytes += std::fs::metadata(path).map(|m| m.len()).unwrap_or(0);
+    }
+
+    /// Writes one frame of `state` (time `state.time`).
+    pub fn write(&mut self, problem: &Problem, state: &State) -> anyhow::Result<()> {
+        let model = problem.model();
+        let n = model.num_nodes();
+        let index = self.next_index;
+        let points = to_arr(&state.x);
+        let rest = model.rest_positions();
+        let displacement: Vec<[f64; 3]> = state
+            .x
+            .iter()
+            .zip(rest)
+            .map(|(x, r)| [x.x - r.x, x.y - r.y, x.z - r.z])
+            .collect();
+        let velocity = to_arr(&state.v);
+        let mut f_int = vec![Vec3::zeros(); n];
+        model.internal_forces(&state.x, &mut f_int);
+        let mut f_ext = vec![Vec3::zeros(); n];
+        problem.external_forces(state.time, &state.x, 1.0, &mut f_ext);
+        let f_int = to_arr(&f_int);
+        let f_ext = to_arr(&f_ext);
+        let constraints = problem.constraints();
+        let fixed: Vec<bool> = (0..n)
+            .map(|i| constraints.mask(i).iter().any(|&h| h))
+            .collect();
+        let diag = model.cell_diagnostics(&state.x);
+        let vol: Vec<f64> = diag.iter().map(|d| d.volumetric_strain).collect();
+        let shear: Vec<f64> = diag.iter().map(|d| d.shear_strain).collect();
+        let corr: Vec<f64> = diag.iter().map(|d| d.correction_force).collect();
+        if self.vtu.is_some() || self.vtk.is_some() {
+            let frame = LatticeFrame::new(&points, &self.cells)
+                .with_point_field(Field::vectors("displacement", &displacement))
+                .with_point_field(Field::vectors("velocity", &velocity))
+                .with_point_field(Field::vectors("internal_force", &f_int))
+                .with_point_field(Field::vectors("external_force", &f_ext))
+                .with_point_field(Field::flags("fixed", &fixed))
+                .with_cell_field(Field::scalars("volumetric_strain", &vol))
+                .with_cell_field(Field::scalars("shear_strain", &shear))
+                .with_cell_field(Field::scalars("correction_force", &corr));
+            for exporter in [self.vtu.as_mut(), self.vtk.as_mut()].into_iter().flatten() {
+                exporter.write_frame(index, state.time, &frame)?;
+            }
+            let mut written = Vec::new();
+            if self.vtu.is_some() {
+                written.push(self.dir.join(format!("{LATTICE_PREFIX}_{index:04}.vtu")));
+            }
+            if self.vtk.is_some() {
+                written.push(self.dir.join(format!("{LATTICE_PREFIX}_{index:04}.vtk")));
+            }
+            for p in written {
+                self.count(&p);
+            }
+        }
+        if let Some(skin) = &self.skin {
+            let pos = skin.positions(&points);
+            let tris = skin.triangles.clone();
+            if self.skin_obj {
+                let p = self.dir.join(format!("{SKIN_PREFIX}_{index:04}.obj"));
+                mss_io::skin::write_obj(&p, &pos, &tris)
+                    .with_context(|| format!("frame {index}: boundary skin"))?;
+                self.count(&p);
+            }
+            if self.skin_stl {
+                let p = self.dir.join(format!("{SKIN_PREFIX}_{index:04}.stl"));
+                mss_io::skin::write_stl(&p, &pos, &tris)
+                    .with_context(|| format!("frame {index}: boundary skin"))?;
+                self.count(&p);
+            }
+        }
+        if let Some((embedding, tris)) = &self.embedded {
+            let pos = embedding.deform(&points);
+            let p = self.dir.join(format!("{SURFACE_PREFIX}_{index:04}.obj"));
+            mss_io::skin::write_obj(&p, &pos, tris)
+                .with_context(|| format!("frame {index}: embedded surface"))?;
+            self.count(&p);
+        }
+        self.next_index += 1;
+        Ok(())
+    }
+
+    /// Completes the series (final `.pvd`).
+    pub fn finish(&mut self) -> anyhow::Result<()> {
+        for exporter in [self.vtu.as_mut(), self.vtk.as_mut()].into_iter().flatten() {
+            exporter.finish()?;
+        }
+        if self.vtu.is_some() {
+            let p = self.dir.join(format!("{LATTICE_PREFIX}.pvd"));
+            self.count(&p);
+        }
+        Ok(())
+    }
+}
+
+/// Estimated bytes of one frame, for `mss check` (uncompressed binary sizes
+/// of the fields; compressed `.vtu` files are usually smaller).
+pub fn frame_size_estimate(
+    out: &OutputSection,
+    nodes: usize,
+    cells: usize,
+    skin_vertices: usize,
+    skin_triangles: usize,
+    surface_vertices: usize,
+    surface_triangles: usize,
+) -> u64 {
+    let lattice = (nodes * (5 * 24 + 1 + 24) + cells * (32 + 8 + 1 + 3 * 8)) as u64;
+    let obj = |v: usize, t: usize| (v * 60 + t * 24) as u64;
+    let stl = |t: usize| (84 + t * 50) as u64;
+    let mut total = 0;
+    if out.vtu {
+        total += lattice * 4 / 3;
+    }
+    if out.vtk {
+        total += lattice;
+    }
+    if out.skin_obj {
+        total += obj(skin_vertices, skin_triangles);
+    }
+    if out.skin_stl {
+        total += stl(skin_triangles);
+    }
+    if out.embedded {
+        total += obj(surface_vertices, surface_triangles);
+    }
+    total
+}

@@ -1,0 +1,545 @@
+//! Process-level tests of the `mss` binary: exit codes, the one-line error on
+//! stderr, no panic, and no file left under a final output name, for a table
+//! of bad inputs; plus the bundled default scene through `check` and `run`.
+//!
+//! They live here rather than in the workspace's `tests/` package because
+//! `env!("CARGO_BIN_EXE_mss")` (the path of the built binary, which Cargo
+//! builds before these tests) only exists in the package that defines the bin.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+const MSS: &str = env!("CARGO_BIN_EXE_mss");
+
+/// A closed box surface, outward-wound (12 triangles).
+fn box_obj(min: [f64; 3], max: [f64; 3]) -> String {
+    let mut s = String::new();
+    for k in 0..8 {
+        let x = if k & 1 == 0 { min[0] } else { max[0] };
+        let y = if k & 2 == 0 { min[1] } else { max[1] };
+        let z = if k & 4 == 0 { min[2] } else { max[2] };
+        s.push_str(&format!("v {x} {y} {z}\n"));
+    }
+    // Faces as quads (1-based), counter-clockwise from outside.
+    for q in [
+        [1, 3, 4, 2], // z-
+        [5, 6, 8, 7], // z+
+        [1, 2, 6, 5], // y-
+        [3, 7, 8, 4], // y+
+        [1, 5, 7, 3], // x-
+        [2, 4, 8, 6], // x+
+    ] {
+        s.push_str(&format!(
+            "f {} {} {}\nf {} {} {}\n",
+            q[0], q[1], q[2], q[0], q[2], q[3]
+        ));
+    }
+    s
+}
+
+/// A valid small scene using `mesh.obj` beside it, with `extra` appended
+/// (later keys of the same table must not repeat earlier ones).
+fn scene(material: &str, extra: &str) -> String {
+    format!("[mesh]\npath = \"mesh.obj\"\n[voxelize]\ncells = 6\n[material]\n{material}\n{extra}")
+}
+
+const MATERIAL: &str = "young = 1.0e4\npoisson = 0.3\ndensity = 1000.0";
+
+struct Case {
+    name: &'static str,
+    files: Vec<(&'static str, Vec<u8>)>,
+    args: Vec<&'static str>,
+    expect: Vec<&'static str>,
+    code: i32,
+}
+
+fn case(
+    name: &'static str,
+    files: Vec<(&'static str, Vec<u8>)>,
+    args: &[&'static str],
+    expect: &[&'static str],
+) -> Case {
+    Case {
+        name,
+        files,
+        args: args.to_vec(),
+        expect: expect.to_vec(),
+        code: 1,
+    }
+}
+
+fn text(name: &'static str, s: impl Into<String>) -> (&'static str, Vec<u8>) {
+    (name, s.into().into_bytes())
+}
+
+fn good_mesh() -> (&'static str, Vec<u8>) {
+    text("mesh.obj", box_obj([0.0; 3], [0.1, 0.05, 0.05]))
+}
+
+/// Scene + good mesh, run with `mss run scene.toml --out out`.
+fn scene_case(name: &'static str, scene_text: String, expect: &[&'static str]) -> Case {
+    case(
+        name,
+        vec![text("scene.toml", scene_text), good_mesh()],
+        &["run", "scene.toml", "--out", "out"],
+        expect,
+    )
+}
+
+/// Bad mesh bytes under `file`, run through a scene that names it.
+fn mesh_case(
+    name: &'static str,
+    file: &'static str,
+    bytes: Vec<u8>,
+    expect: &[&'static str],
+) -> Case {
+    let scene = format!("[mesh]\npath = \"{file}\"\n[material]\n{MATERIAL}\n");
+    case(
+        name,
+        vec![("scene.toml", scene.into_bytes()), (file, bytes)],
+        &["run", "scene.toml", "--out", "out"],
+        expect,
+    )
+}
+
+fn truncated_stl() -> Vec<u8> {
+    let mut b = vec![0u8; 80];
+    b.extend_from_slice(&10u32.to_le_bytes());
+    b.extend_from_slice(&[0u8; 50 * 3]);
+    b
+}
+
+fn cases() -> Vec<Case> {
+    let fixed_floor = "[[fixed]]\nkind = \"face\"\nface = \"x-\"\n";
+    vec![
+        case(
+            "missing scene file",
+            vec![],
+            &["run", "nope.toml", "--out", "out"],
+            &["nope.toml"],
+        ),
+        scene_case(
+            "unknown key",
+            scene(MATERIAL, "colour = 3\n"),
+            &[
+                "scene.toml:",
+                "unknown field `colour`",
+                "expected one of",
+                "`young`",
+            ],
+        ),
+        scene_case(
+            "unknown key in [solver]",
+            scene(MATERIAL, "[solver]\ndurration = 1.0\n"),
+            &["unknown field `durration`", "`duration`"],
+        ),
+        scene_case(
+            "unknown table",
+            scene(MATERIAL, "[physics]\ng = 9.81\n"),
+            &["unknown field `physics`", "`loads`"],
+        ),
+        scene_case(
+            "wrong value type",
+            scene("young = \"soft\"\npoisson = 0.3\ndensity = 1000.0", ""),
+            &["scene.toml:6:", "invalid type"],
+        ),
+        scene_case(
+            "TOML syntax error",
+            "[mesh\npath = 1\n".into(),
+            &["scene.toml:1:"],
+        ),
+        scene_case(
+            "missing material",
+            "[mesh]\npath = \"mesh.obj\"\n".into(),
+            &["missing field `material`"],
+        ),
+        scene_case(
+            "nu = 0.5",
+            scene(
+                "young = 1.0e4\npoisson = 0.5\ndensity = 1000.0",
+                fixed_floor,
+            ),
+            &["Poisson", "0.5"],
+        ),
+        scene_case(
+            "negative E",
+            scene(
+                "young = -1.0e4\npoisson = 0.3\ndensity = 1000.0",
+                fixed_floor,
+            ),
+            &["Young", "-10000"],
+        ),
+        scene_case(
+            "zero density",
+            scene("young = 1.0e4\npoisson = 0.3\ndensity = 0.0", fixed_floor),
+            &["density"],
+        ),
+        scene_case(
+            "unknown parameterization",
+            scene(MATERIAL, "[model]\nparameterization = \"magic\"\n"),
+            &["magic", "paper"],
+        ),
+        scene_case(
+            "negative duration",
+            scene(MATERIAL, "[solver]\nduration = -1.0\n"),
+            &["[solver] duration"],
+        ),
+        scene_case(
+            "zero cells",
+            "[mesh]\npath = \"mesh.obj\"\n[voxelize]\ncells = 0\n[material]\nyoung = 1e4\n\
+             poisson = 0.3\ndensity = 1000.0\n"
+                .into(),
+            &["[voxelize] cells"],
+        ),
+        scene_case(
+            "bad rule name",
+            "[mesh]\npath = \"mesh.obj\"\n[voxelize]\nrule = \"most\"\n[material]\nyoung = 1e4\n\
+             poisson = 0.3\ndensity = 1000.0\n"
+                .into(),
+            &["most", "centre"],
+        ),
+        scene_case(
+            "cell count over the limit",
+            "[mesh]\npath = \"mesh.obj\"\n[voxelize]\ncells = 400\nmax_cells = 1000\n\
+             [material]\nyoung = 1e4\npoisson = 0.3\ndensity = 1000.0\n"
+                .into(),
+            &["1000"],
+        ),
+        scene_case(
+            "mesh smaller than one cell",
+            "[mesh]\npath = \"mesh.obj\"\n[voxelize]\ncell_size = 1.0\n[material]\nyoung = 1e4\n\
+             poisson = 0.3\ndensity = 1000.0\n"
+                .into(),
+            &["cell"],
+        ),
+        scene_case(
+            "time step far above the stable limit",
+            scene(
+                MATERIAL,
+                &format!("{fixed_floor}[solver]\nkind = \"explicit\"\ndt = 0.1\nduration = 1.0\n"),
+            ),
+            &["stability limit"],
+        ),
+        scene_case(
+            "static solver, gravity, nothing fixed",
+            scene(
+                MATERIAL,
+                "[loads]\ngravity = [0, 0, -9.81]\n[solver]\nkind = \"static\"\n",
+            ),
+            &["no node is fixed"],
+        ),
+        scene_case(
+            "fixed box selects no node",
+            scene(
+                MATERIAL,
+                "[[fixed]]\nkind = \"box\"\nmin = [5, 5, 5]\nmax = [6, 6, 6]\n",
+            ),
+            &["[[fixed]] #1", "selects no node"],
+        ),
+        scene_case(
+            "missing mesh file",
+            "[mesh]\npath = \"gone.obj\"\n[material]\nyoung = 1e4\npoisson = 0.3\n\
+             density = 1000.0\n"
+                .into(),
+            &["gone.obj", "does not exist"],
+        ),
+        scene_case(
+            "unknown built-in mesh",
+            "[mesh]\npath = \"builtin:dragon\"\n[material]\nyoung = 1e4\npoisson = 0.3\n\
+             density = 1000.0\n"
+                .into(),
+            &["builtin:dragon", "builtin:critter"],
+        ),
+        case(
+            "unwritable output folder",
+            vec![
+                text("scene.toml", scene(MATERIAL, fixed_floor)),
+                good_mesh(),
+                text("blocker", "a file, not a folder"),
+            ],
+            &[
+                "run",
+                "scene.toml",
+                "--out",
+                "blocker/out",
+                "--duration",
+                "0.001",
+            ],
+            &["blocker"],
+        ),
+        case(
+            "scene is not UTF-8",
+            vec![("scene.toml", vec![0xff, 0xfe, 0x00, 0x80])],
+            &["run", "scene.toml", "--out", "out"],
+            &["UTF-8"],
+        ),
+        mesh_case(
+            "empty mesh file",
+            "empty.obj",
+            Vec::new(),
+            &["empty.obj", "empty"],
+        ),
+        mesh_case(
+            "truncated binary STL",
+            "cut.stl",
+            truncated_stl(),
+            &["cut.stl", "truncated"],
+        ),
+        mesh_case(
+            "binary garbage named .obj",
+            "garbage.obj",
+            (0..4096u32)
+                .map(|i| (i.wrapping_mul(2654435761) >> 13) as u8)
+                .collect(),
+            &["garbage.obj"],
+        ),
+        mesh_case(
+            "OBJ index out of range",
+            "bad_index.obj",
+            b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n".to_vec(),
+            &["bad_index.obj"],
+        ),
+        mesh_case(
+            "NaN coordinates",
+            "nan.obj",
+            b"v 0 0 0\nv 1 0 0\nv 0 nan 0\nv 0 0 1\nf 1 2 3\nf 1 2 4\nf 1 3 4\nf 2 3 4\n".to_vec(),
+            &["nan.obj"],
+        ),
+        mesh_case(
+            "a single triangle",
+            "tri.obj",
+            b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n".to_vec(),
+            &["tri.obj", "zero extent"],
+        ),
+        mesh_case(
+            "a flat square",
+            "flat.obj",
+            b"v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3\nf 1 3 4\n".to_vec(),
+            &["flat.obj", "zero extent"],
+        ),
+        mesh_case(
+            "unknown mesh format",
+            "mesh.ply",
+            b"ply\nformat ascii 1.0\n".to_vec(),
+            &["mesh.ply", "unknown format"],
+        ),
+        case(
+            "voxelize: missing mesh",
+            vec![],
+            &["voxelize", "nothing.stl", "--out", "out"],
+            &["nothing.stl"],
+        ),
+        case(
+            "voxelize: zero cells",
+            vec![good_mesh()],
+            &["voxelize", "mesh.obj", "--cells", "0", "--out", "out"],
+            &["at least 1"],
+        ),
+        case(
+            "voxelize: negative cell size",
+            vec![good_mesh()],
+            &["voxelize", "mesh.obj", "--size=-0.1", "--out", "out"],
+            &["-0.1"],
+        ),
+        case(
+            "negative --duration",
+            vec![
+                text("scene.toml", scene(MATERIAL, fixed_floor)),
+                good_mesh(),
+            ],
+            &["run", "scene.toml", "--duration=-1", "--out", "out"],
+            &["--duration"],
+        ),
+        case(
+            "init refuses to overwrite",
+            vec![text("scene.toml", "keep me")],
+            &["init", "scene.toml"],
+            &["already exists", "--force"],
+        ),
+        Case {
+            code: 2,
+            ..case("unknown option", vec![], &["run", "--bogus"], &["--bogus"])
+        },
+        Case {
+            code: 2,
+            ..case(
+                "zero threads",
+                vec![],
+                &["--threads", "0", "check"],
+                &["--threads"],
+            )
+        },
+    ]
+}
+
+fn files_under(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    if let Ok(rd) = std::fs::read_dir(dir) {
+        for e in rd.flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                out.extend(files_under(&p));
+            } else {
+                out.push(p);
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn bad_inputs_fail_with_one_line_errors_and_leave_no_files() {
+    let cases = cases();
+    assert!(cases.len() >= 25, "{} cases", cases.len());
+    let mut failures = Vec::new();
+    for c in &cases {
+        let dir = tempfile::tempdir().unwrap();
+        for (name, bytes) in &c.files {
+            std::fs::write(dir.path().join(name), bytes).unwrap();
+        }
+        let before = files_under(dir.path());
+        let out = Command::new(MSS)
+            .args(&c.args)
+            .current_dir(dir.path())
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        let mut problems = Vec::new();
+        if out.status.code() != Some(c.code) {
+            problems.push(format!(
+                "exit code {:?}, expected {}",
+                out.status.code(),
+                c.code
+            ));
+        }
+        if stderr.contains("panicked") {
+            problems.push("panicked".into());
+        }
+        let lines: Vec<&str> = stderr.lines().collect();
+        if lines.len() != 1 || !lines[0].starts_with("error: ") {
+            problems.push("stderr is not one line `error: ...`".into());
+        }
+        for e in &c.expect {
+            if !stderr.contains(e) {
+                problems.push(format!("stderr lacks {e:?}"));
+            }
+        }
+        let after = files_under(dir.path());
+        let new: Vec<_> = after.iter().filter(|p| !before.contains(p)).collect();
+        if !new.is_empty() {
+            problems.push(format!("left files {new:?}"));
+        }
+        if !problems.is_empty() {
+            failures.push(format!(
+                "{}: {} -- stderr: {stderr}",
+                c.name,
+                problems.join("; ")
+            ));
+        }
+    }
+    assert!(failures.is_empty(), "\n{}", failures.join("\n"));
+}
+
+#[test]
+fn verbose_error_shows_the_chain_of_causes() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = Command::new(MSS)
+        .args(["-v", "run", "missing.toml"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.starts_with("error: "), "{stderr}");
+    assert!(stderr.contains("missing.toml"), "{stderr}");
+}
+
+#[test]
+fn help_and_version_succeed() {
+    for args in [
+        &["--help"][..],
+        &["--version"],
+        &["run", "--help"],
+        &["init", "--help"],
+    ] {
+        let out = Command::new(MSS).args(args).output().unwrap();
+        assert!(out.status.success(), "{args:?}");
+        assert!(!out.stdout.is_empty(), "{args:?}");
+    }
+}
+
+#[test]
+fn bundled_default_scene_checks_and_runs() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = Command::new(MSS)
+        .args(["check"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("stable time step"), "{stdout}");
+    assert!(files_under(dir.path()).is_empty(), "check wrote files");
+
+    let out = Command::new(MSS)
+        .args(["run", "--out", "tmp", "--duration", "0.01"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for needle in [
+        "cells",
+        "nodes",
+        "springs",
+        "time step",
+        "steps",
+        "wall time",
+        "peak memory",
+        "max displacement",
+        "tmp",
+    ] {
+        assert!(stdout.contains(needle), "summary lacks {needle}: {stdout}");
+    }
+    let tmp = dir.path().join("tmp");
+    assert!(tmp.join("lattice.pvd").is_file());
+    assert!(tmp.join("lattice_0000.vtu").is_file());
+    assert!(tmp.join("skin_0000.obj").is_file());
+    assert!(tmp.join("surface_0000.obj").is_file());
+    assert!(tmp.join("summary.json").is_file());
+}
+
+#[test]
+fn init_writes_a_template_that_check_accepts() {
+    let dir = tempfile::tempdir().unwrap();
+    let st = Command::new(MSS)
+        .args(["-q", "init", "my.toml"])
+        .current_dir(dir.path())
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let out = Command::new(MSS)
+        .args(["check", "my.toml"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let st = Command::new(MSS)
+        .args(["-q", "init", "my.toml", "--force"])
+        .current_dir(dir.path())
+        .status()
+        .unwrap();
+    assert!(st.success());
+}

@@ -1,0 +1,42 @@
+//! One static solve of the MODEL.md cantilever (0.4 x 0.1 x 0.1 m, 32x8x8
+//! cells, paper model, nu = 0.3, gravity, x = 0 fixed).
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use hexmesh::Lattice;
+use mss_core::constraints::{ConstraintSpec, Face, NodeSelector};
+use mss_core::loads::{Damping, LoadSpec};
+use mss_core::solver::{Problem, State, StaticOptions, solve_static};
+use mss_core::{Material, Model, PaperModel};
+
+fn bench(c: &mut Criterion) {
+    let lattice = Lattice::block([32, 8, 8], 0.4 / 32.0, [0.0; 3]).unwrap();
+    let model = Model::new(
+        &lattice,
+        Material::new(1000.0, 0.3, 0.01).unwrap(),
+        &PaperModel,
+    )
+    .unwrap();
+    let problem = Problem::from_specs(
+        model,
+        &[ConstraintSpec::fixed(NodeSelector::BoundingFace(
+            Face::XMin,
+        ))],
+        &[LoadSpec::Gravity {
+            g: [0.0, 0.0, -9.81],
+        }],
+        Damping::NONE,
+    )
+    .unwrap();
+    let mut group = c.benchmark_group("static_solve");
+    group.sample_size(10);
+    group.bench_function("cantilever_32x8x8", |b| {
+        b.iter(|| {
+            let mut s = State::at_rest(problem.model());
+            solve_static(&problem, &mut s, &StaticOptions::default()).unwrap()
+        })
+    });
+    group.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

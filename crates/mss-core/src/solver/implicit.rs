@@ -1,0 +1,269 @@
+//! Implicit backward Euler.
+//!
+//! Unknown: the positions `x` at `t + dt`; velocities `v = (x - x_n) / dt`.
+//! Newton solves, on the free dofs,
+//! `R(x) = f_int(x) + f_ext(t + dt, x) - alpha M v - beta K0 v - M (v - v_n) / dt = 0`
+//! with the exact tangent of the internal forces (non-symmetric at large strain
+//! with correction forces), the loads' Jacobians and the damping terms, a
+//! sparse LU solve and a backtracking line search on `|R|`. If Newton fails or
+//! cells invert, the step is retried as two half steps (recursively, up to
+//! `max_halvings` times) before giving up.
+//!
+//! Backward Euler is unconditionally stable and dissipative: it damps high
+//! frequencies, so use it for large steps and settling, not for energy studies.
+#![allow(clippy::needless_range_loop)] // loops over several per-node arrays at once
+
+use super::{
+    Divergence, IMPLICIT_HINT, Integrator, NewtonFailure, NewtonOptions, NonlinearSystem, Problem,
+    SolverError, State, StepInfo, check_inverted, newton,
+};
+use crate::{BlockCsr, Mat3, Vec3};
+
+/// Options of [`Implicit`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ImplicitOptions {
+    /// Time step (s).
+    pub dt: f64,
+    /// Newton iterations per step before the step is halved.
+    pub max_newton: u32,
+    /// Newton tolerance: residual over free dofs relative to the largest
+    /// force term (inertia, internal or external).
+    pub rtol: f64,
+    /// How many times a failing step may be halved.
+    pub max_halvings: u32,
+}
+
+impl Default for ImplicitOptions {
+    fn default() -> Self {
+        Self {
+            dt: 1e-3,
+            max_newton: 25,
+            rtol: 1e-8,
+            max_halvings: 4,
+        }
+    }
+}
+
+/// The backward Euler integrator.
+#[derive(Debug)]
+pub struct Implicit {
+    opts: ImplicitOptions,
+    free: Vec<bool>,
+    steps: u64,
+}
+
+impl Implicit {
+    /// Creates the integrator.
+    pub fn new(problem: &Problem, opts: ImplicitOptions) -> Result<Self, SolverError> {
+        if !(opts.dt.is_finite() && opts.dt > 0.0) {
+            return Err(SolverError::BadTimeStep(opts.dt));
+        }
+        if !(opts.rtol > 0.0 && opts.max_newton > 0) {
+            return Err(SolverError::BadOption(format!(
+                "implicit: rtol {} must be > 0 and max_newton {} >= 1",
+                opts.rtol, opts.max_newton
+            )));
+        }
+        Ok(Self {
+            opts,
+            free: problem.free_mask(),
+            steps: 0,
+        })
+    }
+
+    /// One backward Euler step of `dt` from `state` (not modified on failure).
+    fn try_step(
+        &self,
+        problem: &Problem,
+        state: &State,
+        dt: f64,
+    ) -> Result<(State, u32), Divergence> {
+        let model = problem.model();
+        let rest = model.rest_positions();
+        let t1 = state.time + dt;
+        let mut x: Vec<Vec3> = state
+            .x
+            .iter()
+            .zip(&state.v)
+            .map(|(x, v)| x + v * dt)
+            .collect();
+        let mut v1 = state.v.clone();
+        for n in 0..model.num_nodes() {
+            let mut xn = state.x[n];
+            problem
+                .constraints()
+                .prescribe(n, t1, dt, &rest[n], &mut xn, &mut v1[n]);
+            let mask = problem.constraints().mask(n);
+            for d in 0..3 {
+                if mask[d] {
+                    x[n][d] = xn[d];
+                }
+            }
+        }
+        let mut sys = BackwardEuler {
+            problem,
+            x0: &state.x,
+            v0: &state.v,
+            t1,
+            dt,
+            scratch: vec![Vec3::zeros(); model.num_nodes()],
+            kv: vec![Vec3::zeros(); model.num_nodes()],
+        };
+        let its = newton(
+            &mut sys,
+            &mut x,
+            &self.free,
+            problem.size(),
+            model.h(),
+            NewtonOptions {
+                max_iterations: self.opts.max_newton,
+                rtol: self.opts.rtol,
+            },
+        )
+        .map_err(|e| match e {
+            NewtonFailure::Diverged(d) => d,
+            // A singular Jacobian with mass on the diagonal means garbage values.
+            NewtonFailure::Singular(_) | NewtonFailure::Linear(_) => Divergence::NonFinite,
+        })?;
+        if let Some(d) = check_inverted(model, &x) {
+            return Err(d);
+        }
+        for n in 0..model.num_nodes() {
+            let mask = problem.constraints().mask(n);
+            for d in 0..3 {
+                if !mask[d] {
+                    v1[n][d] = (x[n][d] - state.x[n][d]) / dt;
+                }
+            }
+        }
+        Ok((State { x, v: v1, time: t1 }, its))
+    }
+
+    /// Advances by `dt`, halving on failure; returns the new state, Newton
+    /// iterations and sub-steps.
+    fn advance(
+        &self,
+        problem: &Problem,
+        state: &State,
+        dt: f64,
+        depth: u32,
+    ) -> Result<(State, u32, u32), Divergence> {
+        match self.try_step(problem, state, dt) {
+            Ok((s, its)) => Ok((s, its, 1)),
+            Err(e) if depth >= self.opts.max_halvings => Err(e),
+            Err(e) => {
+                log::warn!(
+                    "implicit step of {dt:e} s at t = {:e} s failed ({e}); retrying as two half steps",
+                    state.time
+                );
+                let (s1, i1, n1) = self.advance(problem, state, 0.5 * dt, depth + 1)?;
+                let (s2, i2, n2) = self.advance(problem, &s1, 0.5 * dt, depth + 1)?;
+                Ok((s2, i1 + i2, n1 + n2))
+            }
+        }
+    }
+}
+
+impl Integrator for Implicit {
+    fn name(&self) -> &'static str {
+        "implicit"
+    }
+
+    fn dt(&self) -> f64 {
+        self.opts.dt
+    }
+
+    fn step(&mut self, problem: &Problem, state: &mut State) -> Result<StepInfo, SolverError> {
+        state.check_size(problem.model())?;
+        self.steps += 1;
+        let t_end = state.time + self.opts.dt;
+        match self.advance(problem, state, self.opts.dt, 0) {
+            Ok((mut s, its, n)) => {
+                s.time = t_end;
+                *state = s;
+                Ok(StepInfo {
+                    time: t_end,
+                    dt: self.opts.dt,
+                    substeps: n,
+                    newton_iterations: its,
+                })
+            }
+            Err(reason) => Err(SolverError::Diverged {
+                solver: "implicit",
+                step: self.steps,
+                time: t_end,
+                reason,
+                kept_time: state.time,
+                hint: IMPLICIT_HINT,
+            }),
+        }
+    }
+}
+
+struct BackwardEuler<'a> {
+    problem: &'a Problem,
+    x0: &'a [Vec3],
+    v0: &'a [Vec3],
+    t1: f64,
+    dt: f64,
+    scratch: Vec<Vec3>,
+    kv: Vec<Vec3>,
+}
+
+impl NonlinearSystem for BackwardEuler<'_> {
+    fn residual(&mut self, x: &[Vec3], r: &mut [Vec3]) -> f64 {
+        let p = self.problem;
+        let model = p.model();
+        let masses = model.masses();
+        let d = p.damping();
+        let dt = self.dt;
+        model.internal_forces(x, r);
+        p.external_forces(self.t1, x, 1.0, &mut self.scratch);
+        let (mut s_int, mut s_ext, mut s_in) = (0.0f64, 0.0f64, 0.0f64);
+        for i in 0..x.len() {
+            s_int += r[i].norm_squared();
+            s_ext += self.scratch[i].norm_squared();
+            r[i] += self.scratch[i];
+        }
+        // Damping with v = (x - x0) / dt.
+        if d.beta > 0.0 {
+            for i in 0..x.len() {
+                self.scratch[i] = (x[i] - self.x0[i]) / dt;
+            }
+            p.rest_stiffness().mul_vec(&self.scratch, &mut self.kv);
+        }
+        for i in 0..x.len() {
+            let v = (x[i] - self.x0[i]) / dt;
+            let inertia = (v - self.v0[i]) * (masses[i] / dt);
+            s_in += inertia.norm_squared();
+            r[i] -= inertia + v * (d.alpha * masses[i]);
+            if d.beta > 0.0 {
+                r[i] -= self.kv[i] * d.beta;
+            }
+        }
+        s_int.sqrt().max(s_ext.sqrt()).max(s_in.sqrt())
+    }
+
+    fn jacobian(&mut self, x: &[Vec3]) -> BlockCsr {
+        let p = self.problem;
+        let model = p.model();
+        let dt = self.dt;
+        let d = p.damping();
+        let mut j = model.tangent(x);
+        for l in p.loads() {
+            l.add_jacobian(model, self.t1, x, 1.0, &mut j);
+        }
+        for (i, &m) in model.masses().iter().enumerate() {
+            let k = j.find(i, i).expect("diagonal in the lattice pattern");
+            j.blocks[k] -= Mat3::identity() * (m * (1.0 + d.alpha * dt) / (dt * dt));
+        }
+        if d.beta > 0.0 {
+            let k0 = p.rest_stiffness();
+            debug_assert_eq!(k0.col_indices, j.col_indices);
+            for (b, k) in j.blocks.iter_mut().zip(&k0.blocks) {
+                *b -= k * (d.beta / dt);
+            }
+        }
+        j
+    }
+}

@@ -1,0 +1,633 @@
+//! Solvers: explicit time stepping (velocity Verlet, symplectic Euler),
+//! implicit backward Euler, and static equilibrium.
+//!
+//! A [`Problem`] bundles a [`Model`] with its boundary conditions, loads and
+//! damping; a [`State`] holds positions, velocities and time. Time integrators
+//! implement the [`Integrator`] plugin trait ([`integrator_by_name`] builds the
+//! built-ins); [`solve_static`] finds equilibrium.
+//!
+//! Every solver checks for divergence (non-finite values, exploding motion,
+//! inverted cells, Newton failure) and then returns a typed [`SolverError`]
+//! that names the step and time and says what to try; the state is then left
+//! at the last good step, never overwritten with garbage.
+//!
+//! ```
+//! use hexmesh::Lattice;
+//! use mss_core::constraints::{ConstraintSpec, NodeSelector, Face};
+//! use mss_core::loads::{Damping, LoadSpec};
+//! use mss_core::model::PaperModel;
+//! use mss_core::solver::{Problem, State, solve_static, StaticOptions};
+//! use mss_core::{Material, Model};
+//!
+//! let lattice = Lattice::block([8, 2, 2], 0.05, [0.0; 3]).unwrap();
+//! let model = Model::new(&lattice, Material::new(1000.0, 0.3, 0.01).unwrap(), &PaperModel).unwrap();
+//! let problem = Problem::from_specs(
+//!     model,
+//!     &[ConstraintSpec::fixed(NodeSelector::BoundingFace(Face::XMin))],
+//!     &[LoadSpec::Gravity { g: [0.0, 0.0, -9.81] }],
+//!     Damping::NONE,
+//! ).unwrap();
+//! let mut state = State::at_rest(problem.model());
+//! solve_static(&problem, &mut state, &StaticOptions::default()).unwrap();
+//! assert!(state.x.iter().map(|p| p.z).fold(0.0, f64::min) < 0.0);
+//! ```
+
+mod explicit;
+mod implicit;
+mod linear;
+mod statics;
+
+use std::sync::OnceLock;
+
+use thiserror::Error;
+
+pub use explicit::{Explicit, ExplicitOptions, ExplicitScheme, explicit_time_step_limit};
+pub use implicit::{Implicit, ImplicitOptions};
+pub use statics::{StaticInfo, StaticOptions, solve_static};
+
+use crate::constraints::{ConstraintError, ConstraintSpec, Constraints};
+use crate::loads::{Damping, Load, LoadError, LoadSpec};
+use crate::{BlockCsr, Model, Vec3};
+
+/// Why a problem could not be assembled.
+#[derive(Debug, Error, Clone, PartialEq)]
+pub enum ProblemError {
+    /// A boundary condition is invalid.
+    #[error("boundary condition {index}: {source}")]
+    Constraint {
+        /// Position of the constraint in the list given.
+        index: usize,
+        /// What is wrong.
+        source: ConstraintError,
+    },
+    /// A load is invalid.
+    #[error("load {index}: {source}")]
+    Load {
+        /// Position of the load in the list given.
+        index: usize,
+        /// What is wrong.
+        source: LoadError,
+    },
+    /// Damping coefficients are invalid.
+    #[error(transparent)]
+    Damping(LoadError),
+    /// Constraints made for another model.
+    #[error("constraints cover {given} nodes but the model has {expected}")]
+    ConstraintSize {
+        /// Nodes the constraints cover.
+        given: usize,
+        /// Nodes of the model.
+        expected: usize,
+    },
+}
+
+/// A model with its boundary conditions, loads and damping.
+#[derive(Debug)]
+pub struct Problem {
+    model: Model,
+    constraints: Constraints,
+    loads: Vec<Box<dyn Load>>,
+    damping: Damping,
+    rest_stiffness: OnceLock<BlockCsr>,
+}
+
+impl Problem {
+    /// The model alone: free, unloaded, undamped.
+    pub fn new(model: Model) -> Self {
+        let constraints = Constraints::none(model.num_nodes());
+        Self {
+            model,
+            constraints,
+            loads: Vec::new(),
+            damping: Damping::NONE,
+            rest_stiffness: OnceLock::new(),
+        }
+    }
+
+    /// Builds a problem from user-facing descriptions (scene files): every
+    /// selector must select at least one node.
+    pub fn from_specs(
+        model: Model,
+        constraints: &[ConstraintSpec],
+        loads: &[LoadSpec],
+        damping: Damping,
+    ) -> Result<Self, ProblemError> {
+        let mut c = Constraints::none(model.num_nodes());
+        for (index, spec) in constraints.iter().enumerate() {
+            let nodes = spec
+                .select
+                .select_checked(model.rest_positions(), model.h())
+                .map_err(|source| ProblemError::Constraint { index, source })?;
+            c.hold(&nodes, spec.dofs, spec.motion.clone())
+                .map_err(|source| ProblemError::Constraint { index, source })?;
+        }
+        let mut built = Vec::with_capacity(loads.len());
+        for (index, spec) in loads.iter().enumerate() {
+            built.push(
+                spec.resolve(&model)
+                    .map_err(|source| ProblemError::Load { index, source })?,
+            );
+        }
+        let mut p = Self::new(model).with_constraints(c)?;
+        p.loads = built;
+        p.set_damping(damping)?;
+        Ok(p)
+    }
+
+    /// Replaces the constraints.
+    pub fn with_constraints(mut self, constraints: Constraints) -> Result<Self, ProblemError> {
+        if constraints.num_nodes() != self.model.num_nodes() {
+            return Err(ProblemError::ConstraintSize {
+                given: constraints.num_nodes(),
+                expected: self.model.num_nodes(),
+            });
+        }
+        self.constraints = constraints;
+        Ok(self)
+    }
+
+    /// Adds a load (built-in or user-defined).
+    pub fn with_load(mut self, load: Box<dyn Load>) -> Self {
+        self.loads.push(load);
+        self
+    }
+
+    /// Sets the damping.
+    pub fn with_damping(mut self, damping: Damping) -> Result<Self, ProblemError> {
+        self.set_damping(damping)?;
+        Ok(self)
+    }
+
+    fn set_damping(&mut self, damping: Damping) -> Result<(), ProblemError> {
+        damping.validate().map_err(ProblemError::Damping)?;
+        self.damping = damping;
+        Ok(())
+    }
+
+    /// The model.
+    pub fn model(&self) -> &Model {
+        &self.model
+    }
+    /// The resolved boundary conditions.
+    pub fn constraints(&self) -> &Constraints {
+        &self.constraints
+    }
+    /// The loads.
+    pub fn loads(&self) -> &[Box<dyn Load>] {
+        &self.loads
+    }
+    /// The damping.
+    pub fn damping(&self) -> Damping {
+        self.damping
+    }
+
+    /// The rest stiffness `K0` used by stiffness-proportional damping
+    /// (computed on first use).
+    pub fn rest_stiffness(&self) -> &BlockCsr {
+        self.rest_stiffness
+            .get_or_init(|| self.model.rest_stiffness())
+    }
+
+    /// External forces (N) at time `t` and positions `x`, times `scale`,
+    /// written to `out` (not allocating if the loads do not).
+    pub fn external_forces(&self, t: f64, x: &[Vec3], scale: f64, out: &mut [Vec3]) {
+        out.iter_mut().for_each(|f| *f = Vec3::zeros());
+        for l in &self.loads {
+            l.add_forces(&self.model, t, x, scale, out);
+        }
+    }
+
+    /// Whether some load restrains motion (a drag spring).
+    fn has_restraining_load(&self) -> bool {
+        self.loads.iter().any(|l| l.restrains())
+    }
+
+    /// The free-dof mask `free[3 n + d]`.
+    fn free_mask(&self) -> Vec<bool> {
+        (0..3 * self.model.num_nodes())
+            .map(|i| !self.constraints.is_held(i / 3, i % 3))
+            .collect()
+    }
+
+    /// Diameter of the rest bounding box (m).
+    fn size(&self) -> f64 {
+        let rest = self.model.rest_positions();
+        let mut lo = Vec3::repeat(f64::INFINITY);
+        let mut hi = Vec3::repeat(f64::NEG_INFINITY);
+        for p in rest {
+            lo = lo.inf(p);
+            hi = hi.sup(p);
+        }
+        (hi - lo).norm().max(self.model.h())
+    }
+
+    /// Sets the held components of `state` to their prescribed values at
+    /// `state.time` (fixed ones keep their position and get zero velocity).
+    pub fn apply_constraints(&self, state: &mut State) {
+        let rest = self.model.rest_positions();
+        let t = state.time;
+        for (n, ((r, x), v)) in rest.iter().zip(&mut state.x).zip(&mut state.v).enumerate() {
+            self.constraints.prescribe(n, t, 0.0, r, x, v);
+        }
+    }
+}
+
+/// Positions (m), velocities (m/s) and time (s) of every node.
+#[derive(Debug, Clone, PartialEq)]
+pub struct State {
+    /// Absolute positions.
+    pub x: Vec<Vec3>,
+    /// Velocities.
+    pub v: Vec<Vec3>,
+    /// Time.
+    pub time: f64,
+}
+
+impl State {
+    /// The rest configuration at time 0, with zero velocity.
+    pub fn at_rest(model: &Model) -> Self {
+        Self {
+            x: model.rest_positions().to_vec(),
+            v: vec![Vec3::zeros(); model.num_nodes()],
+            time: 0.0,
+        }
+    }
+
+    /// Kinetic energy `sum m v^2 / 2` (J), summed in node order.
+    pub fn kinetic_energy(&self, masses: &[f64]) -> f64 {
+        self.v
+            .iter()
+            .zip(masses)
+            .map(|(v, m)| 0.5 * m * v.norm_squared())
+            .sum()
+    }
+
+    /// Linear momentum `sum m v` (kg m/s).
+    pub fn momentum(&self, masses: &[f64]) -> Vec3 {
+        self.v.iter().zip(masses).map(|(v, m)| v * *m).sum()
+    }
+
+    /// Displacements from the model's rest positions (m).
+    pub fn displacements(&self, model: &Model) -> Vec<Vec3> {
+        self.x
+            .iter()
+            .zip(model.rest_positions())
+            .map(|(x, r)| x - r)
+            .collect()
+    }
+
+    fn check_size(&self, model: &Model) -> Result<(), SolverError> {
+        if self.x.len() != model.num_nodes() || self.v.len() != model.num_nodes() {
+            return Err(SolverError::StateSize {
+                positions: self.x.len(),
+                velocities: self.v.len(),
+                nodes: model.num_nodes(),
+            });
+        }
+        Ok(())
+    }
+}
+
+/// What one call to [`Integrator::step`] did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepInfo {
+    /// Time reached (s).
+    pub time: f64,
+    /// Time advanced (s).
+    pub dt: f64,
+    /// Sub-steps taken (1 unless sub-stepping or step halving happened).
+    pub substeps: u32,
+    /// Newton iterations in total (0 for explicit schemes).
+    pub newton_iterations: u32,
+}
+
+/// How a run diverged.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Divergence {
+    /// A position or velocity became NaN or infinite.
+    NonFinite,
+    /// Cells turned inside out (`det F <= 0`).
+    InvertedCells {
+        /// How many.
+        count: usize,
+        /// The first few.
+        first: Vec<u32>,
+    },
+    /// A cell deformed by more than a quarter of its size in one step: the
+    /// motion explodes.
+    Explosion {
+        /// The cell.
+        cell: u32,
+        /// Relative deformation in one step.
+        strain_per_step: f64,
+    },
+    /// Newton's method did not converge.
+    NewtonFailed {
+        /// Iterations done.
+        iterations: u32,
+        /// Residual reached (N).
+        residual: f64,
+        /// Residual needed (N).
+        target: f64,
+    },
+}
+
+impl std::fmt::Display for Divergence {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Divergence::NonFinite => write!(f, "positions or velocities became NaN or infinite"),
+            Divergence::InvertedCells { count, first } => {
+                write!(f, "{count} cells turned inside out (first: {first:?})")
+            }
+            Divergence::Explosion {
+                cell,
+                strain_per_step,
+            } => write!(
+                f,
+                "cell {cell} deformed by {:.0}% of its size in one step (exploding motion)",
+                strain_per_step * 100.0
+            ),
+            Divergence::NewtonFailed {
+                iterations,
+                residual,
+                target,
+            } => write!(
+                f,
+                "Newton's method did not converge in {iterations} iterations (residual {residual:.3e} N, needed {target:.3e} N)"
+            ),
+        }
+    }
+}
+
+/// Why a solver stopped.
+#[derive(Debug, Error, Clone, PartialEq)]
+pub enum SolverError {
+    /// The explicit step is above the stability limit.
+    #[error(
+        "time step {dt:e} s is above the explicit stability limit {limit:e} s (safety factor times 2/omega_max, reduced by damping); use dt <= {limit:e} s, enable sub-stepping, or use the implicit solver"
+    )]
+    TimeStepTooLarge {
+        /// Requested step (s).
+        dt: f64,
+        /// Largest stable step (s).
+        limit: f64,
+    },
+    /// The time step is not a positive finite number.
+    #[error("time step {0} s must be a positive finite number")]
+    BadTimeStep(f64),
+    /// An option is invalid.
+    #[error("invalid solver option: {0}")]
+    BadOption(String),
+    /// No integrator of that name.
+    #[error("unknown integrator \"{name}\"; known: {known:?}")]
+    UnknownIntegrator {
+        /// Name given.
+        name: String,
+        /// Names accepted.
+        known: &'static [&'static str],
+    },
+    /// The state does not fit the model.
+    #[error(
+        "state has {positions} positions and {velocities} velocities but the model has {nodes} nodes"
+    )]
+    StateSize {
+        /// Positions given.
+        positions: usize,
+        /// Velocities given.
+        velocities: usize,
+        /// Nodes of the model.
+        nodes: usize,
+    },
+    /// The run diverged; the state was left at the last good step.
+    #[error(
+        "the {solver} solver diverged at step {step} (t = {time:e} s): {reason}; the state was kept at the last good time t = {kept_time:e} s. {hint}"
+    )]
+    Diverged {
+        /// Which solver.
+        solver: &'static str,
+        /// Step count of the integrator (or load step of the static solver).
+        step: u64,
+        /// Time (s) the failing step was going to reach.
+        time: f64,
+        /// What went wrong.
+        reason: Divergence,
+        /// Time of the state that was kept (s).
+        kept_time: f64,
+        /// What to try.
+        hint: &'static str,
+    },
+    /// The problem has zero-stiffness motions (rigid motions or hourglass
+    /// modes) that the loads can excite: no unique static solution.
+    #[error("{message} (nodes that move freely include {nodes:?})")]
+    Mechanism {
+        /// Explanation and what to fix.
+        message: String,
+        /// Nodes the mechanism moves most.
+        nodes: Vec<u32>,
+    },
+    /// The sparse linear solver failed for another reason.
+    #[error("linear solver failed: {0}")]
+    LinearSolver(String),
+}
+
+const EXPLICIT_HINT: &str = "Try a smaller time step, the implicit solver, or more damping.";
+const IMPLICIT_HINT: &str = "Try a smaller time step, more damping, or smaller loads (the deformation may be beyond what the lattice can represent).";
+const STATIC_HINT: &str =
+    "Try more load steps (StaticOptions::min_load_increment), a smaller load, or more fixed nodes.";
+
+/// A time-stepping scheme: the plugin point for integrators.
+pub trait Integrator: Send {
+    /// Short name (as accepted by [`integrator_by_name`] for the built-ins).
+    fn name(&self) -> &'static str;
+    /// Advances `state` by [`Integrator::dt`]. On error, `state` is left at the
+    /// last good state.
+    fn step(&mut self, problem: &Problem, state: &mut State) -> Result<StepInfo, SolverError>;
+    /// The time advanced by one call to [`Integrator::step`] (s).
+    fn dt(&self) -> f64;
+}
+
+/// Names accepted by [`integrator_by_name`].
+pub const INTEGRATOR_NAMES: &[&str] = &["explicit", "verlet", "symplectic-euler", "implicit"];
+
+/// Builds a built-in integrator: `"explicit"` / `"verlet"` (velocity Verlet),
+/// `"symplectic-euler"`, or `"implicit"` (backward Euler). `dt` of `None` means
+/// the stable explicit step for explicit schemes, and 10 times it for the
+/// implicit one. Explicit schemes refuse a `dt` above the stability limit
+/// unless `substep` is true (then they sub-step and log a warning).
+pub fn integrator_by_name(
+    name: &str,
+    problem: &Problem,
+    dt: Option<f64>,
+    substep: bool,
+) -> Result<Box<dyn Integrator>, SolverError> {
+    match name {
+        "explicit" | "verlet" | "symplectic-euler" => {
+            let scheme = if name == "symplectic-euler" {
+                ExplicitScheme::SymplecticEuler
+            } else {
+                ExplicitScheme::VelocityVerlet
+            };
+            let opts = ExplicitOptions {
+                dt,
+                scheme,
+                substep,
+                ..ExplicitOptions::default()
+            };
+            Ok(Box::new(Explicit::new(problem, opts)?))
+        }
+        "implicit" => {
+            let dt = dt.unwrap_or_else(|| 10.0 * explicit_time_step_limit(problem, 0.9));
+            Ok(Box::new(Implicit::new(
+                problem,
+                ImplicitOptions {
+                    dt,
+                    ..ImplicitOptions::default()
+                },
+            )?))
+        }
+        _ => Err(SolverError::UnknownIntegrator {
+            name: name.to_string(),
+            known: INTEGRATOR_NAMES,
+        }),
+    }
+}
+
+/// Options of the Newton iterations shared by the implicit and static solvers.
+#[derive(Debug, Clone, Copy)]
+struct NewtonOptions {
+    max_iterations: u32,
+    rtol: f64,
+}
+
+/// A nonlinear system `R(x) = 0` on the free dofs, `J = dR/dx`.
+trait NonlinearSystem {
+    /// Writes `R(x)` to `r` and returns the force scale the residual is
+    /// measured against (N).
+    fn residual(&mut self, x: &[Vec3], r: &mut [Vec3]) -> f64;
+    /// The Jacobian at `x`.
+    fn jacobian(&mut self, x: &[Vec3]) -> BlockCsr;
+}
+
+enum NewtonFailure {
+    Diverged(Divergence),
+    Singular(Vec<u32>),
+    Linear(String),
+}
+
+fn free_norm(r: &[Vec3], free: &[bool]) -> f64 {
+    let mut s = 0.0;
+    for (i, f) in free.iter().enumerate() {
+        if *f {
+            s += r[i / 3][i % 3].powi(2);
+        }
+    }
+    s.sqrt()
+}
+
+/// Newton's method with backtracking line search on `|R|` over the free dofs.
+/// `x` is updated in place (also on failure: callers keep their own copy).
+fn newton(
+    sys: &mut dyn NonlinearSystem,
+    x: &mut [Vec3],
+    free: &[bool],
+    size: f64,
+    h: f64,
+    opts: NewtonOptions,
+) -> Result<u32, NewtonFailure> {
+    let n = x.len();
+    let mut r = vec![Vec3::zeros(); n];
+    let mut trial = vec![Vec3::zeros(); n];
+    let mut r_trial = vec![Vec3::zeros(); n];
+    let mut scale = sys.residual(x, &mut r);
+    let mut norm = free_norm(&r, free);
+    if !norm.is_finite() {
+        return Err(NewtonFailure::Diverged(Divergence::NonFinite));
+    }
+    // Absolute floor: the force that moves a node by 1e-12 h against the
+    // stiffest diagonal entry, set from the first Jacobian.
+    let mut floor = 0.0;
+    let mut target = opts.rtol * scale;
+    for it in 0..opts.max_iterations {
+        if norm == 0.0 || (it > 0 && norm <= target.max(floor)) {
+            return Ok(it);
+        }
+        let jac = sys.jacobian(x);
+        if it == 0 {
+            let kmax = (0..n)
+                .filter_map(|i| jac.find(i, i))
+                .map(|k| jac.blocks[k].abs().max())
+                .fold(0.0, f64::max);
+            floor = 1e-12 * kmax * h * (free.iter().filter(|f| **f).count() as f64).sqrt();
+            if norm <= target.max(floor) {
+                return Ok(0);
+            }
+        }
+        let neg_r: Vec<Vec3> = r.iter().map(|v| -v).collect();
+        let delta = match linear::solve_free(&jac, &neg_r, free, size) {
+            Ok(d) => d,
+            Err(linear::LinearFailure::Singular { nodes }) => {
+                return Err(NewtonFailure::Singular(nodes));
+            }
+            Err(linear::LinearFailure::Other(m)) => return Err(NewtonFailure::Linear(m)),
+        };
+        let mut alpha = 1.0;
+        let mut accepted = false;
+        for _ in 0..12 {
+            for i in 0..n {
+                trial[i] = x[i] + delta[i] * alpha;
+            }
+            let s = sys.residual(&trial, &mut r_trial);
+            let nt = free_norm(&r_trial, free);
+            if nt.is_finite() && nt <= (1.0 - 1e-4 * alpha) * norm {
+                x.copy_from_slice(&trial);
+                std::mem::swap(&mut r, &mut r_trial);
+                norm = nt;
+                scale = s;
+                accepted = true;
+                break;
+            }
+            alpha *= 0.5;
+        }
+        target = opts.rtol * scale;
+        if !accepted {
+            // No decrease along the Newton direction: converged to round-off
+            // if the step is negligible, else a failure.
+            let step = delta.iter().map(|d| d.amax()).fold(0.0, f64::max);
+            // Also accept a residual within 100 times the target: the
+            // round-off floor of ill-conditioned lattices (one cell through
+            // the thickness) can sit just above it.
+            if (step <= 1e-13 * size && norm <= 1e3 * target.max(floor))
+                || norm <= 100.0 * target.max(floor)
+            {
+                log::debug!("Newton stagnated at residual {norm:e} (target {target:e}): accepted");
+                return Ok(it + 1);
+            }
+            return Err(NewtonFailure::Diverged(Divergence::NewtonFailed {
+                iterations: it + 1,
+                residual: norm,
+                target: target.max(floor),
+            }));
+        }
+    }
+    if norm <= 100.0 * target.max(floor) {
+        log::debug!("Newton ended at residual {norm:e} (target {target:e}): accepted");
+        return Ok(opts.max_iterations);
+    }
+    Err(NewtonFailure::Diverged(Divergence::NewtonFailed {
+        iterations: opts.max_iterations,
+        residual: norm,
+        target: target.max(floor),
+    }))
+}
+
+fn check_inverted(model: &Model, x: &[Vec3]) -> Option<Divergence> {
+    let inv = model.inverted_cells(x);
+    if inv.is_empty() {
+        None
+    } else {
+        Some(Divergence::InvertedCells {
+            count: inv.len(),
+            first: inv.into_iter().take(8).collect(),
+        })
+    }
+}

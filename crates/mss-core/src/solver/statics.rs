@@ -1,0 +1,236 @@
+//! Static equilibrium: `f_int(x) + f_ext(t, x) = 0` on the free dofs.
+//!
+//! Newton's method with the exact tangent, a sparse LU solve and a
+//! backtracking line search, inside adaptive load stepping: the loads and the
+//! prescribed displacements are scaled by a load factor that goes from 0 to 1,
+//! in one increment if Newton converges, in halved increments if not.
+//! Convergence: residual over the free dofs below `rtol` times the norm of the
+//! external load (including the reactions of held dofs, so that problems
+//! driven by prescribed displacements have a scale too).
+//!
+//! Mechanisms (rigid motions or the lattice's hourglass modes left free by the
+//! boundary conditions) make the tangent singular: they are reported as
+//! [`SolverError::Mechanism`].
+#![allow(clippy::needless_range_loop)] // loops over several per-node arrays at once
+
+use super::{
+    NewtonFailure, NewtonOptions, NonlinearSystem, Problem, STATIC_HINT, SolverError, State,
+    check_inverted, free_norm, newton,
+};
+use crate::{BlockCsr, Vec3};
+
+/// Options of [`solve_static`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StaticOptions {
+    /// Relative residual to reach (default 1e-8).
+    pub rtol: f64,
+    /// Newton iterations per load increment before the increment is halved.
+    pub max_newton: u32,
+    /// First load increment (fraction of the full load; default 1).
+    pub initial_load_increment: f64,
+    /// Smallest load increment before giving up (default 1/1024).
+    pub min_load_increment: f64,
+}
+
+impl Default for StaticOptions {
+    fn default() -> Self {
+        Self {
+            rtol: 1e-8,
+            max_newton: 30,
+            initial_load_increment: 1.0,
+            min_load_increment: 1.0 / 1024.0,
+        }
+    }
+}
+
+/// What [`solve_static`] did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StaticInfo {
+    /// Newton iterations over all load increments.
+    pub newton_iterations: u32,
+    /// Load increments that converged.
+    pub load_steps: u32,
+    /// Final residual over free dofs relative to the load norm.
+    pub relative_residual: f64,
+}
+
+struct StaticSystem<'a> {
+    problem: &'a Problem,
+    t: f64,
+    lambda: f64,
+    scratch: Vec<Vec3>,
+    free: &'a [bool],
+}
+
+impl NonlinearSystem for StaticSystem<'_> {
+    fn residual(&mut self, x: &[Vec3], r: &mut [Vec3]) -> f64 {
+        let p = self.problem;
+        p.model().internal_forces(x, r);
+        p.external_forces(self.t, x, self.lambda, &mut self.scratch);
+        let mut s = 0.0;
+        for i in 0..x.len() {
+            for d in 0..3 {
+                if self.free[3 * i + d] {
+                    s += self.scratch[i][d].powi(2);
+                } else {
+                    // Reaction of the held dof.
+                    s += (r[i][d] + self.scratch[i][d]).powi(2);
+                }
+            }
+            r[i] += self.scratch[i];
+        }
+        s.sqrt()
+    }
+
+    fn jacobian(&mut self, x: &[Vec3]) -> BlockCsr {
+        let p = self.problem;
+        let mut j = p.model().tangent(x);
+        for l in p.loads() {
+            l.add_jacobian(p.model(), self.t, x, self.lambda, &mut j);
+        }
+        j
+    }
+}
+
+/// Solves for static equilibrium at time `state.time` (loads and prescribed
+/// motions evaluated then), starting from `state.x`. Held components marked
+/// fixed keep their value in `state`. On success `state.x` is the equilibrium
+/// and `state.v` zero; on failure `state` is unchanged.
+pub fn solve_static(
+    problem: &Problem,
+    state: &mut State,
+    opts: &StaticOptions,
+) -> Result<StaticInfo, SolverError> {
+    let model = problem.model();
+    state.check_size(model)?;
+    if !(opts.rtol > 0.0
+        && opts.max_newton > 0
+        && opts.initial_load_increment > 0.0
+        && opts.initial_load_increment <= 1.0
+        && opts.min_load_increment > 0.0
+        && opts.min_load_increment <= opts.initial_load_increment)
+    {
+        return Err(SolverError::BadOption(format!(
+            "static options {opts:?}: need rtol > 0, max_newton >= 1, 0 < min_load_increment <= initial_load_increment <= 1"
+        )));
+    }
+    let held = problem.constraints().num_held_dofs();
+    if held < 6 && !problem.has_restraining_load() {
+        let message = if held == 0 {
+            "no node is fixed: the static problem has no unique solution (the body can translate and rotate freely under its loads); fix a region, e.g. a face or the lowest layer of nodes".to_string()
+        } else {
+            format!(
+                "only {held} displacement components are held: that cannot stop the 6 rigid motions, so the static problem has no unique solution; fix a region (a face or the lowest layer of nodes)"
+            )
+        };
+        return Err(SolverError::Mechanism {
+            message,
+            nodes: Vec::new(),
+        });
+    }
+    let free = problem.free_mask();
+    let rest = model.rest_positions();
+    let n = model.num_nodes();
+    // Start and end values of held components.
+    let x_init = state.x.clone();
+    let mut x_target = state.x.clone();
+    let mut scratch_v = vec![Vec3::zeros(); n];
+    for i in 0..n {
+        problem.constraints().prescribe(
+            i,
+            state.time,
+            0.0,
+            &rest[i],
+            &mut x_target[i],
+            &mut scratch_v[i],
+        );
+    }
+    let mut sys = StaticSystem {
+        problem,
+        t: state.time,
+        lambda: 0.0,
+        scratch: vec![Vec3::zeros(); n],
+        free: &free,
+    };
+    let newton_opts = NewtonOptions {
+        max_iterations: opts.max_newton,
+        rtol: opts.rtol,
+    };
+    let mut x = x_init.clone();
+    let mut lambda = 0.0;
+    let mut dl = opts.initial_load_increment;
+    let mut total_its = 0;
+    let mut load_steps = 0;
+    while lambda < 1.0 {
+        let lt = if lambda + dl >= 1.0 - 1e-12 {
+            1.0
+        } else {
+            lambda + dl
+        };
+        let mut trial = x.clone();
+        for i in 0..n {
+            for d in 0..3 {
+                if !free[3 * i + d] {
+                    trial[i][d] = x_init[i][d] + lt * (x_target[i][d] - x_init[i][d]);
+                }
+            }
+        }
+        sys.lambda = lt;
+        let result = newton(
+            &mut sys,
+            &mut trial,
+            &free,
+            problem.size(),
+            model.h(),
+            newton_opts,
+        )
+        .and_then(|its| match check_inverted(model, &trial) {
+            Some(d) => Err(NewtonFailure::Diverged(d)),
+            None => Ok(its),
+        });
+        match result {
+            Ok(its) => {
+                total_its += its;
+                load_steps += 1;
+                x = trial;
+                lambda = lt;
+                dl = (2.0 * dl).min(1.0);
+            }
+            Err(NewtonFailure::Singular(nodes)) => {
+                return Err(SolverError::Mechanism {
+                    message: "the stiffness matrix is singular: the boundary conditions leave a mechanism free (a rigid motion, or one of the 3 hourglass modes of the lattice); fix a whole face, or more nodes spread over the body".into(),
+                    nodes,
+                });
+            }
+            Err(NewtonFailure::Linear(m)) => return Err(SolverError::LinearSolver(m)),
+            Err(NewtonFailure::Diverged(reason)) => {
+                dl *= 0.5;
+                if dl < opts.min_load_increment {
+                    return Err(SolverError::Diverged {
+                        solver: "static",
+                        step: load_steps as u64 + 1,
+                        time: state.time,
+                        reason,
+                        kept_time: state.time,
+                        hint: STATIC_HINT,
+                    });
+                }
+                log::debug!(
+                    "static: load increment to {lt} failed ({reason}); trying {}",
+                    lambda + dl
+                );
+            }
+        }
+    }
+    let mut r = vec![Vec3::zeros(); n];
+    sys.lambda = 1.0;
+    let scale = sys.residual(&x, &mut r);
+    let res = free_norm(&r, &free);
+    state.x = x;
+    state.v.iter_mut().for_each(|v| *v = Vec3::zeros());
+    Ok(StaticInfo {
+        newton_iterations: total_its,
+        load_steps,
+        relative_residual: if scale > 0.0 { res / scale } else { res },
+    })
+}

@@ -1,0 +1,551 @@
+//! Facts of the model (MODEL.md): stiffnesses, assembly, masses, uniaxial
+//! tension, cantilever, Jacobian, energy, determinism, time step.
+
+use hexmesh::Lattice;
+use mss_core::model::{PaperModel, SpringsOnly, Volumetric};
+use mss_core::{
+    BlockCsr, CellCoefficients, Material, MaterialError, Model, Parameterization, Vec3,
+};
+
+/// Deterministic pseudo-random numbers in [-1, 1) (xorshift).
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> f64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 11) as f64 / (1u64 << 52) as f64 - 1.0
+    }
+}
+
+fn mat(e: f64, nu: f64, rho: f64) -> Material {
+    Material::with_poisson_range(e, nu, rho, -1.0, 0.5).unwrap()
+}
+
+/// A strongly deformed state: stretch, shear and random jitter of 0.15 h.
+fn deformed(model: &Model, seed: u64) -> Vec<Vec3> {
+    let mut rng = Rng(seed);
+    let h = model.h();
+    model
+        .rest_positions()
+        .iter()
+        .map(|p| {
+            let q = Vec3::new(1.3 * p.x + 0.2 * p.z, 0.8 * p.y, 1.1 * p.z - 0.1 * p.x);
+            q + Vec3::new(rng.next(), rng.next(), rng.next()) * (0.15 * h)
+        })
+        .collect()
+}
+
+fn forces(model: &Model, x: &[Vec3]) -> Vec<Vec3> {
+    let mut f = vec![Vec3::zeros(); x.len()];
+    model.internal_forces(x, &mut f);
+    f
+}
+
+fn max_abs_block(m: &BlockCsr) -> f64 {
+    m.blocks.iter().map(|b| b.abs().max()).fold(0.0, f64::max)
+}
+
+#[test]
+fn single_cube_stiffnesses() {
+    let l = Lattice::block([1, 1, 1], 0.5, [0.0; 3]).unwrap();
+    let m = Material::new(1000.0, 0.3, 2.0).unwrap();
+    let model = Model::new(&l, m, &PaperModel).unwrap();
+    let c = model.cell_coefficients(0);
+    assert!((c.k_edge - 1000.0 * 0.5 * 2.2 / (8.0 * 1.3)).abs() < 1e-12);
+    assert!((c.k_diag - 3.0 * 1000.0 * 0.5 / (8.0 * 1.3)).abs() < 1e-12);
+    assert!((c.correction.unwrap() - 0.1).abs() < 1e-15);
+    assert_eq!(model.num_springs(), 16);
+    let v = Volumetric.coefficients(&m, 0.5);
+    assert!((v.k_edge - 1000.0 * 0.5 / (8.0 * 1.3)).abs() < 1e-12);
+    assert_eq!(v.k_diag, c.k_diag);
+    assert_eq!(v.correction, Some(-0.5));
+    assert!((v.volumetric_lambda - m.lambda()).abs() < 1e-12);
+    // Springs only, rest tangent: an edge neighbour block is k_edge along the edge,
+    // the diagonal neighbour block is k_diag e e^T.
+    let s = Model::new(&l, m, &SpringsOnly).unwrap();
+    let t = s.tangent(s.rest_positions());
+    let cell = s.cells()[0];
+    let b = t.blocks[t.find(cell[0] as usize, cell[4] as usize).unwrap()];
+    assert!((b[(2, 2)] - c.k_edge).abs() < 1e-12 && b[(0, 0)].abs() < 1e-12);
+    let b = t.blocks[t.find(cell[0] as usize, cell[6] as usize).unwrap()];
+    assert!((b[(0, 1)] - c.k_diag / 3.0).abs() < 1e-12);
+    // Face-diagonal neighbours have no spring.
+    let b = t.blocks[t.find(cell[0] as usize, cell[2] as usize).unwrap()];
+    assert!(b.abs().max() < 1e-12);
+}
+
+#[test]
+fn per_cell_assembly_and_masses() {
+    let l = Lattice::block([2, 2, 2], 0.25, [1.0, 0.0, 0.0]).unwrap();
+    let m = Material::new(10.0, 0.25, 3.0).unwrap();
+    let model = Model::new(&l, m, &PaperModel).unwrap();
+    // 2x2x2 block: 3*3*3 * 2 edges... count: x-edges 2*3*3 per axis, times 3 axes.
+    assert_eq!(model.num_springs(), 3 * 18 + 4 * 8);
+    assert!((model.total_mass() - 3.0 * l.volume()).abs() < 1e-14);
+    let centre = l.node_at([1, 1, 1]).unwrap() as usize;
+    assert!((model.masses()[centre] - 8.0 * 3.0 * 0.25f64.powi(3) / 8.0).abs() < 1e-15);
+    let corner = l.node_at([0, 0, 0]).unwrap() as usize;
+    assert!((model.masses()[corner] - 3.0 * 0.25f64.powi(3) / 8.0).abs() < 1e-15);
+    // The inner edge (1,1,0)-(1,1,1) is shared by 4 cells: stiffness 4 k_x (nu = 0.25:
+    // no corrections).
+    let below = l.node_at([1, 1, 0]).unwrap() as usize;
+    let t = model.tangent(model.rest_positions());
+    let b = t.blocks[t.find(below, centre).unwrap()];
+    let kx = model.cell_coefficients(0).k_edge;
+    assert!((b[(2, 2)] - 4.0 * kx).abs() < 1e-12 * kx, "{b}");
+    // An outer edge of the block's side face is shared by 2 cells.
+    let a = l.node_at([0, 0, 1]).unwrap() as usize;
+    let b = t.blocks[t.find(corner, a).unwrap()];
+    assert!((b[(2, 2)] - kx).abs() < 1e-12 * kx);
+    let a = l.node_at([1, 0, 1]).unwrap() as usize;
+    let b = t.blocks[t.find(l.node_at([1, 0, 0]).unwrap() as usize, a).unwrap()];
+    assert!((b[(2, 2)] - 2.0 * kx).abs() < 1e-12 * kx);
+}
+
+/// Measured (E, nu) of an n^3 unit block in uniaxial tension (MODEL.md).
+fn tension(param: &dyn Parameterization, nu: f64, n: u32) -> (f64, f64) {
+    let l = Lattice::block([n, n, n], 1.0 / n as f64, [0.0; 3]).unwrap();
+    let model = Model::new(&l, mat(1.0, nu, 1.0), param).unwrap();
+    let k = model.rest_stiffness();
+    let coords = l.node_coords();
+    let fixed: Vec<[bool; 3]> = coords
+        .iter()
+        .map(|c| [c[0] == 0, c[1] == 0, c[2] == 0])
+        .collect();
+    let h = l.h();
+    let mut f = vec![Vec3::zeros(); l.num_nodes()];
+    for face in l.boundary_faces().iter().filter(|f| f.face == 5) {
+        for &v in &face.nodes {
+            f[v as usize].z += h * h / 4.0;
+        }
+    }
+    let u = k.solve_dofs(&f, &fixed).unwrap();
+    let mean = |sel: &dyn Fn(&[u32; 3]) -> bool, d: usize| {
+        let v: Vec<f64> = (0..u.len())
+            .filter(|&i| sel(&coords[i]))
+            .map(|i| u[i][d])
+            .collect();
+        v.iter().sum::<f64>() / v.len() as f64
+    };
+    let ezz = mean(&|c| c[2] == n, 2);
+    let exx = mean(&|c| c[0] == n, 0);
+    (1.0 / ezz, -exx / ezz)
+}
+
+#[test]
+fn uniaxial_tension_gives_e_and_nu() {
+    for param in [&PaperModel as &dyn Parameterization, &Volumetric] {
+        for nu in [-0.2, 0.0, 0.25, 0.3, 0.45, 0.49] {
+            for n in [1, 2, 4, 8] {
+                let (e, nm) = tension(param, nu, n);
+                assert!(
+                    (e - 1.0).abs() < 1e-8 && (nm - nu).abs() < 1e-8,
+                    "{} nu {nu} n {n}: E {e} nu {nm}",
+                    param.name()
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn volumetric_is_exact_for_strongly_negative_nu() {
+    // The volumetric variant accepts -1 < nu < 0.5 (its springs and corrections
+    // do not depend on lambda); model_slow.rs checks the rest stiffness stays
+    // positive definite down to nu = -0.99.
+    for nu in [-0.5, -0.9] {
+        for n in [1, 2, 4] {
+            let (e, nm) = tension(&Volumetric, nu, n);
+            assert!(
+                (e - 1.0).abs() < 1e-8 && (nm - nu).abs() < 1e-8,
+                "nu {nu} n {n}: {e} {nm}"
+            );
+        }
+    }
+    let bad = Material {
+        young: 1.0,
+        poisson: -1.0,
+        density: 1.0,
+    };
+    let l = Lattice::block([1, 1, 1], 1.0, [0.0; 3]).unwrap();
+    assert!(Model::new(&l, bad, &Volumetric).is_err());
+}
+
+#[test]
+fn springs_only_measures_classic_nu() {
+    for nu in [0.0, 0.25, 0.3, 0.45] {
+        for n in [1, 4] {
+            let (_, nm) = tension(&SpringsOnly, nu, n);
+            let expect = 1.0 / (4.0 * nu + 3.0);
+            assert!(
+                (nm - expect).abs() < 1e-8,
+                "nu {nu} n {n}: {nm} vs {expect}"
+            );
+        }
+    }
+}
+
+#[test]
+fn corrections_vanish_at_quarter() {
+    let l = Lattice::block([3, 2, 2], 0.1, [0.0; 3]).unwrap();
+    let m = Material::new(50.0, 0.25, 1.0).unwrap();
+    let p = Model::new(&l, m, &PaperModel).unwrap();
+    let s = Model::new(&l, m, &SpringsOnly).unwrap();
+    let x = deformed(&p, 7);
+    let (fp, fs) = (forces(&p, &x), forces(&s, &x));
+    let scale = fs.iter().map(|f| f.amax()).fold(0.0, f64::max);
+    for (a, b) in fp.iter().zip(&fs) {
+        assert!((a - b).amax() < 1e-13 * scale);
+    }
+    // And they do not vanish otherwise.
+    let p3 = Model::new(&l, Material::new(50.0, 0.3, 1.0).unwrap(), &PaperModel).unwrap();
+    let d = p3.cell_diagnostics(&x);
+    assert!(d.iter().all(|c| c.correction_force > 0.0));
+    assert!(
+        p.cell_diagnostics(&x)
+            .iter()
+            .all(|c| c.correction_force < 1e-12 * scale)
+    );
+}
+
+/// Mean z-deflection of the x = 0.4 end of the MODEL.md cantilever.
+fn cantilever_tip(k: u32) -> f64 {
+    let l = Lattice::block([4 * k, k, k], 0.1 / k as f64, [0.0; 3]).unwrap();
+    let model = Model::new(&l, Material::new(1000.0, 0.0, 0.01).unwrap(), &PaperModel).unwrap();
+    let fixed: Vec<bool> = l.node_coords().iter().map(|c| c[0] == 0).collect();
+    let f: Vec<Vec3> = model
+        .masses()
+        .iter()
+        .map(|&m| Vec3::new(0.0, 0.0, -9.81 * m))
+        .collect();
+    let u = model.rest_stiffness().solve_symmetric(&f, &fixed).unwrap();
+    let tip: Vec<f64> = (0..u.len())
+        .filter(|&i| l.node_coords()[i][0] == 4 * k)
+        .map(|i| u[i].z)
+        .collect();
+    -tip.iter().sum::<f64>() / tip.len() as f64
+}
+
+#[test]
+fn cantilever_linear_regime() {
+    for (k, expect) in [
+        (1, 2.6732e-4),
+        (2, 3.5060e-4),
+        (4, 3.8293e-4),
+        (8, 3.9219e-4),
+    ] {
+        let d = cantilever_tip(k);
+        assert!((d / expect - 1.0).abs() < 1e-3, "{k}: {d} vs {expect}");
+    }
+}
+
+/// Checks tangent(x) against central differences of the forces.
+fn check_jacobian(model: &Model, x: &[Vec3]) {
+    let t = model.tangent(x);
+    let scale = max_abs_block(&t);
+    let h = model.h();
+    let n = x.len();
+    let mut worst = 0.0f64;
+    for j in 0..n {
+        for d in 0..3 {
+            let step = 1e-6 * h;
+            let mut xp = x.to_vec();
+            xp[j][d] += step;
+            let fp = forces(model, &xp);
+            xp[j][d] -= 2.0 * step;
+            let fm = forces(model, &xp);
+            for i in 0..n {
+                let col = (fp[i] - fm[i]) / (2.0 * step);
+                let blk = t
+                    .find(i, j)
+                    .map_or(nalgebra::Matrix3::zeros(), |k| t.blocks[k]);
+                for e in 0..3 {
+                    worst = worst.max((col[e] - blk[(e, d)]).abs());
+                }
+            }
+        }
+    }
+    assert!(
+        worst < 1e-6 * scale,
+        "{}: FD mismatch {worst} (scale {scale})",
+        model.parameterization_name()
+    );
+}
+
+#[test]
+fn jacobian_matches_finite_differences() {
+    let l = Lattice::block([2, 2, 1], 0.1, [0.0; 3]).unwrap();
+    for (param, nu) in [
+        (&SpringsOnly as &dyn Parameterization, 0.3),
+        (&PaperModel, 0.3),
+        (&PaperModel, -0.2),
+        (&PaperModel, 0.49),
+        (&Volumetric, 0.3),
+        (&Volumetric, 0.45),
+    ] {
+        let model = Model::new(&l, mat(100.0, nu, 1.0), param).unwrap();
+        let x = deformed(&model, 11);
+        check_jacobian(&model, &x);
+        let t = model.tangent(&x);
+        if param.name() != "springs" {
+            // The correction part makes it non-symmetric at large strain.
+            assert!(t.asymmetry() > 1e-6 * max_abs_block(&t));
+        } else {
+            assert!(t.asymmetry() < 1e-12 * max_abs_block(&t));
+        }
+    }
+}
+
+#[test]
+fn rest_tangent_is_symmetric() {
+    let l = Lattice::l_shape(2, 1.0).unwrap();
+    for param in [
+        &SpringsOnly as &dyn Parameterization,
+        &PaperModel,
+        &Volumetric,
+    ] {
+        for nu in [-0.2, 0.3, 0.49] {
+            let model = Model::new(&l, mat(100.0, nu, 1.0), param).unwrap();
+            let t = model.tangent(model.rest_positions());
+            assert!(
+                t.asymmetry() < 1e-12 * max_abs_block(&t),
+                "{} {nu}",
+                param.name()
+            );
+            let f = forces(&model, model.rest_positions());
+            assert!(f.iter().all(|v| v.amax() < 1e-12));
+        }
+    }
+}
+
+/// Springs and a volumetric term, no corrections: conservative, for the energy test.
+#[derive(Debug)]
+struct Conservative;
+impl Parameterization for Conservative {
+    fn name(&self) -> &'static str {
+        "conservative-test"
+    }
+    fn validate(&self, _: &Material) -> Result<(), MaterialError> {
+        Ok(())
+    }
+    fn coefficients(&self, m: &Material, h: f64) -> CellCoefficients {
+        CellCoefficients {
+            k_edge: m.young * h * 0.3,
+            k_diag: m.young * h * 0.2,
+            correction: None,
+            volumetric_lambda: m.young * 2.0,
+        }
+    }
+}
+
+#[test]
+fn forces_are_minus_energy_gradient() {
+    let l = Lattice::block([2, 1, 2], 0.2, [0.0; 3]).unwrap();
+    for param in [&SpringsOnly as &dyn Parameterization, &Conservative] {
+        let model = Model::new(&l, mat(100.0, 0.3, 1.0), param).unwrap();
+        let x = deformed(&model, 3);
+        let f = forces(&model, &x);
+        let scale = f.iter().map(|v| v.amax()).fold(0.0, f64::max);
+        let step = 1e-6 * model.h();
+        for i in 0..x.len() {
+            for d in 0..3 {
+                let mut xp = x.clone();
+                xp[i][d] += step;
+                let ep = model.energy(&xp);
+                xp[i][d] -= 2.0 * step;
+                let em = model.energy(&xp);
+                let g = (ep - em) / (2.0 * step);
+                assert!(
+                    (f[i][d] + g).abs() < 1e-6 * scale,
+                    "{} {i} {d}",
+                    param.name()
+                );
+            }
+        }
+        assert!(model.energy(model.rest_positions()).abs() < 1e-20);
+    }
+}
+
+#[test]
+fn forces_are_bitwise_identical_for_any_thread_count() {
+    let l = Lattice::block([22, 22, 22], 0.01, [0.0; 3]).unwrap();
+    for param in [&PaperModel as &dyn Parameterization, &Volumetric] {
+        let model = Model::new(&l, mat(100.0, 0.3, 1.0), param).unwrap();
+        let x = deformed(&model, 5);
+        let run = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| {
+                let mut ws = model.workspace();
+                let mut f = vec![Vec3::zeros(); x.len()];
+                model.internal_forces_with(&x, &mut ws, &mut f);
+                (f, model.energy(&x))
+            })
+        };
+        let one = run(1);
+        for threads in [2, 4] {
+            let other = run(threads);
+            assert!(
+                one.0
+                    .iter()
+                    .zip(&other.0)
+                    .all(|(a, b)| { (0..3).all(|d| a[d].to_bits() == b[d].to_bits()) })
+            );
+            assert_eq!(one.1.to_bits(), other.1.to_bits());
+        }
+    }
+}
+
+#[test]
+fn critical_time_step_is_safe_and_tight() {
+    use nalgebra::{DMatrix, SymmetricEigen};
+    let l = Lattice::block([3, 2, 2], 0.1, [0.0; 3]).unwrap();
+    for param in [
+        &SpringsOnly as &dyn Parameterization,
+        &PaperModel,
+        &Volumetric,
+    ] {
+        for nu in [-0.2, 0.0, 0.3, 0.49] {
+            let model = Model::new(&l, mat(1000.0, nu, 10.0), param).unwrap();
+            let k = model.rest_stiffness();
+            let n = 3 * model.num_nodes();
+            let mut dense = DMatrix::<f64>::zeros(n, n);
+            for i in 0..model.num_nodes() {
+                for kk in k.row_offsets[i] as usize..k.row_offsets[i + 1] as usize {
+                    let j = k.col_indices[kk] as usize;
+                    for e in 0..3 {
+                        for d in 0..3 {
+                            let s = (model.masses()[i] * model.masses()[j]).sqrt();
+                            dense[(3 * i + e, 3 * j + d)] = k.blocks[kk][(e, d)] / s;
+                        }
+                    }
+                }
+            }
+            let eig = SymmetricEigen::new(dense);
+            let wmax = eig.eigenvalues.max().sqrt();
+            let bound = model.omega_max_bound();
+            let ratio = bound / wmax;
+            eprintln!("{} nu {nu}: omega bound / true = {ratio:.3}", param.name());
+            assert!(
+                (1.0..3.0).contains(&ratio),
+                "{} nu {nu}: {ratio}",
+                param.name()
+            );
+            assert!((model.critical_time_step() - 2.0 / bound).abs() < 1e-15);
+        }
+    }
+}
+
+#[test]
+fn multi_material_and_errors() {
+    let l = Lattice::block([2, 1, 1], 1.0, [0.0; 3]).unwrap();
+    let mats = [
+        Material::new(1.0, 0.3, 1.0).unwrap(),
+        Material::new(2.0, 0.3, 5.0).unwrap(),
+    ];
+    let m = Model::with_cell_materials(&l, &mats, &[0, 1], &PaperModel).unwrap();
+    assert!((m.total_mass() - 6.0).abs() < 1e-14);
+    assert_eq!(m.cell_material(1), 1);
+    assert!(Model::with_cell_materials(&l, &mats, &[0, 2], &PaperModel).is_err());
+    assert!(Model::with_cell_materials(&l, &mats, &[0], &PaperModel).is_err());
+    let bad = Material {
+        young: 1.0,
+        poisson: -0.3,
+        density: 1.0,
+    };
+    let err = Model::new(&l, bad, &PaperModel).unwrap_err().to_string();
+    assert!(err.contains("-0.3"), "{err}");
+    assert!(Model::new(&l, bad, &Volumetric).is_ok());
+    for name in mss_core::PARAMETERIZATION_NAMES {
+        let p = mss_core::parameterization_by_name(name).unwrap();
+        assert_eq!(p.name(), *name);
+    }
+    assert!(mss_core::parameterization_by_name("nope").is_none());
+}
+
+#[test]
+fn inverted_cells_are_detected() {
+    let l = Lattice::block([2, 1, 1], 1.0, [0.0; 3]).unwrap();
+    let m = Model::new(&l, Material::new(1.0, 0.3, 1.0).unwrap(), &PaperModel).unwrap();
+    assert!(m.inverted_cells(m.rest_positions()).is_empty());
+    let mut x = m.rest_positions().to_vec();
+    // Mirror the second cell's far face through its near face.
+    for (i, c) in l.node_coords().iter().enumerate() {
+        if c[0] == 2 {
+            x[i].x = 0.5;
+        }
+    }
+    assert_eq!(m.inverted_cells(&x), vec![1]);
+    let d = m.cell_diagnostics(&x);
+    assert!((d[1].volumetric_strain + 1.5).abs() < 1e-12);
+    assert!(d[0].volumetric_strain.abs() < 1e-12 && d[0].shear_strain.abs() < 1e-12);
+}
+
+#[test]
+fn zero_energy_modes_of_blocks() {
+    use mss_core::modes::{zero_energy_modes_dense, zero_energy_modes_subspace};
+    let l = Lattice::block([3, 2, 2], 0.1, [0.0; 3]).unwrap();
+    for param in [
+        &SpringsOnly as &dyn Parameterization,
+        &PaperModel,
+        &Volumetric,
+    ] {
+        for nu in [-0.2, 0.3, 0.49] {
+            let model = Model::new(&l, mat(100.0, nu, 1.0), param).unwrap();
+            let none = vec![[false; 3]; l.num_nodes()];
+            let clamped: Vec<[bool; 3]> = l.node_coords().iter().map(|c| [c[0] == 0; 3]).collect();
+            let mut one = none.clone();
+            one[0] = [true; 3];
+            let mut two = one.clone();
+            two[l.num_nodes() - 1] = [true; 3];
+            for (mask, expect) in [
+                (&none, Some(9)),
+                (&clamped, Some(0)),
+                (&one, Some(6)),
+                (&two, None),
+            ] {
+                let d = zero_energy_modes_dense(&model, mask).unwrap();
+                let s = zero_energy_modes_subspace(&model, mask).unwrap();
+                assert_eq!(d.count, s.count, "{} {nu}: {d:?} {s:?}", param.name());
+                match expect {
+                    Some(e) => assert_eq!(d.count, e, "{} {nu}: {d:?}", param.name()),
+                    None => assert!(d.count > 0),
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn simd_and_scalar_paths_agree_bitwise() {
+    // Two materials force the per-cell scalar path; one material the batched one.
+    let l = Lattice::block([5, 3, 3], 0.1, [0.0; 3]).unwrap();
+    for param in [
+        &PaperModel as &dyn Parameterization,
+        &Volumetric,
+        &SpringsOnly,
+    ] {
+        let m = mat(100.0, 0.3, 1.0);
+        let single = Model::new(&l, m, param).unwrap();
+        let multi =
+            Model::with_cell_materials(&l, &[m, m], &vec![1; l.num_cells()], param).unwrap();
+        let x = deformed(&single, 9);
+        let (a, b) = (forces(&single, &x), forces(&multi, &x));
+        assert!(
+            a.iter()
+                .zip(&b)
+                .all(|(p, q)| (0..3).all(|d| p[d].to_bits() == q[d].to_bits()))
+        );
+        // And the batch path agrees with the per-cell forces.
+        let mut g = vec![Vec3::zeros(); x.len()];
+        for c in 0..l.num_cells() {
+            for (k, f) in single.cell_forces(&x, c).iter().enumerate() {
+                g[l.cells()[c][k] as usize] += f;
+            }
+        }
+        assert!(a.iter().zip(&g).all(|(p, q)| (p - q).amax() < 1e-12));
+    }
+}

@@ -1,0 +1,134 @@
+//! ParaView `.pvd` collections (time series of XML VTK files).
+//!
+//! vtkio cannot write `.pvd`, and the format is a few lines of XML, so it is
+//! written here.
+
+use crate::IoError;
+use crate::atomic::write_atomic;
+
+use std::path::{Path, PathBuf};
+
+/// One frame of a `.pvd` collection.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PvdEntry {
+    /// Simulated time of the frame.
+    pub time: f64,
+    /// File name relative to the folder of the `.pvd`.
+    pub file: String,
+}
+
+/// Records the frames of a time series and keeps a `.pvd` file listing them.
+///
+/// The `.pvd` is rewritten atomically after every added frame, so a run that
+/// is interrupted still leaves a valid collection of the frames written so far.
+///
+/// ```
+/// let dir = tempfile::tempdir().unwrap();
+/// let mut pvd = mss_io::vtk::PvdWriter::new(dir.path().join("run.pvd"));
+/// pvd.add_frame(0.0, "run_0000.vtu").unwrap();
+/// pvd.add_frame(0.5, "run_0001.vtu").unwrap();
+/// let text = std::fs::read_to_string(dir.path().join("run.pvd")).unwrap();
+/// assert!(text.contains(r#"timestep="0.5" group="" part="0" file="run_0001.vtu""#));
+/// ```
+#[derive(Debug, Clone)]
+pub struct PvdWriter {
+    path: PathBuf,
+    entries: Vec<PvdEntry>,
+}
+
+impl PvdWriter {
+    /// A collection to be written at `path` (nothing is written until the
+    /// first [`add_frame`](Self::add_frame)).
+    pub fn new(path: impl Into<PathBuf>) -> Self {
+        PvdWriter {
+            path: path.into(),
+            entries: Vec::new(),
+        }
+    }
+
+    /// Path of the `.pvd` file.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Frames recorded so far, in the order added.
+    pub fn entries(&self) -> &[PvdEntry] {
+        &self.entries
+    }
+
+    /// Records a frame (its file name relative to the `.pvd`'s folder, `/` as
+    /// separator) and rewrites the `.pvd`. A non-finite time is refused.
+    pub fn add_frame(&mut self, time: f64, file: &str) -> Result<(), IoError> {
+        if !time.is_finite() {
+            return Err(IoError::invalid(
+                &self.path,
+                format!("frame time {time} is not finite"),
+            ));
+        }
+        self.entries.push(PvdEntry {
+            time,
+            file: file.to_string(),
+        });
+        if let Err(e) = self.write() {
+            // Keep the in-memory list equal to what is on disk.
+            self.entries.pop();
+            return Err(e);
+        }
+        Ok(())
+    }
+
+    /// Rewrites the `.pvd` with the frames recorded so far.
+    pub fn write(&self) -> Result<(), IoError> {
+        write_atomic(&self.path, |w| {
+            w.write_all(
+                b"<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\" \
+                  byte_order=\"LittleEndian\">\n  <Collection>\n",
+            )?;
+            for e in &self.entries {
+                // Display of f64 is the shortest text that parses back exactly.
+                writeln!(
+                    w,
+                    "    <DataSet timestep=\"{}\" group=\"\" part=\"0\" file=\"{}\"/>",
+                    e.time,
+                    xml_escape(&e.file)
+                )?;
+            }
+            w.write_all(b"  </Collection>\n</VTKFile>\n")
+        })
+    }
+}
+
+/// Escapes the characters that cannot appear in a double-quoted XML attribute.
+fn xml_escape(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    for c in s.chars() {
+        match c {
+            '&' => out.push_str("&amp;"),
+            '<' => out.push_str("&lt;"),
+            '>' => out.push_str("&gt;"),
+            '"' => out.push_str("&quot;"),
+            '\'' => out.push_str("&apos;"),
+            c => out.push(c),
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn escapes_file_names_and_refuses_nan() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut pvd = PvdWriter::new(dir.path().join("a.pvd"));
+        pvd.add_frame(1.0, "a&b\"<c>.vtu").unwrap();
+        let text = std::fs::read_to_string(pvd.path()).unwrap();
+        assert!(
+            text.contains("file=\"a&amp;b&quot;&lt;c&gt;.vtu\""),
+            "{text}"
+        );
+        assert!(pvd.add_frame(f64::NAN, "x.vtu").is_err());
+        assert_eq!(pvd.entries().len(), 1);
+    }
+}

@@ -1,0 +1,201 @@
+//! Frame exporters: plugins that write a time series of lattice frames.
+
+use super::{LatticeFrame, LegacyFormat, PvdWriter, VtuEncoding, write_legacy_vtk, write_vtu};
+use crate::IoError;
+use crate::atomic::{check_prefix, ensure_dir};
+use std::path::{Path, PathBuf};
+
+/// A writer of lattice frame series, chosen by name at run time
+/// ([`exporter_by_name`]).
+///
+/// The caller calls [`write_frame`](Self::write_frame) with strictly
+/// increasing frame indices, then [`finish`](Self::finish) once. Every file is
+/// complete and valid as soon as `write_frame` returns, so an interrupted run
+/// keeps all frames written so far.
+pub trait FrameExporter {
+    /// The name this exporter is selected by (one of [`FRAME_EXPORTERS`]).
+    fn name(&self) -> &'static str;
+    /// Writes frame number `frame_index` at simulated time `time`.
+    fn write_frame(
+        &mut self,
+        frame_index: usize,
+        time: f64,
+        frame: &LatticeFrame,
+    ) -> Result<(), IoError>;
+    /// Completes the series (e.g. final index files). Idempotent.
+    fn finish(&mut self) -> Result<(), IoError>;
+}
+
+/// Names accepted by [`exporter_by_name`]:
+/// `vtu` (ZLib-compressed XML + `.pvd`), `vtu-base64`, `vtu-ascii`,
+/// `vtk` (legacy binary), `vtk-ascii` (legacy text).
+pub const FRAME_EXPORTERS: &[&str] = &["vtu", "vtu-base64", "vtu-ascii", "vtk", "vtk-ascii"];
+
+/// Creates the exporter called `name` (see [`FRAME_EXPORTERS`]) writing into
+/// `dir` (created if missing) with file names `PREFIX_NNNN.ext`.
+pub fn exporter_by_name(
+    name: &str,
+    dir: &Path,
+    prefix: &str,
+) -> Result<Box<dyn FrameExporter>, IoError> {
+    Ok(match name {
+        "vtu" => Box::new(VtuSeries::new(dir, prefix, VtuEncoding::Base64Zlib)?),
+        "vtu-base64" => Box::new(VtuSeries::new(dir, prefix, VtuEncoding::Base64)?),
+        "vtu-ascii" => Box::new(VtuSeries::new(dir, prefix, VtuEncoding::Ascii)?),
+        "vtk" => Box::new(LegacyVtkSeries::new(dir, prefix, LegacyFormat::Binary)?),
+        "vtk-ascii" => Box::new(LegacyVtkSeries::new(dir, prefix, LegacyFormat::Ascii)?),
+        _ => {
+            return Err(IoError::UnknownExporter {
+                kind: "frame",
+                name: name.to_string(),
+                known: FRAME_EXPORTERS.join(", "),
+            });
+        }
+    })
+}
+
+/// Refuses frame indices that do not increase, which would list a frame twice
+/// in a `.pvd` or silently overwrite an earlier file.
+fn check_index(last: Option<usize>, index: usize, path: &Path) -> Result<(), IoError> {
+    match last {
+        Some(l) if index <= l => Err(IoError::invalid(
+            path,
+            format!("frame index {index} does not follow the previous frame index {l}"),
+        )),
+        _ => Ok(()),
+    }
+}
+
+/// XML `.vtu` series: `DIR/PREFIX_NNNN.vtu` per frame and `DIR/PREFIX.pvd`
+/// listing them with their times (rewritten after every frame).
+#[derive(Debug)]
+pub struct VtuSeries {
+    dir: PathBuf,
+    prefix: String,
+    encoding: VtuEncoding,
+    pvd: PvdWriter,
+    last_index: Option<usize>,
+}
+
+impl VtuSeries {
+    /// A series in `dir` (created if missing) named after `prefix`.
+    pub fn new(dir: &Path, prefix: &str, encoding: VtuEncoding) -> Result<Self, IoError> {
+        check_prefix(dir, prefix)?;
+        ensure_dir(dir)?;
+        Ok(VtuSeries {
+            dir: dir.to_path_buf(),
+            prefix: prefix.to_string(),
+            encoding,
+            pvd: PvdWriter::new(dir.join(format!("{prefix}.pvd"))),
+            last_index: None,
+        })
+    }
+
+    /// File name of frame `frame_index` (relative to the folder).
+    pub fn frame_file_name(&self, frame_index: usize) -> String {
+        format!("{}_{frame_index:04}.vtu", self.prefix)
+    }
+
+    /// The `.pvd` collection of the frames written so far.
+    pub fn pvd(&self) -> &PvdWriter {
+        &self.pvd
+    }
+}
+
+impl FrameExporter for VtuSeries {
+    fn name(&self) -> &'static str {
+        match self.encoding {
+            VtuEncoding::Base64Zlib => "vtu",
+            VtuEncoding::Base64 => "vtu-base64",
+            VtuEncoding::Ascii => "vtu-ascii",
+        }
+    }
+
+    fn write_frame(
+        &mut self,
+        frame_index: usize,
+        time: f64,
+        frame: &LatticeFrame,
+    ) -> Result<(), IoError> {
+        let file = self.frame_file_name(frame_index);
+        let path = self.dir.join(&file);
+        check_index(self.last_index, frame_index, &path)?;
+        if !time.is_finite() {
+            return Err(IoError::invalid(
+                &path,
+                format!("frame time {time} is not finite"),
+            ));
+        }
+        write_vtu(&path, frame, self.encoding)?;
+        self.pvd.add_frame(time, &file)?;
+        self.last_index = Some(frame_index);
+        Ok(())
+    }
+
+    fn finish(&mut self) -> Result<(), IoError> {
+        if self.pvd.entries().is_empty() {
+            log::warn!(
+                "no frame written; {} not created",
+                self.pvd.path().display()
+            );
+        }
+        Ok(())
+    }
+}
+
+/// Legacy `.vtk` series: `DIR/PREFIX_NNNN.vtk` per frame (ParaView groups
+/// numbered files into a series; the legacy format cannot be listed in a
+/// `.pvd`). The simulated time is written in each file's title line.
+#[derive(Debug)]
+pub struct LegacyVtkSeries {
+    dir: PathBuf,
+    prefix: String,
+    format: LegacyFormat,
+    last_index: Option<usize>,
+}
+
+impl LegacyVtkSeries {
+    /// A series in `dir` (created if missing) named after `prefix`.
+    pub fn new(dir: &Path, prefix: &str, format: LegacyFormat) -> Result<Self, IoError> {
+        check_prefix(dir, prefix)?;
+        ensure_dir(dir)?;
+        Ok(LegacyVtkSeries {
+            dir: dir.to_path_buf(),
+            prefix: prefix.to_string(),
+            format,
+            last_index: None,
+        })
+    }
+
+    /// File name of frame `frame_index` (relative to the folder).
+    pub fn frame_file_name(&self, frame_index: usize) -> String {
+        format!("{}_{frame_index:04}.vtk", self.prefix)
+    }
+}
+
+impl FrameExporter for LegacyVtkSeries {
+    fn name(&self) -> &'static str {
+        match self.format {
+            LegacyFormat::Binary => "vtk",
+            LegacyFormat::Ascii => "vtk-ascii",
+        }
+    }
+
+    fn write_frame(
+        &mut self,
+        frame_index: usize,
+        time: f64,
+        frame: &LatticeFrame,
+    ) -> Result<(), IoError> {
+        let path = self.dir.join(self.frame_file_name(frame_index));
+        check_index(self.last_index, frame_index, &path)?;
+        let title = format!("hexahedral MSS frame {frame_index} time {time}");
+        write_legacy_vtk(&path, frame, self.format, &title)?;
+        self.last_index = Some(frame_index);
+        Ok(())
+    }
+
+    fn finish(&mut self) -> Result<(), IoError> {
+        Ok(())
+    }
+}
