@@ -99,7 +99,7 @@ fn critter_blobs(p: [f64; 3]) -> f64 {
     let mut d = smin(body, head, 0.02);
     d = smin(d, snout, 0.01);
     for side in [-1.0, 1.0] {
-        let ear = ellipsoid(p, [0.066, 0.016 * side, 0.144], [0.011, 0.012, 0.02]);
+        let ear = ellipsoid(p, [0.066, 0.016 * side, 0.144], [0.015, 0.014, 0.02]);
         d = smin(d, ear, 0.008);
     }
     for (x, y) in [

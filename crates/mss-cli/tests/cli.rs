@@ -543,3 +543,30 @@ fn init_writes_a_template_that_check_accepts() {
         .unwrap();
     assert!(st.success());
 }
+
+/// `mss check` counts the zero-energy modes the held nodes leave: two held
+/// nodes leave rigid rotations (warned), a held face leaves none.
+#[test]
+fn check_warns_about_mechanisms() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("mesh.obj"),
+        box_obj([0.0; 3], [1.0, 0.5, 0.5]),
+    )
+    .unwrap();
+    let run_check = |fixed: &str| {
+        let path = dir.path().join("s.toml");
+        std::fs::write(&path, scene(MATERIAL, fixed)).unwrap();
+        let out = Command::new(MSS).arg("check").arg(&path).output().unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    let few = run_check("[[fixed]]\nkind = \"indices\"\nnodes = [0, 1]\n");
+    assert!(few.contains("zero-energy mode"), "{few}");
+    let face = run_check("[[fixed]]\nkind = \"face\"\nface = \"x-\"\n");
+    assert!(face.contains("mechanisms       none expected"), "{face}");
+}

@@ -110,23 +110,42 @@ pub fn run(args: &CheckArgs, global: &GlobalArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Largest model (nodes) on which `mss run` counts zero-energy modes before
+/// starting; `mss check` always counts them.
+pub const RUN_MODE_CHECK_MAX_NODES: usize = 20_000;
+
 /// A warning if the boundary conditions leave zero-energy motions (rigid
-/// motions or hourglass modes) that the loads can excite.
-fn mechanism_warning(p: &crate::commands::run::Prepared) -> Option<String> {
+/// motions or hourglass mechanisms) that the loads can excite: counted on the
+/// rest stiffness restricted to the free dofs (mss_core::modes).
+pub fn mechanism_warning(p: &crate::commands::run::Prepared) -> Option<String> {
     let c = p.problem.constraints();
-    let held = c.num_held_dofs();
+    let model = p.problem.model();
     let restrained = !p.input.scene.loads.drags.is_empty();
-    if held == 0 && !restrained {
-        return Some(
-            "no node is held: the body is free (6 rigid motions); explicit and implicit runs \
-             work, a static solve does not"
-                .into(),
-        );
+    let mask: Vec<[bool; 3]> = (0..model.num_nodes()).map(|n| c.mask(n)).collect();
+    match mss_core::modes::zero_energy_modes(model, &mask) {
+        Ok(z) if z.count == 0 => None,
+        Ok(z) => Some(format!(
+            "the held nodes leave {}{} zero-energy mode(s) (rigid motions or hourglass \
+             mechanisms){}: a static solve will fail and dynamics may drift; hold a larger \
+             region (e.g. a whole face)",
+            z.count,
+            if z.exact { "" } else { " or more" },
+            if restrained {
+                "; drag springs restrain some of them"
+            } else {
+                ""
+            },
+        )),
+        Err(e) => {
+            log::debug!("zero-energy modes not counted: {e}");
+            let held = c.num_held_dofs();
+            if held < 6 && !restrained {
+                Some(format!(
+                    "only {held} displacement components are held: rigid motions remain free"
+                ))
+            } else {
+                None
+            }
+        }
     }
-    if held < 6 && !restrained {
-        return Some(format!(
-            "only {held} displacement components are held: rigid motions remain free"
-        ));
-    }
-    None
 }

@@ -145,6 +145,11 @@ pub fn run(args: &RunArgs, global: &GlobalArgs) -> anyhow::Result<()> {
     // Everything is checked before the output folder is created, so that bad
     // input leaves no file behind.
     let prepared = prepare(input, show)?;
+    if prepared.problem.model().num_nodes() <= super::check::RUN_MODE_CHECK_MAX_NODES
+        && let Some(warning) = super::check::mechanism_warning(&prepared)
+    {
+        log::warn!("{warning}");
+    }
     let summary = simulate(&prepared, &out_dir, show, start)?;
     let json = serde_json::to_string_pretty(&summary).context("cannot encode the summary")?;
     let summary_path = out_dir.join("summary.json");
