@@ -1045,6 +1045,7 @@ impl System {
     /// Cholesky factor values of the matrix with upper triangle `values`.
     fn factor(&self, values: &[f64]) -> Result<Vec<f64>, FemError> {
         let sym = self.symbolic_factor()?;
+        crate::sparse::sequential_factorizations();
         let par = faer::get_global_parallelism();
         let mat = SparseColMatRef::new(self.symbolic.as_ref(), values);
         let mut l = vec![0.0; sym.len_val()];
@@ -1086,6 +1087,7 @@ impl System {
         let Ok(sym) = self.symbolic_factor() else {
             return;
         };
+        crate::sparse::sequential_factorizations();
         let par = faer::get_global_parallelism();
         let mut buf = MemBuffer::new(sym.solve_in_place_scratch::<f64>(1, par));
         LltRef::<u32, f64>::new(sym, l).solve_in_place_with_conj(

@@ -362,6 +362,7 @@ impl BlockCsr {
     /// LU factorization (partial pivoting; for general, possibly non-symmetric
     /// matrices) restricted to the free dofs.
     pub fn factor_lu(&self, fixed: &[[bool; 3]]) -> Result<Factorization, LinearSolveError> {
+        sequential_factorizations();
         let map = self.check(fixed)?;
         let matrix = self.restricted(&map, false)?;
         let lu = matrix.sp_lu().map_err(|e| match e {
@@ -398,6 +399,7 @@ impl BlockCsr {
     /// Cholesky factorization restricted to the free dofs, for a symmetric
     /// positive definite matrix (only the lower triangle is read).
     pub fn factor_cholesky(&self, fixed: &[[bool; 3]]) -> Result<Factorization, LinearSolveError> {
+        sequential_factorizations();
         let map = self.check(fixed)?;
         let lower = self.restricted(&map, true)?;
         let llt = lower.sp_cholesky(faer::Side::Lower).map_err(|e| match e {
@@ -449,4 +451,16 @@ impl BlockCsr {
     ) -> Result<Vec<Vec3>, LinearSolveError> {
         self.factor_cholesky(fixed)?.solve(rhs)
     }
+}
+
+/// Makes faer's factorizations and solves run sequentially.
+///
+/// faer splits dense kernels by the number of rayon threads, which changes the
+/// order of floating-point sums: static and implicit results would then depend
+/// on the thread count. Our own parallel parts (force and tangent assembly)
+/// are deterministic, so only faer needs pinning. This is process-wide, which
+/// is what a simulator wants; a caller that needs faer in parallel elsewhere
+/// can set it back after our solves.
+pub fn sequential_factorizations() {
+    faer::set_global_parallelism(faer::Par::Seq);
 }

@@ -1,10 +1,13 @@
-//! Explicit runs are bitwise identical for 1, 2 and 4 threads.
+//! Explicit, implicit and static results are bitwise identical for 1, 2 and 4 threads.
 
 use hexmesh::Lattice;
 use mss_core::constraints::{ConstraintSpec, NodeSelector};
 use mss_core::loads::{Damping, LoadSpec};
 use mss_core::model::PaperModel;
-use mss_core::solver::{Explicit, ExplicitOptions, Integrator, Problem, State};
+use mss_core::solver::{
+    Explicit, ExplicitOptions, Implicit, ImplicitOptions, Integrator, Problem, State,
+    StaticOptions, solve_static,
+};
 use mss_core::{Material, Model, Vec3};
 
 fn run(threads: usize) -> State {
@@ -65,5 +68,94 @@ fn explicit_is_bitwise_identical_for_1_2_4_threads() {
                     .all(|(p, q)| p.to_bits() == q.to_bits())
             });
         assert!(same, "{t} threads differ from 1 thread");
+    }
+}
+
+fn bits(s: &State) -> Vec<u64> {
+    s.x.iter()
+        .chain(&s.v)
+        .flat_map(|v| v.iter().map(|c| c.to_bits()).collect::<Vec<_>>())
+        .collect()
+}
+
+/// A 12x3x3 cantilever under a large gravity load: a static solve and 5
+/// implicit steps at 20 times the explicit limit, in a pool of `threads`.
+fn implicit_and_static(threads: usize) -> (State, State) {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    pool.install(|| {
+        let lattice = Lattice::block([12, 3, 3], 0.025, [0.0; 3]).unwrap();
+        let model = Model::new(
+            &lattice,
+            Material::new(1000.0, 0.3, 3.0).unwrap(),
+            &PaperModel,
+        )
+        .unwrap();
+        let p = Problem::from_specs(
+            model,
+            &[ConstraintSpec::fixed(NodeSelector::BoundingFace(
+                mss_core::constraints::Face::XMin,
+            ))],
+            &[LoadSpec::Gravity {
+                g: [0.0, 0.0, -9.81],
+            }],
+            Damping {
+                alpha: 2.0,
+                beta: 0.0,
+            },
+        )
+        .unwrap();
+        let mut statics = State::at_rest(p.model());
+        solve_static(&p, &mut statics, &StaticOptions::default()).unwrap();
+        let mut dynamic = State::at_rest(p.model());
+        let dt = 20.0 * p.model().critical_time_step();
+        let mut it = Implicit::new(
+            &p,
+            ImplicitOptions {
+                dt,
+                ..ImplicitOptions::default()
+            },
+        )
+        .unwrap();
+        for _ in 0..5 {
+            it.step(&p, &mut dynamic).unwrap();
+        }
+        (statics, dynamic)
+    })
+}
+
+#[test]
+fn implicit_and_static_are_bitwise_identical_for_1_2_4_threads() {
+    let (s1, d1) = implicit_and_static(1);
+    let rest = State::at_rest(
+        &Model::new(
+            &Lattice::block([12, 3, 3], 0.025, [0.0; 3]).unwrap(),
+            Material::new(1000.0, 0.3, 3.0).unwrap(),
+            &PaperModel,
+        )
+        .unwrap(),
+    );
+    assert_ne!(
+        bits(&s1),
+        bits(&rest),
+        "the static solve must move the beam"
+    );
+    assert_ne!(
+        bits(&d1),
+        bits(&rest),
+        "the implicit steps must move the beam"
+    );
+    for t in [2, 4] {
+        let (s, d) = implicit_and_static(t);
+        assert!(
+            bits(&s) == bits(&s1),
+            "static: {t} threads differ from 1 thread"
+        );
+        assert!(
+            bits(&d) == bits(&d1),
+            "implicit: {t} threads differ from 1 thread"
+        );
     }
 }

@@ -66,6 +66,7 @@ pub(crate) fn solve_free(
             rhs[(k, 0)] = b[i / 3][i % 3];
         }
     }
+    crate::sparse::sequential_factorizations();
     let lu = match mat.sp_lu() {
         Ok(lu) => lu,
         Err(faer::sparse::linalg::LuError::SymbolicSingular { .. }) => {
