@@ -145,7 +145,10 @@ pub fn run(args: &RunArgs, global: &GlobalArgs) -> anyhow::Result<()> {
     // Everything is checked before the output folder is created, so that bad
     // input leaves no file behind.
     let prepared = prepare(input, show)?;
-    if prepared.problem.model().num_nodes() <= super::check::RUN_MODE_CHECK_MAX_NODES
+    // A static solve reports mechanisms itself, as its one-line error; dynamic
+    // runs go on, so they get the warning.
+    if prepared.plan.kind != mss_io::scene::SolverKind::Static
+        && prepared.problem.model().num_nodes() <= super::check::RUN_MODE_CHECK_MAX_NODES
         && let Some(warning) = super::check::mechanism_warning(&prepared)
     {
         log::warn!("{warning}");

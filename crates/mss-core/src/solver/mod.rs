@@ -418,7 +418,7 @@ pub enum SolverError {
     },
     /// The problem has zero-stiffness motions (rigid motions or hourglass
     /// modes) that the loads can excite: no unique static solution.
-    #[error("{message} (nodes that move freely include {nodes:?})")]
+    #[error("{message}{}", free_nodes_note(nodes))]
     Mechanism {
         /// Explanation and what to fix.
         message: String,
@@ -629,5 +629,15 @@ fn check_inverted(model: &Model, x: &[Vec3]) -> Option<Divergence> {
             count: inv.len(),
             first: inv.into_iter().take(8).collect(),
         })
+    }
+}
+
+/// " (nodes that move freely include [..])", or nothing when no node is known
+/// (e.g. nothing is held at all, so every node moves).
+fn free_nodes_note(nodes: &[u32]) -> String {
+    if nodes.is_empty() {
+        String::new()
+    } else {
+        format!(" (nodes that move freely include {nodes:?})")
     }
 }
