@@ -61,6 +61,22 @@ pub struct Lattice {
     cell_coords: Vec<[u32; 3]>,
 }
 
+/// Checks what both constructors need: a positive finite `h`, a finite origin,
+/// and node indices that fit in `u32`. Returns the number of grid nodes.
+fn check_grid(origin: [f64; 3], h: f64, dims: [u32; 3]) -> Result<u64, LatticeError> {
+    if !(h.is_finite() && h > 0.0) {
+        return Err(LatticeError::BadCellSize(h));
+    }
+    if origin.iter().any(|v| !v.is_finite()) {
+        return Err(LatticeError::BadOrigin(origin));
+    }
+    let node_count = (dims[0] as u64 + 1) * (dims[1] as u64 + 1) * (dims[2] as u64 + 1);
+    if node_count > u32::MAX as u64 {
+        return Err(LatticeError::GridTooLarge(dims));
+    }
+    Ok(node_count)
+}
+
 fn node_key(c: [u32; 3], dims: [u32; 3]) -> u64 {
     let nx = dims[0] as u64 + 1;
     let ny = dims[1] as u64 + 1;
@@ -86,16 +102,7 @@ impl Lattice {
         dims: [u32; 3],
         cell_coords: impl IntoIterator<Item = [u32; 3]>,
     ) -> Result<Self, LatticeError> {
-        if !(h.is_finite() && h > 0.0) {
-            return Err(LatticeError::BadCellSize(h));
-        }
-        if origin.iter().any(|v| !v.is_finite()) {
-            return Err(LatticeError::BadOrigin(origin));
-        }
-        let node_count = (dims[0] as u64 + 1) * (dims[1] as u64 + 1) * (dims[2] as u64 + 1);
-        if node_count > u32::MAX as u64 {
-            return Err(LatticeError::GridTooLarge(dims));
-        }
+        check_grid(origin, h, dims)?;
         let mut keyed: Vec<(u64, [u32; 3])> = Vec::new();
         for coord in cell_coords {
             if (0..3).any(|k| coord[k] >= dims[k]) {
@@ -394,16 +401,7 @@ impl Lattice {
         dims: [u32; 3],
         occupied: &[bool],
     ) -> Result<Self, LatticeError> {
-        if !(h.is_finite() && h > 0.0) {
-            return Err(LatticeError::BadCellSize(h));
-        }
-        if origin.iter().any(|v| !v.is_finite()) {
-            return Err(LatticeError::BadOrigin(origin));
-        }
-        let node_count = (dims[0] as u64 + 1) * (dims[1] as u64 + 1) * (dims[2] as u64 + 1);
-        if node_count > u32::MAX as u64 {
-            return Err(LatticeError::GridTooLarge(dims));
-        }
+        let node_count = check_grid(origin, h, dims)?;
         let [dx, dy, dz] = dims.map(|d| d as usize);
         if occupied.len() != dx * dy * dz {
             // A grid of the wrong size cannot be interpreted: no valid cells.

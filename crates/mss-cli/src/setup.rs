@@ -279,17 +279,7 @@ pub fn damping(scene: &Scene) -> Damping {
 }
 
 /// Rest bounding box of model nodes.
-pub fn node_bounds(rest: &[mss_core::Vec3]) -> ([f64; 3], [f64; 3]) {
-    let mut lo = [f64::INFINITY; 3];
-    let mut hi = [f64::NEG_INFINITY; 3];
-    for p in rest {
-        for k in 0..3 {
-            lo[k] = lo[k].min(p[k]);
-            hi[k] = hi[k].max(p[k]);
-        }
-    }
-    (lo, hi)
-}
+pub use mss_core::constraints::node_bounds;
 
 /// The problem of a scene for a built model: constraints, loads, damping.
 pub fn problem(scene: &Scene, model: mss_core::Model) -> anyhow::Result<Problem> {

@@ -170,7 +170,8 @@ pub enum ConstraintError {
     Dofs(String),
 }
 
-fn bounds(rest: &[Vec3]) -> ([f64; 3], [f64; 3]) {
+/// Axis-aligned bounding box `(min, max)` of node positions.
+pub fn node_bounds(rest: &[Vec3]) -> ([f64; 3], [f64; 3]) {
     let mut lo = [f64::INFINITY; 3];
     let mut hi = [f64::NEG_INFINITY; 3];
     for p in rest {
@@ -208,7 +209,7 @@ impl NodeSelector {
                 }
             }
             NodeSelector::BoundingFace(face) => {
-                let (lo, hi) = bounds(rest);
+                let (lo, hi) = node_bounds(rest);
                 let (a, is_max) = face.axis_and_max();
                 if is_max {
                     keep(&|p| p[a] >= hi[a] - tol)
@@ -227,7 +228,7 @@ impl NodeSelector {
                 out
             }
             NodeSelector::LowestLayer => {
-                let (lo, _) = bounds(rest);
+                let (lo, _) = node_bounds(rest);
                 keep(&|p| p[2] <= lo[2] + tol)
             }
         }
@@ -253,7 +254,7 @@ impl NodeSelector {
         }
         let sel = self.select(rest, h);
         if sel.is_empty() {
-            let (min, max) = bounds(rest);
+            let (min, max) = node_bounds(rest);
             return Err(ConstraintError::EmptySelection {
                 selector: self.to_string(),
                 min,
