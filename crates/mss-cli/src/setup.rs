@@ -11,7 +11,7 @@ use mss_core::constraints::{
     Axis as CAxis, ConstraintSpec, Dofs, Face, Keyframe, Motion, NodeSelector, Side as CSide,
 };
 use mss_core::loads::{Damping, ForceDistribution, LoadSpec};
-use mss_core::model::{PARAMETERIZATION_NAMES, parameterization_by_name};
+use mss_core::model::{HourglassControl, PARAMETERIZATION_NAMES, parameterization_by_name};
 use mss_core::solver::{Problem, explicit_time_step_limit};
 use mss_core::{Material, Parameterization};
 use mss_io::scene::{
@@ -146,12 +146,24 @@ pub fn scene_voxelize_options(v: &VoxelizeSection) -> anyhow::Result<VoxelizeOpt
 /// The material and parameterization of a scene, checked against each other.
 pub fn material(scene: &Scene) -> anyhow::Result<(Material, Box<dyn Parameterization>)> {
     let name = scene.model.parameterization.as_str();
-    let param = parameterization_by_name(name).ok_or_else(|| {
+    let unknown = || {
         anyhow!(
             "[model] parameterization: unknown name \"{name}\"; use one of {}",
             PARAMETERIZATION_NAMES.join(", ")
         )
-    })?;
+    };
+    let param = match scene.model.hourglass {
+        None => parameterization_by_name(name).ok_or_else(unknown)?,
+        Some(alpha) => {
+            // An explicit factor replaces the default of a "+hg" name.
+            let base = name.strip_suffix("+hg").unwrap_or(name);
+            let inner = parameterization_by_name(base).ok_or_else(unknown)?;
+            Box::new(
+                HourglassControl::new(inner, alpha)
+                    .map_err(|e| anyhow!("[model] hourglass: {e}"))?,
+            )
+        }
+    };
     let m = &scene.material;
     let material = Material {
         young: m.young,

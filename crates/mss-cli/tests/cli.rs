@@ -180,6 +180,19 @@ fn cases() -> Vec<Case> {
             &["magic", "paper"],
         ),
         scene_case(
+            "negative hourglass factor",
+            scene(
+                MATERIAL,
+                "[model]\nparameterization = \"volumetric+hg\"\nhourglass = -1.0\n",
+            ),
+            &["[model] hourglass", "-1"],
+        ),
+        scene_case(
+            "hourglass control twice",
+            scene(MATERIAL, "[model]\nparameterization = \"paper+hg+hg\"\n"),
+            &["paper+hg+hg", "volumetric+hg"],
+        ),
+        scene_case(
             "negative duration",
             scene(MATERIAL, "[solver]\nduration = -1.0\n"),
             &["[solver] duration"],

@@ -5,7 +5,7 @@
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use hexmesh::Lattice;
-use mss_core::model::{PaperModel, SpringsOnly, Volumetric};
+use mss_core::model::{HourglassControl, PaperModel, SpringsOnly, Volumetric};
 use mss_core::{Material, Model, Parameterization, Vec3};
 
 fn perturbed(model: &Model) -> Vec<Vec3> {
@@ -71,12 +71,17 @@ fn bench(c: &mut Criterion) {
     group.warm_up_time(std::time::Duration::from_millis(300));
     group.measurement_time(std::time::Duration::from_secs(2));
     let material = Material::new(1000.0, 0.3, 1.0).unwrap();
+    let alpha = HourglassControl::DEFAULT_ALPHA;
+    let paper_hg = HourglassControl::new(Box::new(PaperModel), alpha).unwrap();
+    let volumetric_hg = HourglassControl::new(Box::new(Volumetric), alpha).unwrap();
     for n in [32u32, 64] {
         let lattice = Lattice::block([n; 3], 1.0 / n as f64, [0.0; 3]).unwrap();
         for param in [
             &PaperModel as &dyn Parameterization,
             &SpringsOnly,
             &Volumetric,
+            &paper_hg,
+            &volumetric_hg,
         ] {
             let model = Model::new(&lattice, material, param).unwrap();
             let x = perturbed(&model);

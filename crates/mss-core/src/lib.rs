@@ -25,8 +25,9 @@ pub use loads::{Damping, Load, LoadSpec};
 pub use material::{Material, MaterialError};
 pub use material_test::{MeasuredMaterial, measure_material};
 pub use model::{
-    CellCoefficients, CellDiagnostics, ForceWorkspace, Model, ModelError, PARAMETERIZATION_NAMES,
-    PaperModel, Parameterization, SpringsOnly, Volumetric, parameterization_by_name,
+    CellCoefficients, CellDiagnostics, ForceWorkspace, HourglassControl, HourglassError, Model,
+    ModelError, PARAMETERIZATION_NAMES, PaperModel, Parameterization, SpringsOnly, Volumetric,
+    parameterization_by_name,
 };
 pub use solver::{
     Integrator, Problem, SolverError, State, StaticOptions, integrator_by_name, solve_static,

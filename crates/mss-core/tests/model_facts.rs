@@ -2,7 +2,7 @@
 //! tension, cantilever, Jacobian, energy, determinism, time step.
 
 use hexmesh::Lattice;
-use mss_core::model::{PaperModel, SpringsOnly, Volumetric};
+use mss_core::model::{HourglassControl, PaperModel, SpringsOnly, Volumetric};
 use mss_core::{
     BlockCsr, CellCoefficients, Material, MaterialError, Model, Parameterization, Vec3,
 };
@@ -40,6 +40,11 @@ fn forces(model: &Model, x: &[Vec3]) -> Vec<Vec3> {
     let mut f = vec![Vec3::zeros(); x.len()];
     model.internal_forces(x, &mut f);
     f
+}
+
+/// A parameterization with hourglass control (strong, so that its terms show).
+fn with_hourglass(inner: Box<dyn Parameterization>) -> HourglassControl {
+    HourglassControl::new(inner, 1.0).unwrap()
 }
 
 fn max_abs_block(m: &BlockCsr) -> f64 {
@@ -135,7 +140,16 @@ fn tension(param: &dyn Parameterization, nu: f64, n: u32) -> (f64, f64) {
 
 #[test]
 fn uniaxial_tension_gives_e_and_nu() {
-    for param in [&PaperModel as &dyn Parameterization, &Volumetric] {
+    // Hourglass control acts only on the mechanisms, never on a homogeneous
+    // strain: the tension results stay exact with it.
+    let paper_hg = with_hourglass(Box::new(PaperModel));
+    let volumetric_hg = with_hourglass(Box::new(Volumetric));
+    for param in [
+        &PaperModel as &dyn Parameterization,
+        &Volumetric,
+        &paper_hg,
+        &volumetric_hg,
+    ] {
         for nu in [-0.2, 0.0, 0.25, 0.3, 0.45, 0.49] {
             for n in [1, 2, 4, 8] {
                 let (e, nm) = tension(param, nu, n);
@@ -276,8 +290,12 @@ fn check_jacobian(model: &Model, x: &[Vec3]) {
 #[test]
 fn jacobian_matches_finite_differences() {
     let l = Lattice::block([2, 2, 1], 0.1, [0.0; 3]).unwrap();
+    let paper_hg = with_hourglass(Box::new(PaperModel));
+    let volumetric_hg = with_hourglass(Box::new(Volumetric));
     for (param, nu) in [
         (&SpringsOnly as &dyn Parameterization, 0.3),
+        (&paper_hg, 0.3),
+        (&volumetric_hg, 0.45),
         (&PaperModel, 0.3),
         (&PaperModel, -0.2),
         (&PaperModel, 0.49),
@@ -300,10 +318,12 @@ fn jacobian_matches_finite_differences() {
 #[test]
 fn rest_tangent_is_symmetric() {
     let l = Lattice::l_shape(2, 1.0).unwrap();
+    let volumetric_hg = with_hourglass(Box::new(Volumetric));
     for param in [
         &SpringsOnly as &dyn Parameterization,
         &PaperModel,
         &Volumetric,
+        &volumetric_hg,
     ] {
         for nu in [-0.2, 0.3, 0.49] {
             let model = Model::new(&l, mat(100.0, nu, 1.0), param).unwrap();
@@ -335,6 +355,7 @@ impl Parameterization for Conservative {
             k_diag: m.young * h * 0.2,
             correction: None,
             volumetric_lambda: m.young * 2.0,
+            hourglass: m.young * h * 0.1,
         }
     }
 }
@@ -523,10 +544,12 @@ fn zero_energy_modes_of_blocks() {
 fn simd_and_scalar_paths_agree_bitwise() {
     // Two materials force the per-cell scalar path; one material the batched one.
     let l = Lattice::block([5, 3, 3], 0.1, [0.0; 3]).unwrap();
+    let volumetric_hg = with_hourglass(Box::new(Volumetric));
     for param in [
         &PaperModel as &dyn Parameterization,
         &Volumetric,
         &SpringsOnly,
+        &volumetric_hg,
     ] {
         let m = mat(100.0, 0.3, 1.0);
         let single = Model::new(&l, m, param).unwrap();

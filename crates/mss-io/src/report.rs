@@ -395,26 +395,37 @@ pub fn beam_section(
         &["curve", "x_m", "w_m"],
         &curve_rows,
     )?;
-    let mut series: Vec<Series> = Vec::new();
-    for c in &r.curves {
-        let keep = !c.label.starts_with("springs") && !c.label.starts_with("volumetric");
-        if keep {
-            series.push(Series {
+    // One deflection figure per model: all resolutions of one model against
+    // the reference and the beam theories (all models in one would be a tangle).
+    let mut models: Vec<&str> = r.runs.iter().map(|run| run.model.as_str()).collect();
+    models.dedup();
+    let mut curve_svgs = Vec::new();
+    for model in models {
+        let own = format!("{model} ");
+        let series: Vec<Series> = r
+            .curves
+            .iter()
+            .filter(|c| {
+                c.label.starts_with(&own)
+                    || !r.runs.iter().any(|run| c.label.starts_with(&run.model))
+            })
+            .map(|c| Series {
                 label: c.label.clone(),
                 points: c.points.clone(),
                 dashed: c.label.starts_with("Euler") || c.label.starts_with("Timoshenko"),
-            });
-        }
+            })
+            .collect();
+        let curve_svg = format!("{prefix}_deflection_{}.svg", model.replace('+', "_"));
+        svg_line_plot(
+            &dir.join(&curve_svg),
+            &format!("{title}: neutral-axis deflection ({model})"),
+            "x (m)",
+            "deflection w (m, downwards)",
+            &series,
+            false,
+        )?;
+        curve_svgs.push(curve_svg);
     }
-    let curve_svg = format!("{prefix}_deflection.svg");
-    svg_line_plot(
-        &dir.join(&curve_svg),
-        &format!("{title}: neutral-axis deflection (paper's model)"),
-        "x (m)",
-        "deflection w (m, downwards)",
-        &series,
-        false,
-    )?;
     let err_svg = format!("{prefix}_errors.svg");
     error_plot(
         &dir.join(&err_svg),
@@ -469,10 +480,11 @@ pub fn beam_section(
             (run.monitor.z / info.monitor_ref.z - 1.0) * 100.0
         );
     }
-    let _ = writeln!(
-        s,
-        "\n![deflection]({link_prefix}{curve_svg})\n\n![errors]({link_prefix}{err_svg})\n"
-    );
+    s.push('\n');
+    for curve_svg in &curve_svgs {
+        let _ = writeln!(s, "![deflection]({link_prefix}{curve_svg})\n");
+    }
+    let _ = writeln!(s, "![errors]({link_prefix}{err_svg})\n");
     let _ = writeln!(
         s,
         "Files: `{prefix}_errors.csv`, `{prefix}_deflection.csv`, VTU (MSS and FEM displacements and their difference): {}.\n",

@@ -253,9 +253,17 @@ pub struct MaterialSection {
 #[serde(deny_unknown_fields)]
 pub struct ModelSection {
     /// `"paper"` (default: springs and correction forces of Baudet et al.),
-    /// `"springs"` (springs only), or another name the library knows.
+    /// `"springs"` (springs only), `"volumetric"`, each optionally with
+    /// hourglass control (`"paper+hg"`, ...), or another name the library knows.
     #[serde(default = "default_parameterization")]
     pub parameterization: String,
+    /// Factor alpha of the hourglass control on the lattice's mechanisms
+    /// (dimensionless, >= 0; 1 gives a mechanism its elastic strain energy).
+    /// Given, it adds the control to any parameterization (or sets the factor
+    /// of a `"+hg"` one); absent, `"+hg"` names use the library's default (0.05)
+    /// and the others have none.
+    #[serde(default)]
+    pub hourglass: Option<f64>,
 }
 
 fn default_parameterization() -> String {
@@ -266,6 +274,7 @@ impl Default for ModelSection {
     fn default() -> Self {
         Self {
             parameterization: default_parameterization(),
+            hourglass: None,
         }
     }
 }
@@ -1020,7 +1029,16 @@ mod tests {
         assert_eq!(s.solver, SolverSection::default());
         assert_eq!(s.output, OutputSection::default());
         assert_eq!(s.model.parameterization, "paper");
+        assert_eq!(s.model.hourglass, None);
         assert!(s.fixed.is_empty());
+        let s = Scene::from_toml_str(
+            &format!("{MIN}[model]\nparameterization = \"volumetric+hg\"\nhourglass = 0.25\n"),
+            "s.toml",
+        )
+        .unwrap();
+        assert_eq!(s.model.parameterization, "volumetric+hg");
+        assert_eq!(s.model.hourglass, Some(0.25));
+        assert!(err(&format!("{MIN}[model]\nhourglass = \"strong\"\n")).contains("hourglass"));
     }
 
     #[test]

@@ -79,9 +79,18 @@ pub fn run(args: &CheckArgs, global: &GlobalArgs) -> anyhow::Result<()> {
         model.h()
     );
     let m = &scene.material;
+    let hourglass = model.cell_coefficients(0).hourglass;
     println!(
-        "material         E = {} Pa, nu = {}, density = {} kg/m^3, model \"{}\"",
-        m.young, m.poisson, m.density, scene.model.parameterization
+        "material         E = {} Pa, nu = {}, density = {} kg/m^3, model \"{}\"{}",
+        m.young,
+        m.poisson,
+        m.density,
+        model.parameterization_name(),
+        if hourglass > 0.0 {
+            format!(" (hourglass stiffness {hourglass:.4e} N/m per cell)")
+        } else {
+            String::new()
+        }
     );
     println!("mass             {:.4} kg", model.total_mass());
     println!("held nodes       {held}");
@@ -127,13 +136,19 @@ pub fn mechanism_warning(p: &crate::commands::run::Prepared) -> Option<String> {
         Ok(z) => Some(format!(
             "the held nodes leave {}{} zero-energy mode(s) (rigid motions or hourglass \
              mechanisms){}: a static solve will fail and dynamics may drift; hold a larger \
-             region (e.g. a whole face)",
+             region (e.g. a whole face){}",
             z.count,
             if z.exact { "" } else { " or more" },
             if restrained {
                 "; drag springs restrain some of them"
             } else {
                 ""
+            },
+            if model.cell_coefficients(0).hourglass > 0.0 {
+                ""
+            } else {
+                // Parts one cell thick leave hourglass mechanisms however they are held.
+                ", or add hourglass control ([model] parameterization \"...+hg\" or hourglass = 0.05)"
             },
         )),
         Err(e) => {

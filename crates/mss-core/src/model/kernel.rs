@@ -178,6 +178,9 @@ pub(crate) struct CellParams {
     pub vol_lambda_h3: f64,
     /// `1 / (4 h)`: magnitude of the shape-function gradients at the centre.
     pub grad_scale: f64,
+    /// Stiffness of the hourglass control on the lattice's three mechanisms
+    /// (N/m per unit hourglass amplitude; 0 for none).
+    pub k_hourglass: f64,
 }
 
 pub(crate) type V3<T> = [T; 3];
@@ -234,12 +237,9 @@ fn finish_cell<T: Scalar>(
     axis_sum: [V3<T>; 3],
     f: &mut [V3<T>; 8],
 ) {
-    if let Some(corr) = &p.correction {
-        let axes: [V3<T>; 3] = std::array::from_fn(|i| {
-            let v = axis_sum[i];
-            let inv = T::cst(1.0) / dot(v, v).sqrt();
-            mul_s(v, inv)
-        });
+    // The current axes serve both the corrections and the hourglass control.
+    let axes = (p.correction.is_some() || p.k_hourglass != 0.0).then(|| cell_axes(&axis_sum));
+    if let (Some(corr), Some((axes, _))) = (&p.correction, &axes) {
         // T_i = 1/2 sum_n s_i(n) (f_n . a_i) = 1/2 a_i . sum_n s_i(n) f_n, with
         // s_i = +1 on the -i face and -1 on the +i face.
         let t: [T; 3] = std::array::from_fn(|i| {
@@ -290,6 +290,87 @@ fn finish_cell<T: Scalar>(
             }
         }
     }
+    if let (true, Some((axes, inv_len))) = (p.k_hourglass != 0.0, &axes) {
+        add_hourglass_forces(p.k_hourglass, x, axes, inv_len, f);
+    }
+}
+
+/// Sign `+1` / `-1` of corner `n` along axis `j`.
+#[inline(always)]
+fn corner_sign(n: usize, j: usize) -> f64 {
+    if CORNER_OFFSETS[n][j] == 1 { 1.0 } else { -1.0 }
+}
+
+/// The hourglass vector of the mechanism along axis `i`: the corner pattern
+/// `s_j s_k` (the product of the signs along the two other axes). Displacing
+/// every corner along `i` by `s_j s_k` stretches none of the 16 springs (their
+/// ends always have equal `s_j s_k`), so the springs and the corrections, which
+/// are built from the springs' forces, give it no stiffness.
+#[inline(always)]
+fn hourglass_sign(n: usize, i: usize) -> f64 {
+    corner_sign(n, (i + 1) % 3) * corner_sign(n, (i + 2) % 3)
+}
+
+/// The current cell axes `a_i` (normalized `axis_sum[i]`, MODEL.md step 2)
+/// and `1 / |axis_sum[i]|`.
+#[inline(always)]
+fn cell_axes<T: Scalar>(axis_sum: &[V3<T>; 3]) -> ([V3<T>; 3], [T; 3]) {
+    let inv: [T; 3] = std::array::from_fn(|i| T::cst(1.0) / dot(axis_sum[i], axis_sum[i]).sqrt());
+    (std::array::from_fn(|i| mul_s(axis_sum[i], inv[i])), inv)
+}
+
+/// The hourglass vectors `g_i = 1/8 sum_n s_j s_k(n) x_n` and amplitudes
+/// `q_i = a_i . g_i` of the cell along its current axes `a_i`. `g_i` vanishes
+/// for every affine motion and rotates with the cell, so `q_i` is zero for any
+/// homogeneous strain (tension results stay exact) and invariant under rigid
+/// motions.
+#[inline(always)]
+fn hourglass_amplitudes<T: Scalar>(x: &[V3<T>; 8], axes: &[V3<T>; 3]) -> ([V3<T>; 3], [T; 3]) {
+    let g: [V3<T>; 3] = std::array::from_fn(|i| {
+        let mut g = [T::cst(0.0); 3];
+        for (n, xn) in x.iter().enumerate() {
+            if hourglass_sign(n, i) > 0.0 {
+                add_to(&mut g, *xn);
+            } else {
+                sub_from(&mut g, *xn);
+            }
+        }
+        g.map(|v| v.scale(0.125))
+    });
+    let q = std::array::from_fn(|i| dot(axes[i], g[i]));
+    (g, q)
+}
+
+/// Forces of the hourglass energy `W = k/2 sum_i q_i^2`, `f_n = -dW/dx_n`,
+/// including the derivative of the current axis (so the forces are exactly
+/// conservative): `dq_i/dx_n = s_j s_k(n) / 8 a_i + s_i(n) (g_i - q_i a_i) / |m_i|`.
+#[inline(always)]
+fn add_hourglass_forces<T: Scalar>(
+    k: f64,
+    x: &[V3<T>; 8],
+    axes: &[V3<T>; 3],
+    inv_len: &[T; 3],
+    f: &mut [V3<T>; 8],
+) {
+    let (g, q) = hourglass_amplitudes(x, axes);
+    for i in 0..3 {
+        let kq = q[i].scale(-k);
+        let along = mul_s(axes[i], kq.scale(0.125));
+        let tilt = mul_s(sub(g[i], mul_s(axes[i], q[i])), kq * inv_len[i]);
+        // Each corner gets +-along (its hourglass sign) +- tilt (its side
+        // along i): two sums cover the four combinations.
+        let same = [along[0] + tilt[0], along[1] + tilt[1], along[2] + tilt[2]];
+        let opposite = sub(along, tilt);
+        for (n, fn_) in f.iter_mut().enumerate() {
+            let plus_side = CORNER_OFFSETS[n][i] == 1;
+            match (hourglass_sign(n, i) > 0.0, plus_side) {
+                (true, true) => add_to(fn_, same),
+                (false, false) => sub_from(fn_, same),
+                (true, false) => add_to(fn_, opposite),
+                (false, true) => sub_from(fn_, opposite),
+            }
+        }
+    }
 }
 
 /// Columns of F = sum_a x_a (grad N_a)^T at the cell centre, and det F.
@@ -328,7 +409,8 @@ pub(crate) fn cell_forces<T: Scalar>(p: &CellParams, x: &[V3<T>; 8], f: &mut [V3
     finish_cell(p, x, axis_sum, f);
 }
 
-/// Potential energy of the cell's springs and volumetric term (J).
+/// Potential energy of the cell's springs, volumetric term and hourglass
+/// control (J).
 pub(crate) fn cell_energy(p: &CellParams, x: &[V3<f64>; 8]) -> f64 {
     let mut e = 0.0;
     for &(a, b, _) in &CELL_EDGES {
@@ -342,6 +424,15 @@ pub(crate) fn cell_energy(p: &CellParams, x: &[V3<f64>; 8]) -> f64 {
     if p.vol_lambda_h3 != 0.0 {
         let (_, jac) = deformation_gradient(x, p.grad_scale);
         e += 0.5 * p.vol_lambda_h3 * (jac - 1.0).powi(2);
+    }
+    if p.k_hourglass != 0.0 {
+        let mut axis_sum = [[0.0; 3]; 3];
+        for &(a, b, ax) in &CELL_EDGES {
+            add_to(&mut axis_sum[ax], sub(x[b], x[a]));
+        }
+        let (axes, _) = cell_axes(&axis_sum);
+        let (_, q) = hourglass_amplitudes(x, &axes);
+        e += 0.5 * p.k_hourglass * dot(q, q);
     }
     e
 }
