@@ -39,7 +39,7 @@ pub fn dispatch(cli: &Cli) -> anyhow::Result<()> {
                 .out
                 .clone()
                 .unwrap_or_else(|| "out/experiments".into());
-            experiment::run(a, &out)
+            experiment::run(a, &out, cli.global.chatty())
         }
     }
 }
