@@ -19,7 +19,7 @@ cells = 8
 [material]
 young = 1.0e5
 poisson = 0.3
-density = 1000.0
+density = 1.0
 
 [[fixed]]
 kind = "face"
