@@ -1,6 +1,7 @@
 //! `mss experiment`: the paper's experiments (cantilever, L-shape, material
-//! tests) against a converged FEM reference, written as a Markdown report with
-//! CSV tables, SVG plots and VTU files.
+//! tests), or any scene (`mss experiment scene SCENE.toml`), against a
+//! converged FEM reference, written as a Markdown report with CSV tables, SVG
+//! plots and VTU files.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};

@@ -1,4 +1,5 @@
-//! Sparse LU solve of a [`BlockCsr`] system restricted to the free dofs.
+//! Sparse LU solve of a [`BlockCsr`] system restricted to the free dofs, with
+//! the symbolic analysis kept per sparsity pattern (`LuCache`).
 
 use faer::Mat;
 use faer::prelude::Solve;
@@ -43,7 +44,7 @@ pub(crate) struct LuCache {
     /// Source of each stored value: `9 * block + 3 * e + d`.
     source: Vec<u32>,
     lu_symbolic: Option<SymbolicLu<usize>>,
-    /// Symbolic analyses done (for tests and statistics).
+    /// Symbolic analyses done (shown by `Debug`).
     analyses: u32,
 }
 
@@ -71,12 +72,6 @@ impl LuCache {
             lu_symbolic: None,
             analyses: 0,
         }
-    }
-
-    /// Symbolic analyses done so far.
-    #[allow(dead_code)]
-    pub(crate) fn analyses(&self) -> u32 {
-        self.analyses
     }
 
     /// Makes the cached pattern that of `a` restricted to `free`.
