@@ -1,5 +1,6 @@
 //! One static solve of the MODEL.md cantilever (0.4 x 0.1 x 0.1 m, 32x8x8
-//! cells, paper model, nu = 0.3, gravity, x = 0 fixed).
+//! cells, paper model, nu = 0.3, gravity, x = 0 fixed), under the small load
+//! and under the large-deflection load (total mass 0.0125 kg, 16x4x4).
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use hexmesh::Lattice;
@@ -16,7 +17,34 @@ fn bench(c: &mut Criterion) {
         &PaperModel,
     )
     .unwrap();
-    let problem = Problem::from_specs(
+    let problem = cantilever(model);
+    let large = cantilever(
+        Model::new(
+            &Lattice::block([16, 4, 4], 0.4 / 16.0, [0.0; 3]).unwrap(),
+            Material::new(1000.0, 0.3, 3.125).unwrap(),
+            &PaperModel,
+        )
+        .unwrap(),
+    );
+    let mut group = c.benchmark_group("static_solve");
+    group.sample_size(10);
+    group.bench_function("cantilever_32x8x8", |b| {
+        b.iter(|| {
+            let mut s = State::at_rest(problem.model());
+            solve_static(&problem, &mut s, &StaticOptions::default()).unwrap()
+        })
+    });
+    group.bench_function("cantilever_large_16x4x4", |b| {
+        b.iter(|| {
+            let mut s = State::at_rest(large.model());
+            solve_static(&large, &mut s, &StaticOptions::default()).unwrap()
+        })
+    });
+    group.finish();
+}
+
+fn cantilever(model: Model) -> Problem {
+    Problem::from_specs(
         model,
         &[ConstraintSpec::fixed(NodeSelector::BoundingFace(
             Face::XMin,
@@ -26,16 +54,7 @@ fn bench(c: &mut Criterion) {
         }],
         Damping::NONE,
     )
-    .unwrap();
-    let mut group = c.benchmark_group("static_solve");
-    group.sample_size(10);
-    group.bench_function("cantilever_32x8x8", |b| {
-        b.iter(|| {
-            let mut s = State::at_rest(problem.model());
-            solve_static(&problem, &mut s, &StaticOptions::default()).unwrap()
-        })
-    });
-    group.finish();
+    .unwrap()
 }
 
 criterion_group!(benches, bench);

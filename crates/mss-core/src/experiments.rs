@@ -18,9 +18,10 @@
 use hexmesh::Lattice;
 use thiserror::Error;
 
-use crate::constraints::Constraints;
+use crate::constraints::{ConstraintSpec, Constraints, Motion, NodeSelector};
+use crate::fem::FemConstraints;
 use crate::fem::{Fem, FemError, FemLaw, NewtonOptions};
-use crate::loads::Load;
+use crate::loads::{Damping, Load, LoadSpec};
 use crate::material_test::{MaterialTestError, MeasuredMaterial, measure_material};
 use crate::model::parameterization_by_name;
 use crate::solver::{Problem, SolverError, State, StaticOptions, solve_static};
@@ -59,6 +60,26 @@ pub enum ExperimentError {
     /// The MSS problem set-up was refused.
     #[error("problem set-up: {0}")]
     Problem(String),
+    /// A scene load that the FEM reference cannot represent.
+    #[error(
+        "load #{index} ({load}) has no FEM counterpart: the Q1 reference takes gravity, nodal forces and surface tractions only; remove it from the scene to compare"
+    )]
+    UnsupportedLoad {
+        /// Position of the load among the scene's loads (1-based).
+        index: usize,
+        /// The load's kind and parameters.
+        load: String,
+    },
+    /// A scene boundary condition that the comparison cannot represent.
+    #[error(
+        "boundary condition #{index} ({what}) is not supported by the FEM comparison: only fixed regions (zero displacement) are; remove it from the scene to compare"
+    )]
+    UnsupportedConstraint {
+        /// Position among the scene's boundary conditions (1-based).
+        index: usize,
+        /// What it is.
+        what: String,
+    },
 }
 
 /// Load regime of a static experiment.
@@ -669,4 +690,347 @@ pub fn material(
         }
     }
     Ok(rows)
+}
+
+/// How the regime of a scene comparison is chosen.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RegimeChoice {
+    /// Linear if the linear FEM reference moves no node by more than
+    /// [`AUTO_LARGE_FRACTION`] of the body's diagonal, else large.
+    Auto,
+    /// This regime.
+    Fixed(Regime),
+}
+
+/// Largest displacement, as a fraction of the bounding-box diagonal, that
+/// [`RegimeChoice::Auto`] still treats as small (1 %).
+pub const AUTO_LARGE_FRACTION: f64 = 0.01;
+
+/// Settings of [`scene`].
+#[derive(Debug, Clone)]
+pub struct SceneSettings {
+    /// FEM refinement per lattice cell (the reference mesh has `refine^3`
+    /// hexahedra per cell; with an even factor the reference is
+    /// Richardson-extrapolated from `refine / 2`).
+    pub refine: u32,
+    /// Linear, large deformation, or automatic.
+    pub regime: RegimeChoice,
+    /// Parameterizations to compare.
+    pub models: Vec<String>,
+}
+
+/// Results of [`scene`].
+#[derive(Debug, Clone)]
+pub struct SceneResult {
+    /// Regime used.
+    pub regime: Regime,
+    /// Largest linear FEM displacement over the diagonal, when the regime was
+    /// chosen automatically.
+    pub auto_ratio: Option<f64>,
+    /// Reference info (monitor: mean displacement over all nodes).
+    pub reference: ReferenceInfo,
+    /// One run per model (the monitor is the mean displacement over all nodes).
+    pub runs: Vec<RunResult>,
+}
+
+fn describe_load(l: &LoadSpec) -> String {
+    match l {
+        LoadSpec::Gravity { g } => format!("gravity {g:?} m/s^2"),
+        LoadSpec::Force { select, force, .. } => format!("force {force:?} N on {select}"),
+        LoadSpec::Traction { traction, .. } => format!("traction {traction:?} Pa"),
+        LoadSpec::Drag {
+            select,
+            target,
+            stiffness,
+        } => format!("drag spring of {stiffness} N/m pulling {select} toward {target:?}"),
+    }
+}
+
+/// Checks that every load and boundary condition has an FEM counterpart.
+pub fn check_scene_comparable(
+    constraints: &[ConstraintSpec],
+    loads: &[LoadSpec],
+) -> Result<(), ExperimentError> {
+    for (i, c) in constraints.iter().enumerate() {
+        if c.motion != Motion::Fixed {
+            return Err(ExperimentError::UnsupportedConstraint {
+                index: i + 1,
+                what: format!("prescribed motion of {}", c.select),
+            });
+        }
+    }
+    for (i, l) in loads.iter().enumerate() {
+        if matches!(l, LoadSpec::Drag { .. }) {
+            return Err(ExperimentError::UnsupportedLoad {
+                index: i + 1,
+                load: describe_load(l),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// The nodes of the refined FEM mesh that `select` means: the same geometric
+/// selection on the fine nodes, except explicit indices, which name coarse
+/// lattice nodes (mapped to the fine nodes at the same place).
+fn fine_selection(
+    select: &NodeSelector,
+    lattice: &Lattice,
+    fem: &Fem,
+) -> Result<Vec<u32>, ExperimentError> {
+    let fine = fem.lattice();
+    match select {
+        NodeSelector::Indices(_) => {
+            let coarse: Vec<Vec3> = lattice.nodes().iter().map(|&p| Vec3::from(p)).collect();
+            let nodes = select
+                .select_checked(&coarse, lattice.h())
+                .map_err(|e| ExperimentError::Problem(e.to_string()))?;
+            let r = fem.refinement();
+            let index: std::collections::HashMap<[u32; 3], u32> = fine
+                .node_coords()
+                .iter()
+                .enumerate()
+                .map(|(i, &c)| (c, i as u32))
+                .collect();
+            nodes
+                .iter()
+                .map(|&n| {
+                    let c = lattice.node_coords()[n as usize].map(|k| k * r);
+                    index.get(&c).copied().ok_or_else(|| {
+                        ExperimentError::Setting(format!("node {n} not in the FEM mesh"))
+                    })
+                })
+                .collect()
+        }
+        _ => {
+            let pos: Vec<Vec3> = fine.nodes().iter().map(|&p| Vec3::from(p)).collect();
+            select
+                .select_checked(&pos, fine.h())
+                .map_err(|e| ExperimentError::Problem(e.to_string()))
+        }
+    }
+}
+
+/// Q1 solution of a scene on `lattice` refined `r` times.
+fn scene_fem(
+    lattice: &Lattice,
+    r: u32,
+    material: Material,
+    constraints: &[ConstraintSpec],
+    loads: &[LoadSpec],
+    coarse_forces: &[Vec3],
+    law: FemLaw,
+) -> Result<(Fem, Vec<Vec3>), ExperimentError> {
+    let t0 = std::time::Instant::now();
+    let fem = Fem::new(lattice, r, material)?;
+    let mut bc = FemConstraints::new(fem.num_nodes());
+    for c in constraints {
+        for n in fine_selection(&c.select, lattice, &fem)? {
+            for d in 0..3 {
+                if c.dofs.0[d] {
+                    bc.fix(n, d, 0.0)?;
+                }
+            }
+        }
+    }
+    let mut f = vec![Vec3::zeros(); fem.num_nodes()];
+    let tol = 1e-9 * fem.lattice().h();
+    for l in loads {
+        let add = match l {
+            LoadSpec::Gravity { g } => fem.gravity_load(Vec3::from(*g)),
+            LoadSpec::Traction { min, max, traction } => fem.traction_load(
+                |c, _| (0..3).all(|k| c[k] >= min[k] - tol && c[k] <= max[k] + tol),
+                Vec3::from(*traction),
+            ),
+            // Nodal forces (and anything else) come from the coarse vector.
+            _ => continue,
+        };
+        for (a, b) in f.iter_mut().zip(&add) {
+            *a += b;
+        }
+    }
+    if coarse_forces.iter().any(|v| *v != Vec3::zeros()) {
+        let index: std::collections::HashMap<[u32; 3], usize> = fem
+            .lattice()
+            .node_coords()
+            .iter()
+            .enumerate()
+            .map(|(i, &c)| (c, i))
+            .collect();
+        for (n, v) in coarse_forces.iter().enumerate() {
+            let c = lattice.node_coords()[n].map(|k| k * r);
+            if let Some(&i) = index.get(&c) {
+                f[i] += v;
+            }
+        }
+    }
+    let opts = NewtonOptions {
+        load_steps: 2,
+        ..NewtonOptions::default()
+    };
+    let sol = fem.solve(law, &bc, &f, &opts)?;
+    log::info!(
+        "scene FEM {law:?} on {:?} cells: {} iterations, {:.1} s",
+        fem.lattice().dims(),
+        sol.iterations,
+        t0.elapsed().as_secs_f64()
+    );
+    Ok((fem, sol.displacement))
+}
+
+/// Compares the MSS static equilibrium of any scene (a lattice, its material,
+/// fixed regions and loads) with a Q1 FEM reference on the same lattice
+/// refined `settings.refine` times per cell, for each parameterization of
+/// `settings.models`. Loads: gravity, nodal forces (applied at the same nodes
+/// of the FEM mesh) and tractions (on the FEM faces whose centre lies in the
+/// box); drag springs and prescribed motions are refused with
+/// [`ExperimentError::UnsupportedLoad`] / [`ExperimentError::UnsupportedConstraint`].
+pub fn scene(
+    lattice: &Lattice,
+    material: Material,
+    constraints: &[ConstraintSpec],
+    loads: &[LoadSpec],
+    settings: &SceneSettings,
+) -> Result<SceneResult, ExperimentError> {
+    check_scene_comparable(constraints, loads)?;
+    if settings.refine == 0 || settings.models.is_empty() {
+        return Err(ExperimentError::Setting(format!(
+            "scene comparison needs a refinement of at least 1 (got {}) and at least one model",
+            settings.refine
+        )));
+    }
+    let first = parameterization_by_name(&settings.models[0])
+        .ok_or_else(|| ExperimentError::Parameterization(settings.models[0].clone()))?;
+    // Nodal forces of the `force` loads, as the MSS distributes them.
+    let model0 = Model::new(lattice, material, first.as_ref())?;
+    let rest = model0.rest_positions().to_vec();
+    let mut coarse_forces = vec![Vec3::zeros(); rest.len()];
+    for (i, l) in loads.iter().enumerate() {
+        if matches!(l, LoadSpec::Force { .. }) {
+            let load = l
+                .resolve(&model0)
+                .map_err(|e| ExperimentError::Problem(format!("load #{}: {e}", i + 1)))?;
+            load.add_forces(&model0, 0.0, &rest, 1.0, &mut coarse_forces);
+        }
+    }
+    let t0 = std::time::Instant::now();
+    let fem_at = |r: u32, law: FemLaw| {
+        scene_fem(
+            lattice,
+            r,
+            material,
+            constraints,
+            loads,
+            &coarse_forces,
+            law,
+        )
+    };
+    let (regime, auto_ratio, pre) = match settings.regime {
+        RegimeChoice::Fixed(r) => (r, None, None),
+        RegimeChoice::Auto => {
+            let (fem, u) = fem_at(settings.refine, FemLaw::Linear)?;
+            let umax = u.iter().map(|v| v.norm()).fold(0.0, f64::max);
+            let (lo, hi) = crate::constraints::node_bounds(&rest);
+            let diag = (0..3).map(|k| (hi[k] - lo[k]).powi(2)).sum::<f64>().sqrt();
+            let ratio = umax / diag.max(f64::MIN_POSITIVE);
+            let regime = if ratio > AUTO_LARGE_FRACTION {
+                Regime::Large
+            } else {
+                Regime::Linear
+            };
+            (
+                regime,
+                Some(ratio),
+                (regime == Regime::Linear).then_some((fem, u)),
+            )
+        }
+    };
+    let law = match regime {
+        Regime::Linear => FemLaw::Linear,
+        Regime::Large => FemLaw::NeoHookean,
+    };
+    let (fine, u_fine) = match pre {
+        Some(p) => p,
+        None => fem_at(settings.refine, law)?,
+    };
+    let coarse = if settings.refine.is_multiple_of(2) {
+        Some(fem_at(settings.refine / 2, law)?)
+    } else {
+        None
+    };
+    let at = |fem: &Fem, u: &[Vec3], l: &Lattice| -> Result<Vec<Vec3>, ExperimentError> {
+        fem.interpolate_all(u, l.nodes())
+            .ok_or_else(|| ExperimentError::Setting("lattice node outside the FEM mesh".into()))
+    };
+    let uf = at(&fine, &u_fine, lattice)?;
+    let u_ref: Vec<Vec3> = match &coarse {
+        Some((fc, uc)) => {
+            let uc = at(fc, uc, lattice)?;
+            uf.iter()
+                .zip(&uc)
+                .map(|(a, b)| (a * 4.0 - b) / 3.0)
+                .collect()
+        }
+        None => uf.clone(),
+    };
+    let all = |_: [f64; 3]| true;
+    let reference = ReferenceInfo {
+        fine_dims: fine.lattice().dims(),
+        law,
+        richardson: coarse.is_some(),
+        monitor_fine: mean_over(lattice, &uf, &all),
+        monitor_ref: mean_over(lattice, &u_ref, &all),
+        seconds: t0.elapsed().as_secs_f64(),
+    };
+    let mut runs = Vec::new();
+    for name in &settings.models {
+        let param = parameterization_by_name(name)
+            .ok_or_else(|| ExperimentError::Parameterization(name.clone()))?;
+        let t = std::time::Instant::now();
+        let model = Model::new(lattice, material, param.as_ref())?;
+        let problem = Problem::from_specs(model, constraints, loads, Damping::NONE)
+            .map_err(|e| ExperimentError::Problem(e.to_string()))?;
+        let m = problem.model();
+        let u = match regime {
+            Regime::Linear => {
+                let k = m.tangent(m.rest_positions());
+                let mut f = vec![Vec3::zeros(); m.num_nodes()];
+                problem.external_forces(0.0, m.rest_positions(), 1.0, &mut f);
+                let neg: Vec<Vec3> = f.iter().map(|v| -v).collect();
+                let held: Vec<[bool; 3]> = (0..m.num_nodes())
+                    .map(|n| problem.constraints().mask(n))
+                    .collect();
+                k.solve_dofs(&neg, &held)?
+            }
+            Regime::Large => {
+                let mut state = State::at_rest(m);
+                let opts = StaticOptions {
+                    rtol: 1e-10,
+                    ..StaticOptions::default()
+                };
+                solve_static(&problem, &mut state, &opts)?;
+                state.displacements(m)
+            }
+        };
+        let seconds = t.elapsed().as_secs_f64();
+        let (node_error, stats) = error_stats(&u, &u_ref);
+        runs.push(RunResult {
+            model: name.clone(),
+            dims: lattice.dims(),
+            h: lattice.h(),
+            stats,
+            monitor: mean_over(lattice, &u, &all),
+            lattice: lattice.clone(),
+            u,
+            u_ref: u_ref.clone(),
+            node_error,
+            seconds,
+        });
+    }
+    Ok(SceneResult {
+        regime,
+        auto_ratio,
+        reference,
+        runs,
+    })
 }

@@ -196,3 +196,123 @@ fn hourglass_control_fixes_the_one_cell_beam_and_leaves_16x4x4_alone() {
         );
     }
 }
+
+fn scene_box(n: u32) -> hexmesh::Lattice {
+    // A 0.2 x 0.05 x 0.05 m bar, 4n x n x n cells.
+    hexmesh::Lattice::block([4 * n, n, n], 0.05 / n as f64, [0.0; 3]).unwrap()
+}
+
+fn scene_specs() -> (
+    Vec<mss_core::ConstraintSpec>,
+    Vec<mss_core::LoadSpec>,
+    mss_core::Material,
+) {
+    use mss_core::constraints::{ConstraintSpec, Face, NodeSelector};
+    use mss_core::loads::{ForceDistribution, LoadSpec};
+    let fixed = vec![ConstraintSpec::fixed(NodeSelector::BoundingFace(
+        Face::XMin,
+    ))];
+    let loads = vec![
+        LoadSpec::Gravity {
+            g: [0.0, 0.0, -9.81],
+        },
+        // A downward traction on the free end face and a sideways force on
+        // the top of the free end.
+        LoadSpec::Traction {
+            min: [0.2, 0.0, 0.0],
+            max: [0.2, 0.05, 0.05],
+            traction: [0.0, 0.0, -1.0],
+        },
+        LoadSpec::Force {
+            select: NodeSelector::Box {
+                min: [0.2, 0.0, 0.05],
+                max: [0.2, 0.05, 0.05],
+            },
+            force: [0.0, 1e-4, 0.0],
+            distribution: ForceDistribution::Total,
+        },
+    ];
+    (
+        fixed,
+        loads,
+        // Stiff enough for a small (linear) response: about 0.2 mm.
+        mss_core::Material::new(1.0e5, 0.3, 1.0).unwrap(),
+    )
+}
+
+#[test]
+fn scene_comparison_error_is_bounded_and_falls_with_resolution() {
+    use mss_core::experiments::{RegimeChoice, SceneSettings, scene};
+    let (fixed, loads, mat) = scene_specs();
+    let settings = SceneSettings {
+        refine: 2,
+        regime: RegimeChoice::Auto,
+        models: models(),
+    };
+    // (One cell through the thickness, 4x1x1, is too ill-conditioned for the
+    // sideways force.)
+    let coarse = scene(&scene_box(2), mat, &fixed, &loads, &settings).unwrap();
+    let fine = scene(&scene_box(4), mat, &fixed, &loads, &settings).unwrap();
+    assert_eq!(coarse.regime, Regime::Linear, "{:?}", coarse.auto_ratio);
+    assert!(coarse.reference.richardson);
+    for m in ["paper", "springs", "volumetric"] {
+        let at = |r: &mss_core::experiments::SceneResult| {
+            r.runs.iter().find(|x| x.model == m).unwrap().stats
+        };
+        let (c, f) = (at(&coarse), at(&fine));
+        println!("{m}: 8x2x2 {c:?}, 16x4x4 {f:?}");
+        assert!(f.mean < c.mean && f.max < c.max, "{m}");
+        assert!(f.mean < 6.0 && f.max < 14.0, "{m}: {f:?}");
+    }
+    // The nonlinear regime on request: same order of error at this small load.
+    let nl = scene(
+        &scene_box(2),
+        mat,
+        &fixed,
+        &loads,
+        &SceneSettings {
+            regime: RegimeChoice::Fixed(Regime::Large),
+            models: vec!["volumetric".into()],
+            ..settings
+        },
+    )
+    .unwrap();
+    assert_eq!(nl.regime, Regime::Large);
+    assert!(nl.runs[0].stats.mean < 25.0, "{:?}", nl.runs[0].stats);
+}
+
+#[test]
+fn scene_comparison_refuses_drag_springs_and_prescribed_motions() {
+    use mss_core::constraints::{ConstraintSpec, Motion, NodeSelector};
+    use mss_core::experiments::{ExperimentError, RegimeChoice, SceneSettings, scene};
+    use mss_core::loads::LoadSpec;
+    let (mut fixed, mut loads, mat) = scene_specs();
+    let settings = SceneSettings {
+        refine: 2,
+        regime: RegimeChoice::Auto,
+        models: vec!["paper".into()],
+    };
+    loads.push(LoadSpec::Drag {
+        select: NodeSelector::Indices(vec![3]),
+        target: [0.3, 0.0, 0.0],
+        stiffness: 1.0,
+    });
+    let err = scene(&scene_box(1), mat, &fixed, &loads, &settings).unwrap_err();
+    println!("{err}");
+    assert!(
+        matches!(err, ExperimentError::UnsupportedLoad { index: 4, .. }),
+        "{err:?}"
+    );
+    assert!(err.to_string().contains("drag"), "{err}");
+    loads.pop();
+    fixed.push(ConstraintSpec {
+        motion: Motion::Velocity([0.0, 0.0, 0.01]),
+        ..ConstraintSpec::fixed(NodeSelector::Indices(vec![5]))
+    });
+    let err = scene(&scene_box(1), mat, &fixed, &loads, &settings).unwrap_err();
+    println!("{err}");
+    assert!(
+        matches!(err, ExperimentError::UnsupportedConstraint { index: 2, .. }),
+        "{err:?}"
+    );
+}

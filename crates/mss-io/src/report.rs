@@ -17,7 +17,9 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use mss_core::experiments::{BeamResult, LShapeResult, MaterialRow, Regime, RunResult};
+use mss_core::experiments::{
+    BeamResult, LShapeResult, MaterialRow, Regime, RunResult, SceneResult,
+};
 
 use crate::IoError;
 use crate::atomic::write_atomic;
@@ -592,4 +594,60 @@ pub fn material_section(rows: &[MaterialRow], dir: &Path, file: &str) -> Result<
 /// Label of a regime for report headings.
 pub fn regime_title(r: Regime) -> &'static str {
     r.label()
+}
+
+/// The section of a scene comparison (`mss experiment scene`): writes
+/// `{prefix}_errors.csv` and one `{prefix}_{model}.vtu` per model (MSS and FEM
+/// displacements and their difference) into `dir` and returns the Markdown.
+pub fn scene_section(
+    r: &SceneResult,
+    dir: &Path,
+    prefix: &str,
+    title: &str,
+) -> Result<String, IoError> {
+    let label = |x: &RunResult| dims(x.dims);
+    let csv = format!("{prefix}_errors.csv");
+    write_csv(&dir.join(&csv), &STATS_HEADER, &stats_rows(&r.runs, &label))?;
+    let mut files = Vec::new();
+    for run in &r.runs {
+        let name = format!("{prefix}_{}.vtu", run.model);
+        write_run_vtu(&dir.join(&name), run)?;
+        files.push(format!("`{name}`"));
+    }
+    let info = &r.reference;
+    let mut s = String::new();
+    let _ = writeln!(s, "## {title}\n");
+    let regime = match r.auto_ratio {
+        Some(q) => format!(
+            "{} (chosen automatically: the linear reference's largest displacement is {:.3} % of the body's diagonal)",
+            r.regime.label(),
+            100.0 * q
+        ),
+        None => r.regime.label().to_string(),
+    };
+    let _ = writeln!(
+        s,
+        "Regime: {regime}. Reference: Q1 FEM ({:?}) on {} cells{}, {:.1} s. Mean displacement over the lattice nodes: FEM fine {:.5e}, {:.5e}, {:.5e} m; reference {:.5e}, {:.5e}, {:.5e} m.\n",
+        info.law,
+        dims(info.fine_dims),
+        if info.richardson {
+            ", Richardson-extrapolated with the half refinement"
+        } else {
+            ""
+        },
+        info.seconds,
+        info.monitor_fine.x,
+        info.monitor_fine.y,
+        info.monitor_fine.z,
+        info.monitor_ref.x,
+        info.monitor_ref.y,
+        info.monitor_ref.z
+    );
+    s.push_str(&stats_table(&r.runs, &label));
+    let _ = writeln!(
+        s,
+        "\nFiles: `{csv}` (monitor = mean displacement over all nodes), VTU (MSS and FEM displacements and their difference): {}.\n",
+        files.join(", ")
+    );
+    Ok(s)
 }

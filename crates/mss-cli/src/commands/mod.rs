@@ -22,7 +22,7 @@ pub enum Command {
     /// Write a commented template scene.
     Init(init::InitArgs),
     /// Compare the model with the built-in FEM reference: the paper's beam and
-    /// L-shape experiments and virtual material tests (report, CSV, SVG, .vtu).
+    /// L-shape experiments and virtual material tests, or any scene (report, CSV, SVG, .vtu).
     Experiment(experiment::ExperimentArgs),
 }
 
@@ -39,7 +39,7 @@ pub fn dispatch(cli: &Cli) -> anyhow::Result<()> {
                 .out
                 .clone()
                 .unwrap_or_else(|| "out/experiments".into());
-            experiment::run(a, &out)
+            experiment::run(a, &out, cli.global.chatty())
         }
     }
 }

@@ -50,6 +50,8 @@ pub struct Implicit {
     opts: ImplicitOptions,
     free: Vec<bool>,
     steps: u64,
+    /// Symbolic LU analysis of the Jacobian, reused over steps.
+    lu: std::cell::RefCell<super::linear::LuCache>,
 }
 
 impl Implicit {
@@ -68,6 +70,7 @@ impl Implicit {
             opts,
             free: problem.free_mask(),
             steps: 0,
+            lu: std::cell::RefCell::new(super::linear::LuCache::new()),
         })
     }
 
@@ -118,7 +121,9 @@ impl Implicit {
             NewtonOptions {
                 max_iterations: self.opts.max_newton,
                 rtol: self.opts.rtol,
+                slope_line_search: false,
             },
+            &mut self.lu.borrow_mut(),
         )
         .map_err(|e| match e {
             NewtonFailure::Diverged(d) => d,

@@ -1,8 +1,10 @@
-//! Sparse LU solve of a [`BlockCsr`] system restricted to the free dofs.
+//! Sparse LU solve of a [`BlockCsr`] system restricted to the free dofs, with
+//! the symbolic analysis kept per sparsity pattern (`LuCache`).
 
 use faer::Mat;
 use faer::prelude::Solve;
-use faer::sparse::{SparseColMat, Triplet};
+use faer::sparse::linalg::solvers::{Lu, SymbolicLu};
+use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
 
 use crate::{BlockCsr, Vec3};
 
@@ -17,49 +19,168 @@ pub(crate) enum LinearFailure {
     Other(String),
 }
 
+/// The restricted (free-dof) scalar pattern of a [`BlockCsr`] and its
+/// symbolic LU factorization (COLAMD column ordering, elimination tree,
+/// supernodes), computed once per pattern and reused for every matrix with the
+/// same block pattern and free mask: Newton iterations then only scatter the
+/// values and refactor numerically.
+///
+/// The pattern, and therefore the ordering, depends only on the lattice and the
+/// free mask, so the factors (and the results) are the same as with a fresh
+/// symbolic analysis per matrix, for any thread count.
+pub(crate) struct LuCache {
+    row_offsets: Vec<u32>,
+    col_indices: Vec<u32>,
+    free: Vec<bool>,
+    /// Free index of each dof, or `usize::MAX` if held.
+    index: Vec<usize>,
+    /// Free dofs.
+    m: usize,
+    /// Compressed-column structure of the restricted matrix.
+    symbolic: Option<SymbolicSparseColMat<usize>>,
+    /// Copies of the structure's column starts and row indices.
+    col_ptr: Vec<usize>,
+    row_idx: Vec<usize>,
+    /// Source of each stored value: `9 * block + 3 * e + d`.
+    source: Vec<u32>,
+    lu_symbolic: Option<SymbolicLu<usize>>,
+    /// Symbolic analyses done (shown by `Debug`).
+    analyses: u32,
+}
+
+impl std::fmt::Debug for LuCache {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("LuCache")
+            .field("free_dofs", &self.m)
+            .field("analyses", &self.analyses)
+            .finish()
+    }
+}
+
+impl LuCache {
+    pub(crate) fn new() -> Self {
+        Self {
+            row_offsets: Vec::new(),
+            col_indices: Vec::new(),
+            free: Vec::new(),
+            index: Vec::new(),
+            m: 0,
+            symbolic: None,
+            col_ptr: Vec::new(),
+            row_idx: Vec::new(),
+            source: Vec::new(),
+            lu_symbolic: None,
+            analyses: 0,
+        }
+    }
+
+    /// Makes the cached pattern that of `a` restricted to `free`.
+    fn prepare(&mut self, a: &BlockCsr, free: &[bool]) -> Result<(), LinearFailure> {
+        if self.symbolic.is_some()
+            && self.row_offsets == a.row_offsets
+            && self.col_indices == a.col_indices
+            && self.free == free
+        {
+            return Ok(());
+        }
+        let n = a.num_rows();
+        let mut index = vec![usize::MAX; 3 * n];
+        let mut m = 0;
+        for (i, f) in free.iter().enumerate() {
+            if *f {
+                index[i] = m;
+                m += 1;
+            }
+        }
+        // (column, row, source) of every free-free entry, sorted by column
+        // then row: the compressed-column order.
+        let mut entries: Vec<(usize, usize, u32)> = Vec::with_capacity(a.blocks.len() * 9);
+        for r in 0..n {
+            for k in a.row_offsets[r] as usize..a.row_offsets[r + 1] as usize {
+                let c = a.col_indices[k] as usize;
+                for e in 0..3 {
+                    let ri = index[3 * r + e];
+                    if ri == usize::MAX {
+                        continue;
+                    }
+                    for d in 0..3 {
+                        let ci = index[3 * c + d];
+                        if ci != usize::MAX {
+                            entries.push((ci, ri, (9 * k + 3 * e + d) as u32));
+                        }
+                    }
+                }
+            }
+        }
+        entries.sort_unstable();
+        let mut col_ptr = vec![0usize; m + 1];
+        for &(c, _, _) in &entries {
+            col_ptr[c + 1] += 1;
+        }
+        for j in 0..m {
+            col_ptr[j + 1] += col_ptr[j];
+        }
+        let row_idx: Vec<usize> = entries.iter().map(|&(_, r, _)| r).collect();
+        let source: Vec<u32> = entries.iter().map(|&(_, _, s)| s).collect();
+        let symbolic =
+            SymbolicSparseColMat::new_checked(m, m, col_ptr.clone(), None, row_idx.clone());
+        let lu_symbolic = if m > 0 {
+            crate::sparse::sequential_factorizations();
+            Some(
+                SymbolicLu::try_new(symbolic.as_ref())
+                    .map_err(|e| LinearFailure::Other(format!("{e:?}")))?,
+            )
+        } else {
+            None
+        };
+        self.row_offsets.clone_from(&a.row_offsets);
+        self.col_indices.clone_from(&a.col_indices);
+        self.free = free.to_vec();
+        self.index = index;
+        self.m = m;
+        self.symbolic = Some(symbolic);
+        self.col_ptr = col_ptr;
+        self.row_idx = row_idx;
+        self.source = source;
+        self.lu_symbolic = lu_symbolic;
+        self.analyses += 1;
+        Ok(())
+    }
+}
+
 /// Solves `A y = b` on the free dofs (`free[3 n + d]`); held components of
 /// `y` are zero. `size` is a length scale of the body (m): a solution larger
-/// than `1e6 size` is taken as a sign of a singular matrix.
+/// than `1e6 size` is taken as a sign of a singular matrix. The symbolic
+/// analysis of `cache` is reused when `a` has its pattern.
 pub(crate) fn solve_free(
+    cache: &mut LuCache,
     a: &BlockCsr,
     b: &[Vec3],
     free: &[bool],
     size: f64,
 ) -> Result<Vec<Vec3>, LinearFailure> {
     let n = a.num_rows();
-    let mut index = vec![usize::MAX; 3 * n];
-    let mut m = 0;
-    for (i, f) in free.iter().enumerate() {
-        if *f {
-            index[i] = m;
-            m += 1;
-        }
-    }
+    cache.prepare(a, free)?;
+    let m = cache.m;
+    let index = &cache.index;
     let mut y = vec![Vec3::zeros(); n];
     if m == 0 {
         return Ok(y);
     }
-    let mut trip = Vec::with_capacity(a.blocks.len() * 9);
-    for r in 0..n {
-        for k in a.row_offsets[r] as usize..a.row_offsets[r + 1] as usize {
-            let c = a.col_indices[k] as usize;
-            let blk = &a.blocks[k];
-            for e in 0..3 {
-                let ri = index[3 * r + e];
-                if ri == usize::MAX {
-                    continue;
-                }
-                for d in 0..3 {
-                    let ci = index[3 * c + d];
-                    if ci != usize::MAX {
-                        trip.push(Triplet::new(ri, ci, blk[(e, d)]));
-                    }
-                }
-            }
-        }
-    }
-    let mat = SparseColMat::<usize, f64>::try_new_from_triplets(m, m, &trip)
-        .map_err(|e| LinearFailure::Other(format!("{e:?}")))?;
+    let values: Vec<f64> = cache
+        .source
+        .iter()
+        .map(|&s| {
+            let s = s as usize;
+            a.blocks[s / 9][((s % 9) / 3, s % 3)]
+        })
+        .collect();
+    let (Some(pattern), Some(lu_symbolic)) = (&cache.symbolic, &cache.lu_symbolic) else {
+        return Err(LinearFailure::Other(
+            "missing symbolic factorization".into(),
+        ));
+    };
+    let mat = SparseColMatRef::new(pattern.as_ref(), &values);
     let mut rhs = Mat::<f64>::zeros(m, 1);
     for (i, &k) in index.iter().enumerate() {
         if k != usize::MAX {
@@ -67,7 +188,7 @@ pub(crate) fn solve_free(
         }
     }
     crate::sparse::sequential_factorizations();
-    let lu = match mat.sp_lu() {
+    let lu = match Lu::try_new_with_symbolic(lu_symbolic.clone(), mat) {
         Ok(lu) => lu,
         Err(faer::sparse::linalg::LuError::SymbolicSingular { .. }) => {
             return Err(LinearFailure::Singular { nodes: Vec::new() });
@@ -79,8 +200,13 @@ pub(crate) fn solve_free(
     // recover the accuracy that pivoting on ill-conditioned lattices loses.
     let mut best = f64::INFINITY;
     for _ in 0..3 {
-        let ax = &mat * &sol;
-        let r = &rhs - &ax;
+        let mut r = rhs.clone();
+        for j in 0..m {
+            let xj = sol[(j, 0)];
+            for p in cache.col_ptr[j]..cache.col_ptr[j + 1] {
+                r[(cache.row_idx[p], 0)] -= values[p] * xj;
+            }
+        }
         let rn = r.norm_l2();
         if !(rn.is_finite() && rn < 0.5 * best) {
             break;

@@ -497,6 +497,10 @@ pub fn integrator_by_name(
 struct NewtonOptions {
     max_iterations: u32,
     rtol: f64,
+    /// Choose the step length from the slope `g(alpha) = delta . R(x + alpha delta)`
+    /// (the energy's directional derivative for conservative forces) instead of
+    /// backtracking on `|R|`; `|R|` backtracking remains the fallback.
+    slope_line_search: bool,
 }
 
 /// A nonlinear system `R(x) = 0` on the free dofs, `J = dR/dx`.
@@ -526,6 +530,8 @@ fn free_norm(r: &[Vec3], free: &[bool]) -> f64 {
 
 /// Newton's method with backtracking line search on `|R|` over the free dofs.
 /// `x` is updated in place (also on failure: callers keep their own copy).
+/// `lu` keeps the symbolic LU analysis of the Jacobian's pattern across
+/// iterations and calls.
 fn newton(
     sys: &mut dyn NonlinearSystem,
     x: &mut [Vec3],
@@ -533,6 +539,7 @@ fn newton(
     size: f64,
     h: f64,
     opts: NewtonOptions,
+    lu: &mut linear::LuCache,
 ) -> Result<u32, NewtonFailure> {
     let n = x.len();
     let mut r = vec![Vec3::zeros(); n];
@@ -563,22 +570,85 @@ fn newton(
             }
         }
         let neg_r: Vec<Vec3> = r.iter().map(|v| -v).collect();
-        let delta = match linear::solve_free(&jac, &neg_r, free, size) {
+        let delta = match linear::solve_free(lu, &jac, &neg_r, free, size) {
             Ok(d) => d,
             Err(linear::LinearFailure::Singular { nodes }) => {
                 return Err(NewtonFailure::Singular(nodes));
             }
             Err(linear::LinearFailure::Other(m)) => return Err(NewtonFailure::Linear(m)),
         };
-        let mut alpha = 1.0;
         let mut accepted = false;
-        for _ in 0..12 {
+        if opts.slope_line_search {
+            // The residual norm is a poor merit function in bending: full
+            // Newton steps that rotate the body raise |R| (the rest tangent
+            // has no geometric stiffness) while lowering the energy, and
+            // backtracking on |R| then crawls with steps of 1/32. Take the
+            // full step unless it overshoots the minimum of the energy along
+            // delta by much (g(1) < -g(0) / 2), else regula falsi on g.
+            let slope = |r: &[Vec3]| -> f64 {
+                let mut g = 0.0;
+                for i in 0..n {
+                    g += delta[i].dot(&r[i]);
+                }
+                g
+            };
+            let g0 = slope(&r[..]);
+            if g0.is_finite() && g0 > 0.0 {
+                let mut eval = |alpha: f64, trial: &mut [Vec3], r_trial: &mut [Vec3]| {
+                    for i in 0..n {
+                        trial[i] = x[i] + delta[i] * alpha;
+                    }
+                    let s = sys.residual(trial, r_trial);
+                    (s, free_norm(r_trial, free), slope(r_trial))
+                };
+                let (s1, n1, g1) = eval(1.0, &mut trial[..], &mut r_trial[..]);
+                let mut found = n1.is_finite() && g1 >= -0.5 * g0;
+                let mut alpha = 1.0;
+                let (mut st, mut nt) = (s1, n1);
+                if !found {
+                    let (mut lo, mut glo, mut hi, mut ghi) = (0.0f64, g0, 1.0f64, g1);
+                    for _ in 0..12 {
+                        alpha = if ghi.is_finite() && n1.is_finite() {
+                            (lo + (hi - lo) * glo / (glo - ghi))
+                                .clamp(lo + 0.1 * (hi - lo), hi - 0.1 * (hi - lo))
+                        } else {
+                            0.5 * (lo + hi)
+                        };
+                        let (sa, na, ga) = eval(alpha, &mut trial[..], &mut r_trial[..]);
+                        if na.is_finite() && ga.is_finite() && ga.abs() <= 0.5 * g0 {
+                            (st, nt) = (sa, na);
+                            found = true;
+                            break;
+                        }
+                        if na.is_finite() && ga.is_finite() && ga > 0.0 {
+                            (lo, glo) = (alpha, ga);
+                        } else {
+                            (hi, ghi) = (alpha, ga);
+                        }
+                    }
+                }
+                if found {
+                    log::trace!(
+                        "Newton iteration {it}: slope step {alpha}, residual {norm:e} -> {nt:e}"
+                    );
+                    x.copy_from_slice(&trial);
+                    std::mem::swap(&mut r, &mut r_trial);
+                    norm = nt;
+                    scale = st;
+                    accepted = true;
+                }
+            }
+        }
+        let mut alpha = 1.0;
+        let backtracks = if accepted { 0 } else { 12 };
+        for _ in 0..backtracks {
             for i in 0..n {
                 trial[i] = x[i] + delta[i] * alpha;
             }
             let s = sys.residual(&trial, &mut r_trial);
             let nt = free_norm(&r_trial, free);
             if nt.is_finite() && nt <= (1.0 - 1e-4 * alpha) * norm {
+                log::trace!("Newton iteration {it}: step {alpha}, residual {norm:e} -> {nt:e}");
                 x.copy_from_slice(&trial);
                 std::mem::swap(&mut r, &mut r_trial);
                 norm = nt;

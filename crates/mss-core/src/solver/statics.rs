@@ -14,8 +14,8 @@
 #![allow(clippy::needless_range_loop)] // loops over several per-node arrays at once
 
 use super::{
-    NewtonFailure, NewtonOptions, NonlinearSystem, Problem, STATIC_HINT, SolverError, State,
-    check_inverted, free_norm, newton,
+    Divergence, NewtonFailure, NewtonOptions, NonlinearSystem, Problem, STATIC_HINT, SolverError,
+    State, check_inverted, free_norm, newton,
 };
 use crate::{BlockCsr, Vec3};
 
@@ -50,6 +50,9 @@ pub struct StaticInfo {
     pub newton_iterations: u32,
     /// Load increments that converged.
     pub load_steps: u32,
+    /// Newton iterations spent in load increments that failed and were
+    /// retried with a smaller increment (not in `newton_iterations`).
+    pub rejected_iterations: u32,
     /// Final residual over free dofs relative to the load norm.
     pub relative_residual: f64,
 }
@@ -155,19 +158,32 @@ pub fn solve_static(
     let newton_opts = NewtonOptions {
         max_iterations: opts.max_newton,
         rtol: opts.rtol,
+        slope_line_search: true,
     };
+    let mut lu = super::linear::LuCache::new();
     let mut x = x_init.clone();
     let mut lambda = 0.0;
     let mut dl = opts.initial_load_increment;
     let mut total_its = 0;
     let mut load_steps = 0;
+    let mut rejected = 0;
+    // The previous converged load factor and positions (for the predictor).
+    let mut previous: Option<(f64, Vec<Vec3>)> = None;
     while lambda < 1.0 {
         let lt = if lambda + dl >= 1.0 - 1e-12 {
             1.0
         } else {
             lambda + dl
         };
+        // Predictor: extrapolate the last converged increment linearly in the
+        // load factor (secant), which saves Newton iterations in bending.
         let mut trial = x.clone();
+        if let Some((lp, xp)) = &previous {
+            let ratio = (lt - lambda) / (lambda - lp);
+            for i in 0..n {
+                trial[i] += (x[i] - xp[i]) * ratio;
+            }
+        }
         for i in 0..n {
             for d in 0..3 {
                 if !free[3 * i + d] {
@@ -183,6 +199,7 @@ pub fn solve_static(
             problem.size(),
             model.h(),
             newton_opts,
+            &mut lu,
         )
         .and_then(|its| match check_inverted(model, &trial) {
             Some(d) => Err(NewtonFailure::Diverged(d)),
@@ -190,9 +207,10 @@ pub fn solve_static(
         });
         match result {
             Ok(its) => {
+                log::debug!("static: load factor {lt}: {its} Newton iterations");
                 total_its += its;
                 load_steps += 1;
-                x = trial;
+                previous = Some((lambda, std::mem::replace(&mut x, trial)));
                 lambda = lt;
                 dl = (2.0 * dl).min(1.0);
             }
@@ -204,6 +222,9 @@ pub fn solve_static(
             }
             Err(NewtonFailure::Linear(m)) => return Err(SolverError::LinearSolver(m)),
             Err(NewtonFailure::Diverged(reason)) => {
+                if let Divergence::NewtonFailed { iterations, .. } = &reason {
+                    rejected += iterations;
+                }
                 dl *= 0.5;
                 if dl < opts.min_load_increment {
                     return Err(SolverError::Diverged {
@@ -231,6 +252,7 @@ pub fn solve_static(
     Ok(StaticInfo {
         newton_iterations: total_its,
         load_steps,
+        rejected_iterations: rejected,
         relative_residual: if scale > 0.0 { res / scale } else { res },
     })
 }
