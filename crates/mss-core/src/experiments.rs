@@ -535,15 +535,23 @@ pub enum LLoad {
     /// Downward traction on the arm's free end face (x = max), orthogonal to
     /// the base.
     ArmEndDown,
+    /// The L as a prism standing on its L-shaped face: the face y = 0 (the
+    /// whole L cross-section) clamped, horizontal shear traction along +x on
+    /// the opposite face y = 4 m. The paper's "4000 x 4000 x 4000 mm" object
+    /// "fixed at its base" under a shearing force fits this reading too.
+    /// (Shear along +z gives the same errors: the L's cross-section is
+    /// symmetric about the line x + z = 4 m.)
+    PrismShearX,
 }
 
 impl LLoad {
     /// All readings tried.
-    pub const ALL: [LLoad; 4] = [
+    pub const ALL: [LLoad; 5] = [
         LLoad::ArmTopDown,
         LLoad::ArmTopShearX,
         LLoad::ArmTopShearY,
         LLoad::ArmEndDown,
+        LLoad::PrismShearX,
     ];
     /// Description.
     pub fn describe(self) -> &'static str {
@@ -552,7 +560,15 @@ impl LLoad {
             LLoad::ArmTopShearX => "horizontal (+x) shear traction on the arm's top face",
             LLoad::ArmTopShearY => "horizontal (+y) shear traction on the arm's top face",
             LLoad::ArmEndDown => "downward traction on the arm's end face (x = 4 m)",
+            LLoad::PrismShearX => {
+                "L prism on its L face (y = 0 clamped), +x shear traction on y = 4 m"
+            }
         }
+    }
+
+    /// Whether this reading stands the L on its L-shaped face (y = 0).
+    fn is_prism(self) -> bool {
+        matches!(self, LLoad::PrismShearX)
     }
 }
 
@@ -621,10 +637,23 @@ pub fn lshape(settings: &LShapeSettings) -> Result<LShapeResult, ExperimentError
                 |c, n| n[0] > 0.5 && (c[0] - top).abs() < tol,
                 Vec3::new(0.0, 0.0, -p),
             ),
+            LLoad::PrismShearX => fem.traction_load(
+                |c, n| n[1] > 0.5 && (c[1] - top).abs() < tol,
+                Vec3::new(p, 0.0, 0.0),
+            ),
         }
     };
-    let clamp = |q: [f64; 3]| q[2].abs() < 1e-9;
-    let monitor = |q: [f64; 3]| (q[2] - top).abs() < 1e-9 && q[0] > L_UNIT - 1e-9;
+    let prism = load.is_prism();
+    // The base is z = 0 (the leg's foot), or y = 0 for the prism readings.
+    let base_axis = if prism { 1 } else { 2 };
+    let clamp = move |q: [f64; 3]| q[base_axis].abs() < 1e-9;
+    let monitor = move |q: [f64; 3]| {
+        if prism {
+            (q[1] - top).abs() < 1e-9
+        } else {
+            (q[2] - top).abs() < 1e-9 && q[0] > L_UNIT - 1e-9
+        }
+    };
     let base = Lattice::l_shape(1, L_UNIT)?;
     let case = Case {
         material,

@@ -277,12 +277,14 @@ pub fn run(args: &ExperimentArgs, out_dir: &Path, chatty: bool) -> anyhow::Resul
             md,
             "## L-shape (shearing experiment)\n\n\
              `Lattice::l_shape`: a vertical leg and an overhanging arm of 2 m cubes (4 m bounding \
-             box), base z = 0 clamped, mass neglected, E = 1 kPa, nu = 0.3, linear regime (the \
+             box; y is the extrusion axis), base z = 0 clamped (y = 0 for the prism reading), \
+             mass neglected, E = 1 kPa, nu = 0.3, linear regime (the \
              relative errors do not depend on the load magnitude, so the paper's ambiguous \
              \"0.3 GN\" plays no role). The paper's load (\"a constant force to the edges \
-             orthogonal to the base\") is ambiguous; four readings were run. Closeness to \
+             orthogonal to the base\") is ambiguous; {} readings were run. Closeness to \
              MODEL.md's row for a cell edge of {} m (paper's model M {} / MAX {}, volumetric {} / {}) \
              measured as the sum of |ln(ours / theirs)| over those four numbers:\n",
+            LLoad::ALL.len(),
             2.0 / finest as f64,
             MODEL_MD_L.0,
             MODEL_MD_L.1,
