@@ -20,6 +20,25 @@ pub fn bar(len: u64, what: &str, show: bool) -> ProgressBar {
     pb
 }
 
+/// Voxelizes `mesh` behind a progress bar of the rows classified (with rate
+/// and ETA), labelled `what`; the bar is cleared when voxelization ends.
+/// The bar's length comes from the voxelizer's first report.
+pub fn voxelize_with_bar(
+    mesh: &hexmesh::TriMesh,
+    opts: &hexmesh::VoxelizeOptions,
+    what: &str,
+    show: bool,
+) -> Result<hexmesh::Voxelized, hexmesh::VoxelizeError> {
+    let pb = bar(0, what, show);
+    let hook = |done: u64, total: u64| {
+        pb.set_length(total);
+        pb.set_position(done);
+    };
+    let result = hexmesh::voxelize_with_progress(mesh, opts, &hook);
+    pb.finish_and_clear();
+    result
+}
+
 /// A spinner with elapsed time for work of unknown length.
 pub fn spinner(what: &str, show: bool) -> ProgressBar {
     if !show {
@@ -81,6 +100,15 @@ mod tests {
         if cfg!(target_os = "linux") {
             assert!(peak_memory_bytes().unwrap() > 0);
         }
+    }
+
+    #[test]
+    fn hidden_bar_voxelizes_like_the_library() {
+        let mesh = hexmesh::generate::critter();
+        let opts = hexmesh::VoxelizeOptions::default();
+        let with_bar = voxelize_with_bar(&mesh, &opts, "voxelizing", false).unwrap();
+        let plain = hexmesh::voxelize(&mesh, &opts).unwrap();
+        assert_eq!(with_bar.lattice, plain.lattice);
     }
 
     #[test]
