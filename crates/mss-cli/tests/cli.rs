@@ -570,3 +570,54 @@ fn check_warns_about_mechanisms() {
     let face = run_check("[[fixed]]\nkind = \"face\"\nface = \"x-\"\n");
     assert!(face.contains("mechanisms       none expected"), "{face}");
 }
+
+/// The README's command reference, as the binary prints it: `mss --help`
+/// and `mss <command> --help` for every command, in the README's layout.
+fn readme_help_section() -> String {
+    let mut s = String::new();
+    for cmd in [
+        None,
+        Some("run"),
+        Some("voxelize"),
+        Some("check"),
+        Some("init"),
+        Some("experiment"),
+    ] {
+        let args: Vec<&str> = cmd.into_iter().chain(["--help"]).collect();
+        let out = Command::new(MSS).args(&args).output().unwrap();
+        assert!(out.status.success(), "{args:?}");
+        let text = String::from_utf8(out.stdout).unwrap();
+        s.push_str(&format!(
+            "### `mss {}`\n\n```text\n{}\n```\n\n",
+            args.join(" "),
+            text.trim_end()
+        ));
+    }
+    s.trim_end().to_owned()
+}
+
+/// The help section of README.md (between HELP-START and HELP-END) is the
+/// binary's help. Regenerate it with
+/// `MSS_UPDATE_README=1 cargo test --release -p mss-cli --test cli readme_help`.
+#[test]
+fn readme_help_is_current() {
+    const START: &str = "<!-- HELP-START -->\n";
+    const END: &str = "\n<!-- HELP-END -->";
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../README.md");
+    let readme = std::fs::read_to_string(&path).unwrap();
+    let (a, b) = (
+        readme.find(START).expect("README lacks HELP-START") + START.len(),
+        readme.find(END).expect("README lacks HELP-END"),
+    );
+    let current = readme_help_section();
+    if std::env::var_os("MSS_UPDATE_README").is_some() {
+        let updated = format!("{}{current}{}", &readme[..a], &readme[b..]);
+        std::fs::write(&path, updated).unwrap();
+    } else {
+        assert!(
+            readme[a..b] == current,
+            "README.md's help section is out of date: run \
+             MSS_UPDATE_README=1 cargo test --release -p mss-cli --test cli readme_help"
+        );
+    }
+}

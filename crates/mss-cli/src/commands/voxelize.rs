@@ -38,9 +38,9 @@ pub struct VoxelizeArgs {
     /// Refuse lattices with more cells than this.
     #[arg(long, value_name = "N", default_value_t = 2_000_000)]
     pub max_cells: u64,
-    /// Also write the springs (cell edges and body diagonals) as lines,
-    /// springs.vtu, with cell data rest_length and diagonal (stiffnesses
-    /// need a material: see `[output] springs` of `mss run`).
+    /// Also write the springs as lines: springs.vtu (rest_length, diagonal).
+    // No strain or stiffness here: those need a material and a deformed
+    // state; a scene's `[output] springs` writes them per frame.
     #[arg(long)]
     pub springs: bool,
 }
