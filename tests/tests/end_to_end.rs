@@ -193,3 +193,182 @@ fn check_and_init_write_or_refuse_as_documented() {
     assert_eq!(mss_cli::exit_code(&err), 1);
     assert!(!mss_cli::error_report(&err).contains('\n'));
 }
+
+/// Points, line connectivity (pairs) and cell fields of a `.vtu` of lines.
+struct Lines {
+    points: Vec<[f64; 3]>,
+    lines: Vec<[u32; 2]>,
+    fields: std::collections::HashMap<String, Vec<f64>>,
+}
+
+fn read_lines(path: &std::path::Path) -> Lines {
+    let vtk = vtkio::Vtk::import(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let DataSet::UnstructuredGrid { mut pieces, .. } = vtk.data else {
+        panic!("{}: not an unstructured grid", path.display());
+    };
+    let Piece::Inline(piece) = pieces.remove(0) else {
+        panic!("{}: piece not inline", path.display());
+    };
+    let piece = *piece;
+    assert!(
+        piece
+            .cells
+            .types
+            .iter()
+            .all(|&t| t == vtkio::model::CellType::Line),
+        "{}: not all lines",
+        path.display()
+    );
+    let p = piece.points.cast_into::<f64>().unwrap();
+    let (n, legacy) = piece.cells.cell_verts.into_legacy();
+    assert_eq!(legacy.len(), 3 * n as usize);
+    let fields = piece
+        .data
+        .cell
+        .into_iter()
+        .map(|a| match a {
+            Attribute::DataArray(d) => (d.name, d.data.cast_into::<f64>().unwrap()),
+            Attribute::Field { name, .. } => panic!("unexpected field {name}"),
+        })
+        .collect();
+    Lines {
+        points: p.chunks(3).map(|c| [c[0], c[1], c[2]]).collect(),
+        lines: legacy.chunks(3).map(|c| [c[1], c[2]]).collect(),
+        fields,
+    }
+}
+
+fn length(points: &[[f64; 3]], [a, b]: [u32; 2]) -> f64 {
+    let (p, q) = (points[a as usize], points[b as usize]);
+    ((q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2) + (q[2] - p[2]).powi(2)).sqrt()
+}
+
+/// Unique edges of the 10 x 5 x 5 block plus 4 diagonals per cell.
+const BLOCK_SPRINGS: usize = 10 * 6 * 6 + 11 * 5 * 6 + 11 * 6 * 5 + 4 * 250;
+
+#[test]
+fn springs_frames_read_back_with_strain_and_stiffness() {
+    use mss_core::Parameterization;
+    let dir = tempfile::tempdir().unwrap();
+    write(dir.path(), "box.obj", &box_obj([0.0; 3], [0.1, 0.05, 0.05]));
+    let scene = write(
+        dir.path(),
+        "scene.toml",
+        &SCENE.replace("skin_stl = true", "skin_stl = true\nsprings = true"),
+    );
+    let out = dir.path().join("out");
+    mss_cli::run_with_args(["mss", "-q", "run", &scene, "--out", out.to_str().unwrap()]).unwrap();
+
+    let frames = 4;
+    let pvd = std::fs::read_to_string(out.join("springs.pvd")).unwrap();
+    assert_eq!(pvd.matches("<DataSet").count(), frames);
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["springs"], BLOCK_SPRINGS);
+    // The paper's constants for this material and h = 0.01 m, from the library.
+    let material = mss_core::Material {
+        young: 1.0e4,
+        poisson: 0.3,
+        density: 1000.0,
+    };
+    let co = mss_core::PaperModel.coefficients(&material, 0.01);
+    let rest = read_lines(&out.join("springs_0000.vtu"));
+    for k in 0..frames {
+        let name = format!("springs_{k:04}.vtu");
+        assert!(pvd.contains(&name), "{pvd}");
+        let f = read_lines(&out.join(&name));
+        assert_eq!(f.points.len(), 396, "{name}");
+        assert_eq!(f.lines.len(), BLOCK_SPRINGS, "{name}");
+        assert_eq!(f.lines, rest.lines, "{name}: connectivity changed");
+        let (strain, stiffness, l0, diag) = (
+            &f.fields["strain"],
+            &f.fields["stiffness"],
+            &f.fields["rest_length"],
+            &f.fields["diagonal"],
+        );
+        assert_eq!(diag.iter().filter(|&&d| d == 1.0).count(), 4 * 250);
+        let mut edge_stiffness = 0.0;
+        for i in 0..f.lines.len() {
+            // Rest length from the rest frame, strain from this frame's points.
+            let rest_len = length(&rest.points, f.lines[i]);
+            assert!((l0[i] - rest_len).abs() < 1e-15, "{name} spring {i}");
+            let expect = (length(&f.points, f.lines[i]) - rest_len) / rest_len;
+            assert!((strain[i] - expect).abs() < 1e-9, "{name} spring {i}");
+            if diag[i] == 1.0 {
+                assert!((rest_len - 0.01 * 3f64.sqrt()).abs() < 1e-12);
+                assert_eq!(stiffness[i], co.k_diag);
+            } else {
+                assert!((rest_len - 0.01).abs() < 1e-12);
+                // An edge belongs to 1 to 4 cells of the block.
+                let sharing = stiffness[i] / co.k_edge;
+                assert!(
+                    (1..=4).any(|n| (sharing - n as f64).abs() < 1e-9),
+                    "{sharing}"
+                );
+                edge_stiffness += stiffness[i];
+            }
+        }
+        // Every cell contributes its 12 edges once.
+        let total = 12.0 * 250.0 * co.k_edge;
+        assert!((edge_stiffness - total).abs() < 1e-9 * total);
+        if k == 0 {
+            assert!(strain.iter().all(|&e| e == 0.0));
+        } else {
+            assert!(strain.iter().any(|&e| e.abs() > 1e-6), "{name}: no strain");
+        }
+    }
+    assert!(!out.join(format!("springs_{frames:04}.vtu")).exists());
+
+    // Only the last state: one springs file, no collection.
+    let last = dir.path().join("last");
+    let scene = write(
+        dir.path(),
+        "last.toml",
+        &SCENE.replace("skin_stl = true", "springs = true\nlast_only = true"),
+    );
+    mss_cli::run_with_args(["mss", "-q", "run", &scene, "--out", last.to_str().unwrap()]).unwrap();
+    assert!(last.join("springs_0000.vtu").is_file());
+    assert!(!last.join("springs_0001.vtu").exists());
+    assert!(!last.join("springs.pvd").exists());
+}
+
+#[test]
+fn voxelize_springs_flag_writes_rest_springs() {
+    let dir = tempfile::tempdir().unwrap();
+    let mesh = write(dir.path(), "box.obj", &box_obj([0.0; 3], [0.1, 0.05, 0.05]));
+    let out = dir.path().join("vox");
+    let o = out.to_str().unwrap();
+    mss_cli::run_with_args(["mss", "-q", "voxelize", &mesh, "--cells", "10", "--out", o]).unwrap();
+    assert!(
+        !out.join("springs.vtu").exists(),
+        "written without --springs"
+    );
+    mss_cli::run_with_args([
+        "mss",
+        "-q",
+        "voxelize",
+        &mesh,
+        "--cells",
+        "10",
+        "--springs",
+        "--out",
+        o,
+    ])
+    .unwrap();
+    let f = read_lines(&out.join("springs.vtu"));
+    assert_eq!((f.points.len(), f.lines.len()), (396, BLOCK_SPRINGS));
+    let mut pairs = f.lines.clone();
+    pairs.sort_unstable();
+    pairs.dedup();
+    assert_eq!(pairs.len(), BLOCK_SPRINGS, "a spring written twice");
+    for (i, &line) in f.lines.iter().enumerate() {
+        let l = length(&f.points, line);
+        assert!((f.fields["rest_length"][i] - l).abs() < 1e-15);
+        let expect = if f.fields["diagonal"][i] == 1.0 {
+            0.01 * 3f64.sqrt()
+        } else {
+            0.01
+        };
+        assert!((l - expect).abs() < 1e-12);
+    }
+}

@@ -21,6 +21,8 @@
 //! - [`skin`]: the lattice's boundary faces as a closed, outward, 2-manifold
 //!   triangle surface bound to lattice nodes; [`embed`]: the original surface
 //!   bound to cells by trilinear coordinates, so both follow the nodes.
+//! - [`springs`]: the merged edge and body-diagonal springs of a lattice as
+//!   node pairs, for writing them as lines.
 //! - [`generate`]: the default "critter" mesh, spheres and boxes.
 //!
 //! ```
@@ -64,6 +66,7 @@ pub mod lattice;
 pub mod load;
 pub mod mesh;
 pub mod skin;
+pub mod springs;
 pub mod voxelize;
 pub mod winding;
 
@@ -76,8 +79,9 @@ pub use load::{
 };
 pub use mesh::TriMesh;
 pub use skin::{Skin, boundary_skin};
+pub use springs::SpringTopology;
 pub use voxelize::{
-    ComponentPolicy, OccupancyRule, Resolution, VoxelStats, VoxelizeError, VoxelizeOptions,
-    Voxelized, voxelize,
+    ComponentPolicy, OccupancyRule, ProgressFn, Resolution, VoxelStats, VoxelizeError,
+    VoxelizeOptions, Voxelized, voxelize, voxelize_with_progress,
 };
 pub use winding::InsideTest;

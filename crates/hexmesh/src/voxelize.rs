@@ -10,10 +10,13 @@
 //! evaluation for open ones; see [`crate::winding`]). Cells are then kept by an
 //! [`OccupancyRule`], and face-connected components are filtered by a
 //! [`ComponentPolicy`].
+//!
+//! Progress: [`voxelize_with_progress`] reports the classification, the
+//! dominant cost, as work units done out of a total (see [`ProgressFn`]).
 
 use std::fmt;
 use std::str::FromStr;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Instant;
 
 use rayon::prelude::*;
@@ -352,19 +355,81 @@ pub fn plan_grid(mesh: &TriMesh, opts: &VoxelizeOptions) -> Result<Grid, Voxeliz
     Ok(Grid { origin, h, dims })
 }
 
+/// A progress hook: called as `progress(done, total)` with the work units
+/// (grid rows classified, plus triangles for [`OccupancyRule::AnyOverlap`];
+/// one unit for a custom rule) done so far out of `total`.
+///
+/// It is called once with `done = 0` before classification starts, then from
+/// the worker threads as rows finish, one call at a time and with `done`
+/// strictly increasing, and last with `done == total`. The hook only
+/// observes: the result never depends on it or on the thread count. It
+/// should be cheap (a progress bar's `set_position`), since calls are
+/// serialized.
+pub type ProgressFn<'a> = &'a (dyn Fn(u64, u64) + Sync);
+
 /// Voxelizes `mesh` with the built-in inside test ([`WindingInside`]).
 pub fn voxelize(mesh: &TriMesh, opts: &VoxelizeOptions) -> Result<Voxelized, VoxelizeError> {
+    voxelize_impl(mesh, opts, None)
+}
+
+/// Like [`voxelize`], reporting the progress of cell classification to
+/// `progress` (see [`ProgressFn`]). The result is the same as [`voxelize`]'s.
+pub fn voxelize_with_progress(
+    mesh: &TriMesh,
+    opts: &VoxelizeOptions,
+    progress: ProgressFn<'_>,
+) -> Result<Voxelized, VoxelizeError> {
+    voxelize_impl(mesh, opts, Some(progress))
+}
+
+fn voxelize_impl(
+    mesh: &TriMesh,
+    opts: &VoxelizeOptions,
+    progress: Option<ProgressFn<'_>>,
+) -> Result<Voxelized, VoxelizeError> {
     let grid = plan_grid(mesh, opts)?;
     check_mesh(mesh)?;
     let t0 = Instant::now();
     let inside = WindingInside::new(mesh, grid.h);
     let ms_prepare = ms(t0);
-    let mut v = voxelize_with(inside.oriented_mesh(), &inside, grid, opts)?;
+    let mut v = classify_and_build(inside.oriented_mesh(), &inside, grid, opts, progress)?;
     v.stats.ms_prepare = ms_prepare;
     v.stats.mesh_closed = inside.orient_report().closed;
     v.stats.triangles_flipped = inside.orient_report().flipped;
     v.stats.mesh_volume = inside.oriented_mesh().signed_volume().abs();
     Ok(v)
+}
+
+/// Counts work units done and forwards them to a [`ProgressFn`].
+///
+/// The count and the call sit under one lock so that calls arrive one at a
+/// time with increasing counts, whatever the order the threads finish in.
+struct Reporter<'a> {
+    hook: Option<ProgressFn<'a>>,
+    done: Mutex<u64>,
+    total: u64,
+}
+
+impl<'a> Reporter<'a> {
+    fn new(hook: Option<ProgressFn<'a>>, total: u64) -> Self {
+        if let Some(f) = hook {
+            f(0, total);
+        }
+        Self {
+            hook,
+            done: Mutex::new(0),
+            total,
+        }
+    }
+
+    fn add(&self, n: u64) {
+        if let Some(f) = self.hook {
+            // A panicking hook poisons the lock; the count is still valid.
+            let mut done = self.done.lock().unwrap_or_else(PoisonError::into_inner);
+            *done = (*done + n).min(self.total);
+            f(*done, self.total);
+        }
+    }
 }
 
 fn ms(t: Instant) -> f64 {
@@ -393,14 +458,26 @@ pub fn voxelize_with(
     grid: Grid,
     opts: &VoxelizeOptions,
 ) -> Result<Voxelized, VoxelizeError> {
+    classify_and_build(mesh, inside, grid, opts, None)
+}
+
+fn classify_and_build(
+    mesh: &TriMesh,
+    inside: &dyn InsideTest,
+    grid: Grid,
+    opts: &VoxelizeOptions,
+    progress: Option<ProgressFn<'_>>,
+) -> Result<Voxelized, VoxelizeError> {
     check_mesh(mesh)?;
     let t0 = Instant::now();
     let ctx = OccupancyContext { grid, mesh, inside };
+    let rows = grid.dims[1] as u64 * grid.dims[2] as u64;
     let occupied = match &opts.rule {
-        OccupancyRule::Centre => centre_rule(&ctx),
+        OccupancyRule::Centre => centre_rule(&ctx, &Reporter::new(progress, rows)),
         OccupancyRule::AnyOverlap => {
-            let mut occ = centre_rule(&ctx);
-            mark_triangle_cells(&ctx, &mut occ);
+            let report = Reporter::new(progress, rows + mesh.triangles.len() as u64);
+            let mut occ = centre_rule(&ctx, &report);
+            mark_triangle_cells(&ctx, &mut occ, &report);
             occ
         }
         &OccupancyRule::Fraction {
@@ -416,10 +493,18 @@ pub fn voxelize_with(
                      {samples_per_axis} in 1..=16"
                 )));
             }
-            fraction_rule(&ctx, threshold, samples_per_axis)
+            fraction_rule(
+                &ctx,
+                threshold,
+                samples_per_axis,
+                &Reporter::new(progress, rows),
+            )
         }
         OccupancyRule::Custom(rule) => {
+            // A user rule classifies the whole grid in one call: one unit.
+            let report = Reporter::new(progress, 1);
             let occ = rule.occupied(&ctx);
+            report.add(1);
             if occ.len() != grid.len() {
                 return Err(VoxelizeError::BadRule(format!(
                     "custom rule returned {} cells for a grid of {}",
@@ -464,7 +549,7 @@ pub fn voxelize_with(
     Ok(Voxelized { lattice, stats })
 }
 
-fn centre_rule(ctx: &OccupancyContext<'_>) -> Vec<bool> {
+fn centre_rule(ctx: &OccupancyContext<'_>, report: &Reporter<'_>) -> Vec<bool> {
     let g = ctx.grid;
     let [nx, ny, _] = g.dims.map(|d| d as usize);
     let mut occ = vec![false; g.len()];
@@ -474,11 +559,17 @@ fn centre_rule(ctx: &OccupancyContext<'_>) -> Vec<bool> {
         let z = g.origin[2] + (k as f64 + 0.5) * g.h;
         ctx.inside
             .classify_row(y, z, g.origin[0] + 0.5 * g.h, g.h, out);
+        report.add(1);
     });
     occ
 }
 
-fn fraction_rule(ctx: &OccupancyContext<'_>, threshold: f64, s: u32) -> Vec<bool> {
+fn fraction_rule(
+    ctx: &OccupancyContext<'_>,
+    threshold: f64,
+    s: u32,
+    report: &Reporter<'_>,
+) -> Vec<bool> {
     let g = ctx.grid;
     let [nx, ny, _] = g.dims.map(|d| d as usize);
     let s = s as usize;
@@ -503,15 +594,25 @@ fn fraction_rule(ctx: &OccupancyContext<'_>, threshold: f64, s: u32) -> Vec<bool
         for (o, &c) in out.iter_mut().zip(&count) {
             *o = c >= need;
         }
+        report.add(1);
     });
     occ
 }
 
 /// Marks every cell whose box intersects a triangle (separating axis test).
-fn mark_triangle_cells(ctx: &OccupancyContext<'_>, occ: &mut [bool]) {
+fn mark_triangle_cells(ctx: &OccupancyContext<'_>, occ: &mut [bool], report: &Reporter<'_>) {
+    // Triangles per progress report: this loop is sequential and a triangle
+    // takes well under a microsecond, so one call each would cost more than the work.
+    const BATCH: u64 = 1024;
     let g = ctx.grid;
     let mesh = ctx.mesh;
+    let mut unreported = 0u64;
     for t in &mesh.triangles {
+        if unreported == BATCH {
+            report.add(unreported);
+            unreported = 0;
+        }
+        unreported += 1;
         let p = t.map(|i| mesh.vertices[i as usize]);
         let mut lo = [0usize; 3];
         let mut hi = [0usize; 3];
@@ -541,6 +642,7 @@ fn mark_triangle_cells(ctx: &OccupancyContext<'_>, occ: &mut [bool]) {
             }
         }
     }
+    report.add(unreported);
 }
 
 /// Triangle / axis-aligned cube overlap by the separating axis theorem
@@ -773,4 +875,89 @@ fn count_edges(grid: &Grid, occ: &[bool]) -> usize {
         }
     }
     count
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::generate::{critter, sphere};
+
+    /// Every rule, with and without a progress hook, on 1 and 3 threads:
+    /// the same lattice, and a hook that sees 0, increasing counts and the total.
+    #[test]
+    fn progress_reaches_total_and_does_not_change_results() {
+        struct EveryOther;
+        impl Occupancy for EveryOther {
+            fn occupied(&self, ctx: &OccupancyContext<'_>) -> Vec<bool> {
+                (0..ctx.grid.len()).map(|i| i % 2 == 0).collect()
+            }
+        }
+        let rules = [
+            OccupancyRule::Centre,
+            OccupancyRule::AnyOverlap,
+            OccupancyRule::Fraction {
+                threshold: 0.5,
+                samples_per_axis: 2,
+            },
+            OccupancyRule::Custom(Arc::new(EveryOther)),
+        ];
+        // The critter is closed (exact crossings); the open sphere takes the
+        // winding-number path.
+        let mut open = sphere(1.0, 2);
+        open.triangles.truncate(open.triangles.len() - 3);
+        for mesh in [critter(), open] {
+            for rule in &rules {
+                let opts = VoxelizeOptions {
+                    resolution: Resolution::CellsAlongLongestAxis(14),
+                    rule: rule.clone(),
+                    components: ComponentPolicy::All,
+                    ..VoxelizeOptions::default()
+                };
+                let plain = voxelize(&mesh, &opts).unwrap();
+                let grid = plan_grid(&mesh, &opts).unwrap();
+                let rows = grid.dims[1] as u64 * grid.dims[2] as u64;
+                let expect_total = match rule {
+                    OccupancyRule::AnyOverlap => rows + mesh.triangles.len() as u64,
+                    OccupancyRule::Custom(_) => 1,
+                    _ => rows,
+                };
+                for threads in [1, 3] {
+                    let pool = rayon::ThreadPoolBuilder::new()
+                        .num_threads(threads)
+                        .build()
+                        .unwrap();
+                    let calls = Mutex::new(Vec::new());
+                    let hook = |done: u64, total: u64| calls.lock().unwrap().push((done, total));
+                    let with = pool
+                        .install(|| voxelize_with_progress(&mesh, &opts, &hook))
+                        .unwrap();
+                    assert_eq!(with.lattice, plain.lattice, "{rule:?}, {threads} threads");
+                    assert_eq!(with.stats.cells, plain.stats.cells);
+                    let calls = calls.into_inner().unwrap();
+                    assert_eq!(calls.first(), Some(&(0, expect_total)), "{rule:?}");
+                    assert_eq!(
+                        calls.last(),
+                        Some(&(expect_total, expect_total)),
+                        "{rule:?}"
+                    );
+                    assert!(calls.windows(2).all(|w| w[0].0 < w[1].0), "{rule:?}");
+                    assert!(calls.iter().all(|&(_, t)| t == expect_total));
+                }
+            }
+        }
+    }
+
+    /// A hook is never called when voxelization is refused before classification.
+    #[test]
+    fn refused_grid_reports_nothing() {
+        let opts = VoxelizeOptions {
+            max_cells: 10,
+            ..VoxelizeOptions::default()
+        };
+        let called = Mutex::new(false);
+        let hook = |_: u64, _: u64| *called.lock().unwrap() = true;
+        let err = voxelize_with_progress(&critter(), &opts, &hook).unwrap_err();
+        assert!(matches!(err, VoxelizeError::TooManyCells { .. }), "{err}");
+        assert!(!*called.lock().unwrap());
+    }
 }

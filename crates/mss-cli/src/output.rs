@@ -1,14 +1,17 @@
 //! Writing the frames of a run: lattice (`.vtu` + `.pvd`, legacy `.vtk`),
-//! deformed boundary skin (`.obj`, `.stl`) and the embedded input surface.
+//! deformed boundary skin (`.obj`, `.stl`), the embedded input surface and
+//! the springs as lines (`.vtu` + `.pvd`).
 
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use hexmesh::{Embedding, Lattice, Skin, TriMesh};
-use mss_core::Vec3;
 use mss_core::solver::{Problem, State};
+use mss_core::{SpringSet, Vec3};
 use mss_io::scene::OutputSection;
-use mss_io::vtk::{Field, FrameExporter, LatticeFrame, exporter_by_name};
+use mss_io::vtk::{
+    Field, FrameExporter, LatticeFrame, PvdWriter, VtuEncoding, exporter_by_name, write_lines_vtu,
+};
 
 /// File name stem of the lattice frames (`lattice_0000.vtu`, `lattice.pvd`).
 pub const LATTICE_PREFIX: &str = "lattice";
@@ -16,6 +19,16 @@ pub const LATTICE_PREFIX: &str = "lattice";
 pub const SKIN_PREFIX: &str = "skin";
 /// File name stem of the embedded input surface (`surface_0000.obj`).
 pub const SURFACE_PREFIX: &str = "surface";
+/// File name stem of the springs as lines (`springs_0000.vtu`, `springs.pvd`).
+pub const SPRINGS_PREFIX: &str = "springs";
+
+/// The springs output of a run.
+struct SpringsOutput {
+    /// Built at the first frame, from the model being run.
+    set: Option<SpringSet>,
+    /// The `.pvd` of the spring frames; `None` when only the last state is written.
+    pvd: Option<PvdWriter>,
+}
 
 /// Writes the frames of one run into one folder.
 pub struct FrameWriter {
@@ -26,6 +39,7 @@ pub struct FrameWriter {
     skin_obj: bool,
     skin_stl: bool,
     embedded: Option<(Embedding, Vec<[u32; 3]>)>,
+    springs: Option<SpringsOutput>,
     cells: Vec<[u32; 8]>,
     next_index: usize,
     files: usize,
@@ -60,6 +74,12 @@ impl FrameWriter {
         } else {
             None
         };
+        // One frame is not a series: a .pvd would only repeat the file name.
+        let springs = out.springs.then(|| SpringsOutput {
+            set: None,
+            pvd: (!out.last_only)
+                .then(|| PvdWriter::new(dir.join(format!("{SPRINGS_PREFIX}.pvd")))),
+        });
         Ok(Self {
             dir: dir.to_path_buf(),
             vtu,
@@ -68,6 +88,7 @@ impl FrameWriter {
             skin_obj: out.skin_obj,
             skin_stl: out.skin_stl,
             embedded,
+            springs,
             cells: lattice.cells().to_vec(),
             next_index: 0,
             files: 0,
@@ -165,7 +186,51 @@ impl FrameWriter {
                 .with_context(|| format!("frame {index}: embedded surface"))?;
             self.count(&p);
         }
+        if self.springs.is_some() {
+            self.write_springs(index, problem, state, &points)?;
+        }
         self.next_index += 1;
+        Ok(())
+    }
+
+    /// Writes `springs_NNNN.vtu` (and rewrites `springs.pvd`) for one frame.
+    fn write_springs(
+        &mut self,
+        index: usize,
+        problem: &Problem,
+        state: &State,
+        points: &[[f64; 3]],
+    ) -> anyhow::Result<()> {
+        let Some(out) = self.springs.as_mut() else {
+            return Ok(());
+        };
+        let set = out
+            .set
+            .get_or_insert_with(|| SpringSet::new(problem.model()));
+        let strain = set
+            .strains(&state.x)
+            .with_context(|| format!("frame {index}: springs"))?;
+        let file = format!("{SPRINGS_PREFIX}_{index:04}.vtu");
+        let path = self.dir.join(&file);
+        write_lines_vtu(
+            &path,
+            points,
+            &set.topology.nodes,
+            &[
+                Field::scalars("strain", &strain),
+                Field::scalars("stiffness", &set.stiffness),
+                Field::scalars("rest_length", &set.rest_length),
+                Field::flags("diagonal", &set.topology.diagonal),
+            ],
+            VtuEncoding::default(),
+        )
+        .with_context(|| format!("frame {index}: springs"))?;
+        // `add_frame` rewrites the .pvd, like the lattice's, so that an
+        // interrupted run still has a collection of what it wrote.
+        if let Some(pvd) = out.pvd.as_mut() {
+            pvd.add_frame(state.time, &file)?;
+        }
+        self.count(&path);
         Ok(())
     }
 
@@ -178,22 +243,43 @@ impl FrameWriter {
             let p = self.dir.join(format!("{LATTICE_PREFIX}.pvd"));
             self.count(&p);
         }
+        if let Some(pvd) = self.springs.as_ref().and_then(|s| s.pvd.as_ref())
+            && !pvd.entries().is_empty()
+        {
+            let p = pvd.path().to_path_buf();
+            self.count(&p);
+        }
         Ok(())
     }
 }
 
+/// Sizes of what one frame writes, for [`frame_size_estimate`].
+#[derive(Debug, Clone, Copy, Default)]
+pub struct FrameCounts {
+    /// Lattice nodes.
+    pub nodes: usize,
+    /// Lattice cells.
+    pub cells: usize,
+    /// Springs.
+    pub springs: usize,
+    /// Boundary skin vertices.
+    pub skin_vertices: usize,
+    /// Boundary skin triangles.
+    pub skin_triangles: usize,
+    /// Input surface vertices.
+    pub surface_vertices: usize,
+    /// Input surface triangles.
+    pub surface_triangles: usize,
+}
+
 /// Estimated bytes of one frame, for `mss check` (uncompressed binary sizes
-/// of the fields; compressed `.vtu` files are usually smaller).
-pub fn frame_size_estimate(
-    out: &OutputSection,
-    nodes: usize,
-    cells: usize,
-    skin_vertices: usize,
-    skin_triangles: usize,
-    surface_vertices: usize,
-    surface_triangles: usize,
-) -> u64 {
-    let lattice = (nodes * (5 * 24 + 1 + 24) + cells * (32 + 8 + 1 + 3 * 8)) as u64;
+/// of the fields, base64 included for `.vtu`; compressed `.vtu` files are
+/// usually smaller).
+pub fn frame_size_estimate(out: &OutputSection, n: &FrameCounts) -> u64 {
+    let lattice = (n.nodes * (5 * 24 + 1 + 24) + n.cells * (32 + 8 + 1 + 3 * 8)) as u64;
+    // Points, then per spring: 2 Int64 node ids, an offset, a type, three
+    // Float64 fields and a flag.
+    let springs = (n.nodes * 24 + n.springs * (16 + 8 + 1 + 3 * 8 + 1)) as u64;
     let obj = |v: usize, t: usize| (v * 60 + t * 24) as u64;
     let stl = |t: usize| (84 + t * 50) as u64;
     let mut total = 0;
@@ -204,13 +290,16 @@ pub fn frame_size_estimate(
         total += lattice;
     }
     if out.skin_obj {
-        total += obj(skin_vertices, skin_triangles);
+        total += obj(n.skin_vertices, n.skin_triangles);
     }
     if out.skin_stl {
-        total += stl(skin_triangles);
+        total += stl(n.skin_triangles);
     }
     if out.embedded {
-        total += obj(surface_vertices, surface_triangles);
+        total += obj(n.surface_vertices, n.surface_triangles);
+    }
+    if out.springs {
+        total += springs * 4 / 3;
     }
     total
 }

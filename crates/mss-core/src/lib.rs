@@ -19,6 +19,7 @@ pub mod model;
 pub mod modes;
 pub mod solver;
 pub mod sparse;
+pub mod springs;
 
 pub use constraints::{ConstraintSpec, Constraints, NodeSelector};
 pub use loads::{Damping, Load, LoadSpec};
@@ -33,6 +34,7 @@ pub use solver::{
     Integrator, Problem, SolverError, State, StaticOptions, integrator_by_name, solve_static,
 };
 pub use sparse::{BlockCsr, Factorization, LinearSolveError};
+pub use springs::{SpringError, SpringSet};
 
 /// 3-vectors of the simulation (`f64`).
 pub type Vec3 = nalgebra::Vector3<f64>;

@@ -591,6 +591,11 @@ pub struct OutputSection {
     /// The input surface carried by the lattice, as OBJ per frame (default true).
     #[serde(default = "yes")]
     pub embedded: bool,
+    /// The springs as lines per frame, `springs_NNNN.vtu`, with cell data
+    /// `strain` ((l - L0) / L0), `stiffness` (N/m), `rest_length` (m) and
+    /// `diagonal`, plus `springs.pvd` when frames form a series (default false).
+    #[serde(default)]
+    pub springs: bool,
     /// Write a frame every this many steps (give this or `every_time`).
     pub every_steps: Option<u64>,
     /// Write a frame every this many simulated seconds (default: duration / 20).
@@ -617,6 +622,7 @@ impl Default for OutputSection {
             skin_obj: true,
             skin_stl: false,
             embedded: true,
+            springs: false,
             every_steps: None,
             every_time: None,
             last_only: false,
@@ -938,11 +944,11 @@ impl Scene {
                 "a .pvd collection lists .vtu frames: set vtu = true too, or pvd = false".into(),
             );
         }
-        if !(o.vtu || o.vtk || o.skin_obj || o.skin_stl || o.embedded) {
+        if !(o.vtu || o.vtk || o.skin_obj || o.skin_stl || o.embedded || o.springs) {
             return bad(
                 "[output]",
                 "every output kind is off; enable at least one of vtu, vtk, skin_obj, \
-                 skin_stl, embedded"
+                 skin_stl, embedded, springs"
                     .into(),
             );
         }

@@ -7,7 +7,7 @@ use clap::Args;
 use mss_io::scene::SolverKind;
 
 use crate::commands::run::prepare;
-use crate::output::frame_size_estimate;
+use crate::output::{FrameCounts, frame_size_estimate};
 use crate::progress::human_bytes;
 use crate::{GlobalArgs, setup};
 
@@ -44,12 +44,15 @@ pub fn run(args: &CheckArgs, global: &GlobalArgs) -> anyhow::Result<()> {
     let skin = hexmesh::boundary_skin(&p.lattice);
     let frame = frame_size_estimate(
         &scene.output,
-        model.num_nodes(),
-        model.num_cells(),
-        skin.vertex_nodes.len(),
-        skin.triangles.len(),
-        p.mesh.vertices.len(),
-        p.mesh.triangles.len(),
+        &FrameCounts {
+            nodes: model.num_nodes(),
+            cells: model.num_cells(),
+            springs: model.num_springs(),
+            skin_vertices: skin.vertex_nodes.len(),
+            skin_triangles: skin.triangles.len(),
+            surface_vertices: p.mesh.vertices.len(),
+            surface_triangles: p.mesh.triangles.len(),
+        },
     );
     let frames = plan.num_frames();
     let held: usize = (0..model.num_nodes())

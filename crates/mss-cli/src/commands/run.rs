@@ -59,9 +59,12 @@ pub fn prepare(input: SceneInput, show: bool) -> anyhow::Result<Prepared> {
         setup::load_mesh(&source).with_context(|| format!("{scene_name}: [mesh] path"))?;
     let opts = setup::scene_voxelize_options(&scene.voxelize)
         .with_context(|| format!("{scene_name}: [voxelize]"))?;
-    let spinner = progress::spinner(&format!("voxelizing {mesh_name}"), show);
-    let vox = hexmesh::voxelize::voxelize(&loaded.mesh, &opts);
-    spinner.finish_and_clear();
+    let vox = progress::voxelize_with_bar(
+        &loaded.mesh,
+        &opts,
+        &format!("voxelizing {mesh_name}"),
+        show,
+    );
     let vox = vox.with_context(|| format!("{scene_name}: cannot voxelize {mesh_name}"))?;
     let voxelize_seconds = t0.elapsed().as_secs_f64();
     let (material, param) = setup::material(scene).with_context(|| scene_name.clone())?;

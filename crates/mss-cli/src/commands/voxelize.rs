@@ -1,5 +1,6 @@
 //! `mss voxelize`: voxelizes a surface mesh and writes the lattice, its
-//! boundary skin, the embedded surface and `stats.json`.
+//! boundary skin, the embedded surface, `stats.json` and, with `--springs`,
+//! the springs as lines.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -7,7 +8,7 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use clap::Args;
 use mss_io::scene::{KeepComponents, MeshSource, VoxelResolution};
-use mss_io::vtk::{Field, LatticeFrame, VtuEncoding, write_vtu};
+use mss_io::vtk::{Field, LatticeFrame, VtuEncoding, write_lines_vtu, write_vtu};
 use serde::Serialize;
 
 use crate::{GlobalArgs, progress, setup};
@@ -37,6 +38,11 @@ pub struct VoxelizeArgs {
     /// Refuse lattices with more cells than this.
     #[arg(long, value_name = "N", default_value_t = 2_000_000)]
     pub max_cells: u64,
+    /// Also write the springs as lines: springs.vtu (rest_length, diagonal).
+    // No strain or stiffness here: those need a material and a deformed
+    // state; a scene's `[output] springs` writes them per frame.
+    #[arg(long)]
+    pub springs: bool,
 }
 
 /// What `mss voxelize` measured (printed, and written as `stats.json`).
@@ -74,6 +80,8 @@ pub struct VoxelizeSummary {
     pub write_seconds: f64,
     /// Output folder.
     pub output_folder: String,
+    /// Files written (besides `stats.json`).
+    pub files: Vec<String>,
 }
 
 /// Runs `mss voxelize`.
@@ -108,14 +116,17 @@ pub fn run(args: &VoxelizeArgs, global: &GlobalArgs) -> anyhow::Result<()> {
     let (mesh_name, loaded) = setup::load_mesh(&source)?;
     let load_seconds = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
-    let spinner = progress::spinner(&format!("voxelizing {mesh_name}"), global.chatty());
-    let vox = hexmesh::voxelize::voxelize(&loaded.mesh, &opts);
-    spinner.finish_and_clear();
+    let vox = progress::voxelize_with_bar(
+        &loaded.mesh,
+        &opts,
+        &format!("voxelizing {mesh_name}"),
+        global.chatty(),
+    );
     let vox = vox.with_context(|| format!("cannot voxelize {mesh_name}"))?;
     let voxelize_seconds = t1.elapsed().as_secs_f64();
     let t2 = Instant::now();
     let lattice = &vox.lattice;
-    write_outputs(&out_dir, lattice, &loaded.mesh)?;
+    write_outputs(&out_dir, lattice, &loaded.mesh, args.springs)?;
     let summary = VoxelizeSummary {
         mesh: mesh_name,
         mesh_vertices: loaded.mesh.vertices.len(),
@@ -133,6 +144,11 @@ pub fn run(args: &VoxelizeArgs, global: &GlobalArgs) -> anyhow::Result<()> {
         voxelize_seconds,
         write_seconds: t2.elapsed().as_secs_f64(),
         output_folder: out_dir.display().to_string(),
+        files: ["lattice.vtu", "skin.obj", "surface.obj"]
+            .into_iter()
+            .chain(args.springs.then_some("springs.vtu"))
+            .map(str::to_owned)
+            .collect(),
     };
     let json = serde_json::to_string_pretty(&summary).context("cannot encode the statistics")?;
     mss_io::atomic::write_atomic(&out_dir.join("stats.json"), |w| {
@@ -149,6 +165,7 @@ fn write_outputs(
     dir: &Path,
     lattice: &hexmesh::Lattice,
     mesh: &hexmesh::TriMesh,
+    springs: bool,
 ) -> anyhow::Result<()> {
     let coords: Vec<f64> = lattice.cell_coords().iter().map(|c| c[2] as f64).collect();
     let frame = LatticeFrame::new(lattice.nodes(), lattice.cells())
@@ -160,6 +177,22 @@ fn write_outputs(
     let embedding = hexmesh::Embedding::new(lattice, mesh);
     let surface = embedding.deform(lattice.nodes());
     mss_io::skin::write_obj(&dir.join("surface.obj"), &surface, &mesh.triangles)?;
+    if springs {
+        let topology = hexmesh::SpringTopology::new(lattice.cells());
+        let rest_length = topology
+            .lengths(lattice.nodes())
+            .context("the lattice's springs refer to missing nodes")?;
+        write_lines_vtu(
+            &dir.join("springs.vtu"),
+            lattice.nodes(),
+            &topology.nodes,
+            &[
+                Field::scalars("rest_length", &rest_length),
+                Field::flags("diagonal", &topology.diagonal),
+            ],
+            VtuEncoding::default(),
+        )?;
+    }
     Ok(())
 }
 
@@ -186,7 +219,8 @@ fn print_summary(s: &VoxelizeSummary) {
         s.load_seconds, s.voxelize_seconds, s.write_seconds
     );
     println!(
-        "output       {}: lattice.vtu, skin.obj, surface.obj, stats.json",
-        s.output_folder
+        "output       {}: {}, stats.json",
+        s.output_folder,
+        s.files.join(", ")
     );
 }
