@@ -330,6 +330,17 @@ fn springs_frames_read_back_with_strain_and_stiffness() {
     assert!(last.join("springs_0000.vtu").is_file());
     assert!(!last.join("springs_0001.vtu").exists());
     assert!(!last.join("springs.pvd").exists());
+
+    // `pvd = false`: the numbered frames of both series, no collection.
+    let bare = dir.path().join("bare");
+    let scene = write(
+        dir.path(),
+        "bare.toml",
+        &SCENE.replace("skin_stl = true", "springs = true\npvd = false"),
+    );
+    mss_cli::run_with_args(["mss", "-q", "run", &scene, "--out", bare.to_str().unwrap()]).unwrap();
+    assert!(bare.join("lattice_0001.vtu").is_file() && bare.join("springs_0001.vtu").is_file());
+    assert!(!bare.join("lattice.pvd").exists() && !bare.join("springs.pvd").exists());
 }
 
 #[test]

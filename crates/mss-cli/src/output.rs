@@ -10,7 +10,8 @@ use mss_core::solver::{Problem, State};
 use mss_core::{SpringSet, Vec3};
 use mss_io::scene::OutputSection;
 use mss_io::vtk::{
-    Field, FrameExporter, LatticeFrame, PvdWriter, VtuEncoding, exporter_by_name, write_lines_vtu,
+    Field, FrameExporter, LatticeFrame, PvdWriter, VtuEncoding, VtuSeries, exporter_by_name,
+    write_lines_vtu,
 };
 
 /// File name stem of the lattice frames (`lattice_0000.vtu`, `lattice.pvd`).
@@ -34,6 +35,8 @@ struct SpringsOutput {
 pub struct FrameWriter {
     dir: PathBuf,
     vtu: Option<Box<dyn FrameExporter>>,
+    /// Whether the `.vtu` series keeps `lattice.pvd` (`[output] pvd`).
+    lattice_pvd: bool,
     vtk: Option<Box<dyn FrameExporter>>,
     skin: Option<Skin>,
     skin_obj: bool,
@@ -58,10 +61,12 @@ impl FrameWriter {
         lattice: &Lattice,
         mesh: &TriMesh,
     ) -> anyhow::Result<Self> {
-        let vtu = if out.vtu {
-            Some(exporter_by_name("vtu", dir, LATTICE_PREFIX)?)
-        } else {
-            None
+        let vtu: Option<Box<dyn FrameExporter>> = match (out.vtu, out.pvd) {
+            (false, _) => None,
+            (true, true) => Some(exporter_by_name("vtu", dir, LATTICE_PREFIX)?),
+            (true, false) => Some(Box::new(
+                VtuSeries::new(dir, LATTICE_PREFIX, VtuEncoding::Base64Zlib)?.without_pvd(),
+            )),
         };
         let vtk = if out.vtk {
             Some(exporter_by_name("vtk", dir, LATTICE_PREFIX)?)
@@ -77,12 +82,13 @@ impl FrameWriter {
         // One frame is not a series: a .pvd would only repeat the file name.
         let springs = out.springs.then(|| SpringsOutput {
             set: None,
-            pvd: (!out.last_only)
+            pvd: (out.pvd && !out.last_only)
                 .then(|| PvdWriter::new(dir.join(format!("{SPRINGS_PREFIX}.pvd")))),
         });
         Ok(Self {
             dir: dir.to_path_buf(),
             vtu,
+            lattice_pvd: out.pvd,
             vtk,
             skin,
             skin_obj: out.skin_obj,
@@ -239,8 +245,8 @@ impl FrameWriter {
         for exporter in [self.vtu.as_mut(), self.vtk.as_mut()].into_iter().flatten() {
             exporter.finish()?;
         }
-        if self.vtu.is_some() {
-            let p = self.dir.join(format!("{LATTICE_PREFIX}.pvd"));
+        let p = self.dir.join(format!("{LATTICE_PREFIX}.pvd"));
+        if self.vtu.is_some() && self.lattice_pvd {
             self.count(&p);
         }
         if let Some(pvd) = self.springs.as_ref().and_then(|s| s.pvd.as_ref())

@@ -67,13 +67,15 @@ fn check_index(last: Option<usize>, index: usize, path: &Path) -> Result<(), IoE
 }
 
 /// XML `.vtu` series: `DIR/PREFIX_NNNN.vtu` per frame and `DIR/PREFIX.pvd`
-/// listing them with their times (rewritten after every frame).
+/// listing them with their times (rewritten after every frame; see
+/// [`VtuSeries::without_pvd`]).
 #[derive(Debug)]
 pub struct VtuSeries {
     dir: PathBuf,
     prefix: String,
     encoding: VtuEncoding,
     pvd: PvdWriter,
+    write_pvd: bool,
     last_index: Option<usize>,
 }
 
@@ -87,8 +89,17 @@ impl VtuSeries {
             prefix: prefix.to_string(),
             encoding,
             pvd: PvdWriter::new(dir.join(format!("{prefix}.pvd"))),
+            write_pvd: true,
             last_index: None,
         })
+    }
+
+    /// The same series without the `.pvd` file (`[output] pvd = false`): only
+    /// the numbered `.vtu` frames are written, and [`VtuSeries::pvd`] stays
+    /// empty.
+    pub fn without_pvd(mut self) -> Self {
+        self.write_pvd = false;
+        self
     }
 
     /// File name of frame `frame_index` (relative to the folder).
@@ -127,13 +138,15 @@ impl FrameExporter for VtuSeries {
             ));
         }
         write_vtu(&path, frame, self.encoding)?;
-        self.pvd.add_frame(time, &file)?;
+        if self.write_pvd {
+            self.pvd.add_frame(time, &file)?;
+        }
         self.last_index = Some(frame_index);
         Ok(())
     }
 
     fn finish(&mut self) -> Result<(), IoError> {
-        if self.pvd.entries().is_empty() {
+        if self.write_pvd && self.pvd.entries().is_empty() {
             log::warn!(
                 "no frame written; {} not created",
                 self.pvd.path().display()
