@@ -185,6 +185,10 @@ pub struct BeamSettings {
     pub reference: u32,
     /// Parameterizations to run.
     pub models: Vec<String>,
+    /// Constitutive law of the FEM reference in the large regime (default,
+    /// `None`: compressible neo-Hookean; the linear regime always uses linear
+    /// elasticity).
+    pub reference_law: Option<FemLaw>,
 }
 
 /// The paper's cantilever dimensions and material.
@@ -265,14 +269,10 @@ fn reference(
     base: &Lattice,
     case: &Case,
     fine_r: u32,
-    regime: Regime,
+    law: FemLaw,
     targets: &[&Lattice],
 ) -> Result<(Vec<Vec<Vec3>>, ReferenceInfo), ExperimentError> {
     let t0 = std::time::Instant::now();
-    let law = match regime {
-        Regime::Linear => FemLaw::Linear,
-        Regime::Large => FemLaw::NeoHookean,
-    };
     let solve = |r: u32| -> Result<(Fem, Vec<Vec3>), ExperimentError> {
         let fem = Fem::new(base, r, case.material)?;
         let bc = fem.clamp_where(case.clamp);
@@ -476,7 +476,12 @@ pub fn beam(settings: &BeamSettings) -> Result<BeamResult, ExperimentError> {
     let curve_lattice = lattice_for(settings.reference)?;
     let mut targets: Vec<&Lattice> = lattices.iter().collect();
     targets.push(&curve_lattice);
-    let (mut refs, info) = reference(&base, &case, settings.reference, settings.regime, &targets)?;
+    let law = match (settings.regime, settings.reference_law) {
+        (Regime::Linear, _) => FemLaw::Linear,
+        (Regime::Large, Some(law)) => law,
+        (Regime::Large, None) => FemLaw::NeoHookean,
+    };
+    let (mut refs, info) = reference(&base, &case, settings.reference, law, &targets)?;
     let ref_fine = refs.pop().unwrap_or_default();
     let mut runs = Vec::new();
     for model in &settings.models {
@@ -667,7 +672,7 @@ pub fn lshape(settings: &LShapeSettings) -> Result<LShapeResult, ExperimentError
         .map(|&n| Lattice::l_shape(n, L_UNIT))
         .collect::<Result<_, _>>()?;
     let targets: Vec<&Lattice> = lattices.iter().collect();
-    let (refs, info) = reference(&base, &case, settings.reference, Regime::Linear, &targets)?;
+    let (refs, info) = reference(&base, &case, settings.reference, FemLaw::Linear, &targets)?;
     let mut runs = Vec::new();
     for model in &settings.models {
         for (l, u_ref) in lattices.iter().zip(&refs) {
