@@ -211,8 +211,12 @@ fn rotation() -> Mat3 {
 }
 
 fn cantilever(n: [u32; 3], material: Material) -> Model {
+    cantilever_with(n, material, &PaperModel)
+}
+
+fn cantilever_with(n: [u32; 3], material: Material, param: &dyn Parameterization) -> Model {
     let lattice = Lattice::block(n, 0.4 / n[0] as f64, [0.0; 3]).unwrap();
-    Model::new(&lattice, material, &PaperModel).unwrap()
+    Model::new(&lattice, material, param).unwrap()
 }
 
 #[test]
@@ -266,9 +270,13 @@ fn static_solution_rotates_with_the_lattice_and_loads() {
 }
 
 fn damped_cantilever(alpha: f64) -> Problem {
+    damped_cantilever_with(alpha, &PaperModel)
+}
+
+fn damped_cantilever_with(alpha: f64, param: &dyn Parameterization) -> Problem {
     let mat = Material::new(1000.0, 0.3, 0.01).unwrap();
     Problem::from_specs(
-        cantilever([8, 2, 2], mat),
+        cantilever_with([8, 2, 2], mat, param),
         &[ConstraintSpec::fixed(NodeSelector::BoundingFace(
             Face::XMin,
         ))],
@@ -292,24 +300,35 @@ fn rel_diff(model: &Model, a: &State, b: &State) -> f64 {
 
 #[test]
 fn explicit_implicit_and_static_reach_the_same_equilibrium() {
-    let p = damped_cantilever(300.0);
-    let mut st = State::at_rest(p.model());
-    solve_static(&p, &mut st, &StaticOptions::default()).unwrap();
-    let t_end = 0.3;
+    // Every parameterization works with all three solvers.
+    let volumetric_hg = HourglassControl::new(Box::new(Volumetric), 1.0).unwrap();
+    for param in [
+        &PaperModel as &dyn Parameterization,
+        &Volumetric,
+        &volumetric_hg,
+    ] {
+        let p = damped_cantilever_with(300.0, param);
+        let mut st = State::at_rest(p.model());
+        solve_static(&p, &mut st, &StaticOptions::default()).unwrap();
+        let t_end = 0.3;
 
-    let mut ex = integrator_by_name("explicit", &p, None, false).unwrap();
-    let mut se = State::at_rest(p.model());
-    while se.time < t_end {
-        ex.step(&p, &mut se).unwrap();
+        let mut ex = integrator_by_name("explicit", &p, None, false).unwrap();
+        let mut se = State::at_rest(p.model());
+        while se.time < t_end {
+            ex.step(&p, &mut se).unwrap();
+        }
+        let mut im = integrator_by_name("implicit", &p, Some(2e-3), false).unwrap();
+        let mut si = State::at_rest(p.model());
+        while si.time < t_end {
+            im.step(&p, &mut si).unwrap();
+        }
+        let (de, di) = (rel_diff(p.model(), &se, &st), rel_diff(p.model(), &si, &st));
+        println!(
+            "{}: explicit vs static {de:.3e}, implicit vs static {di:.3e}",
+            param.name()
+        );
+        assert!(de < 1e-4 && di < 1e-4, "{}", param.name());
     }
-    let mut im = integrator_by_name("implicit", &p, Some(2e-3), false).unwrap();
-    let mut si = State::at_rest(p.model());
-    while si.time < t_end {
-        im.step(&p, &mut si).unwrap();
-    }
-    let (de, di) = (rel_diff(p.model(), &se, &st), rel_diff(p.model(), &si, &st));
-    println!("explicit vs static {de:.3e}, implicit vs static {di:.3e}");
-    assert!(de < 1e-4 && di < 1e-4);
 }
 
 #[test]
