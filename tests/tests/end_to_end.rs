@@ -319,26 +319,34 @@ fn springs_frames_read_back_with_strain_and_stiffness() {
     }
     assert!(!out.join(format!("springs_{frames:04}.vtu")).exists());
 
+    // The scene with springs and `output` extra keys, run into `dir/name`.
+    let run_variant = |name: &str, output: &str| {
+        let folder = dir.path().join(name);
+        let scene = write(
+            dir.path(),
+            &format!("{name}.toml"),
+            &SCENE.replace("skin_stl = true", &format!("springs = true\n{output}")),
+        );
+        mss_cli::run_with_args([
+            "mss",
+            "-q",
+            "run",
+            &scene,
+            "--out",
+            folder.to_str().unwrap(),
+        ])
+        .unwrap();
+        folder
+    };
+
     // Only the last state: one springs file, no collection.
-    let last = dir.path().join("last");
-    let scene = write(
-        dir.path(),
-        "last.toml",
-        &SCENE.replace("skin_stl = true", "springs = true\nlast_only = true"),
-    );
-    mss_cli::run_with_args(["mss", "-q", "run", &scene, "--out", last.to_str().unwrap()]).unwrap();
+    let last = run_variant("last", "last_only = true");
     assert!(last.join("springs_0000.vtu").is_file());
     assert!(!last.join("springs_0001.vtu").exists());
     assert!(!last.join("springs.pvd").exists());
 
     // `pvd = false`: the numbered frames of both series, no collection.
-    let bare = dir.path().join("bare");
-    let scene = write(
-        dir.path(),
-        "bare.toml",
-        &SCENE.replace("skin_stl = true", "springs = true\npvd = false"),
-    );
-    mss_cli::run_with_args(["mss", "-q", "run", &scene, "--out", bare.to_str().unwrap()]).unwrap();
+    let bare = run_variant("bare", "pvd = false");
     assert!(bare.join("lattice_0001.vtu").is_file() && bare.join("springs_0001.vtu").is_file());
     assert!(!bare.join("lattice.pvd").exists() && !bare.join("springs.pvd").exists());
 }

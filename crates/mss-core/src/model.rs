@@ -275,7 +275,10 @@ impl Parameterization for HourglassControl {
 /// factor: `"paper+hg"`, `"springs+hg"`, `"volumetric+hg"`.
 pub fn parameterization_by_name(name: &str) -> Option<Box<dyn Parameterization>> {
     if let Some(base) = name.strip_suffix("+hg") {
-        let inner = parameterization_by_name(base).filter(|_| !base.ends_with("+hg"))?;
+        if base.ends_with("+hg") {
+            return None;
+        }
+        let inner = parameterization_by_name(base)?;
         return HourglassControl::new(inner, HourglassControl::DEFAULT_ALPHA)
             .ok()
             .map(|p| Box::new(p) as Box<dyn Parameterization>);

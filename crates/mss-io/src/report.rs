@@ -338,6 +338,22 @@ const STATS_HEADER: [&str; 9] = [
     "monitor_uz",
 ];
 
+/// How a reference was computed, for the reports: law, grid, extrapolation
+/// (from the half `halved`, "resolution" or "refinement") and time.
+fn reference_phrase(info: &mss_core::experiments::ReferenceInfo, halved: &str) -> String {
+    format!(
+        "Q1 FEM ({:?}) on {} cells{}, {:.1} s",
+        info.law,
+        dims(info.fine_dims),
+        if info.richardson {
+            format!(", Richardson-extrapolated with the half {halved}")
+        } else {
+            String::new()
+        },
+        info.seconds
+    )
+}
+
 fn error_plot(path: &Path, title: &str, runs: &[RunResult]) -> Result<(), IoError> {
     let mut models: Vec<&str> = runs.iter().map(|r| r.model.as_str()).collect();
     models.dedup();
@@ -452,15 +468,8 @@ pub fn beam_section(
     );
     let _ = writeln!(
         s,
-        "Reference: Q1 FEM ({:?}) on {} cells{}, {:.1} s. Mean tip deflection: FEM fine {:.5e} m, reference {:.5e} m; Euler-Bernoulli {:.5e} m, Timoshenko (kappa = 5/6) {:.5e} m (linear theories).\n",
-        info.law,
-        dims(info.fine_dims),
-        if info.richardson {
-            ", Richardson-extrapolated with the half resolution"
-        } else {
-            ""
-        },
-        info.seconds,
+        "Reference: {}. Mean tip deflection: FEM fine {:.5e} m, reference {:.5e} m; Euler-Bernoulli {:.5e} m, Timoshenko (kappa = 5/6) {:.5e} m (linear theories).\n",
+        reference_phrase(info, "resolution"),
         -info.monitor_fine.z,
         -info.monitor_ref.z,
         r.euler_bernoulli_tip,
@@ -521,16 +530,10 @@ pub fn lshape_section(
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "Load: {} ({} Pa). Reference: Q1 FEM on {} grid cells{}, {:.1} s; mean displacement of the arm's top: {:.4e}, {:.4e}, {:.4e} m.\n",
+        "Load: {} ({} Pa). Reference: {}; mean displacement of the top face: {:.4e}, {:.4e}, {:.4e} m.\n",
         r.settings.load.describe(),
         r.settings.traction,
-        dims(info.fine_dims),
-        if info.richardson {
-            ", Richardson-extrapolated with the half resolution"
-        } else {
-            ""
-        },
-        info.seconds,
+        reference_phrase(info, "resolution"),
         info.monitor_ref.x,
         info.monitor_ref.y,
         info.monitor_ref.z
@@ -627,15 +630,8 @@ pub fn scene_section(
     };
     let _ = writeln!(
         s,
-        "Regime: {regime}. Reference: Q1 FEM ({:?}) on {} cells{}, {:.1} s. Mean displacement over the lattice nodes: FEM fine {:.5e}, {:.5e}, {:.5e} m; reference {:.5e}, {:.5e}, {:.5e} m.\n",
-        info.law,
-        dims(info.fine_dims),
-        if info.richardson {
-            ", Richardson-extrapolated with the half refinement"
-        } else {
-            ""
-        },
-        info.seconds,
+        "Regime: {regime}. Reference: {}. Mean displacement over the lattice nodes: FEM fine {:.5e}, {:.5e}, {:.5e} m; reference {:.5e}, {:.5e}, {:.5e} m.\n",
+        reference_phrase(info, "refinement"),
         info.monitor_fine.x,
         info.monitor_fine.y,
         info.monitor_fine.z,
