@@ -4,7 +4,7 @@ use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
     if let Ok(text) = std::str::from_utf8(data) {
-        if let Err(e) = mss_io::scene::Scene::from_toml_str(text, "fuzz.toml") {
+        if let Err(e) = mss_scene::Scene::from_toml_str(text, "fuzz.toml") {
             let msg = e.to_string();
             assert!(!msg.contains('\n'), "multi-line error: {msg}");
         }

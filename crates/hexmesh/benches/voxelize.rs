@@ -12,7 +12,7 @@ use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use hexmesh::{Resolution, VoxelizeOptions, load_mesh, voxelize};
 
 fn bunny_path() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/bunny.obj")
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../data/meshes/bunny.obj")
 }
 
 fn bench(c: &mut Criterion) {

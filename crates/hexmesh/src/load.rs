@@ -11,7 +11,7 @@
 use std::collections::HashMap;
 use std::io::{BufRead, Cursor};
 use std::path::{Path, PathBuf};
-use std::sync::{Arc, Mutex, OnceLock};
+use std::sync::Arc;
 
 use thiserror::Error;
 
@@ -164,7 +164,14 @@ pub struct LoadedMesh {
     pub report: LoadReport,
 }
 
-/// A mesh file format. Implement it and [`register_loader`] it to add formats.
+/// A mesh file format, the plug point for new formats: implement it and
+/// [`Loaders::register`] it.
+///
+/// Contract: [`load`](Self::load) parses the whole file's bytes into a raw
+/// [`TriMesh`] and never panics; malformed input is a [`LoadError`] naming
+/// `name` (and the line, where the format has lines). It does not need to
+/// weld, drop degenerate triangles or check finiteness: [`clean_mesh`] does
+/// that for every loader. See [`Loaders`] for an example.
 pub trait MeshLoader: Send + Sync {
     /// File extensions served, lower case, without the dot.
     fn extensions(&self) -> &[&str];
@@ -390,60 +397,140 @@ impl MeshLoader for StlLoader {
     }
 }
 
-type Registry = Mutex<Vec<Arc<dyn MeshLoader>>>;
-
-fn registry() -> &'static Registry {
-    static REGISTRY: OnceLock<Registry> = OnceLock::new();
-    REGISTRY.get_or_init(|| Mutex::new(vec![Arc::new(ObjLoader), Arc::new(StlLoader)]))
+/// A set of mesh loaders, chosen by file extension: a value that a program
+/// builds, extends and passes where meshes are read (no global state, so two
+/// programs in one process, or two tests, cannot disturb each other).
+///
+/// [`Loaders::default`] serves the built-in formats (OBJ, STL). A loader added
+/// later wins for an extension that several loaders serve.
+///
+/// ```
+/// use std::sync::Arc;
+/// use hexmesh::load::{LoadError, Loaders, MeshLoader};
+/// use hexmesh::TriMesh;
+///
+/// /// A toy format: one triangle per line, nine numbers.
+/// struct Tri;
+/// impl MeshLoader for Tri {
+///     fn extensions(&self) -> &[&str] {
+///         &["tri"]
+///     }
+///     fn load(&self, bytes: &[u8], name: &str) -> Result<TriMesh, LoadError> {
+///         let text = std::str::from_utf8(bytes).map_err(|_| LoadError::Parse {
+///             file: name.into(),
+///             line: None,
+///             message: "not UTF-8".into(),
+///         })?;
+///         let mut mesh = TriMesh::default();
+///         for (i, line) in text.lines().enumerate() {
+///             let v: Vec<f64> = line.split_whitespace().filter_map(|t| t.parse().ok()).collect();
+///             if v.len() != 9 {
+///                 return Err(LoadError::Parse {
+///                     file: name.into(),
+///                     line: Some(i + 1),
+///                     message: format!("{} numbers, expected 9", v.len()),
+///                 });
+///             }
+///             let base = mesh.vertices.len() as u32;
+///             for k in 0..3 {
+///                 mesh.vertices.push([v[3 * k], v[3 * k + 1], v[3 * k + 2]]);
+///             }
+///             mesh.triangles.push([base, base + 1, base + 2]);
+///         }
+///         Ok(mesh)
+///     }
+/// }
+///
+/// let mut loaders = Loaders::default();
+/// assert!(loaders.for_extension("tri").is_none());
+/// loaders.register(Arc::new(Tri));
+/// assert!(loaders.for_extension("TRI").is_some());
+/// assert_eq!(loaders.known_extensions(), "obj, stl, tri");
+///
+/// let dir = tempfile::tempdir().unwrap();
+/// let path = dir.path().join("one.tri");
+/// std::fs::write(&path, "0 0 0 1 0 0 0 1 0\n0 0 0 0 1 0 0 0 1\n0 0 0 0 0 1 1 0 0\n1 0 0 0 0 1 0 1 0\n").unwrap();
+/// let loaded = loaders.load(&path).unwrap();
+/// assert_eq!(loaded.mesh.triangles.len(), 4);
+/// std::fs::write(&path, "0 0 0\n").unwrap();
+/// assert!(loaders.load(&path).unwrap_err().to_string().contains("expected 9"));
+/// ```
+#[derive(Clone)]
+pub struct Loaders {
+    loaders: Vec<Arc<dyn MeshLoader>>,
 }
 
-/// Registers a loader for more file formats. A later registration wins for an
-/// extension served by several loaders.
-pub fn register_loader(loader: Arc<dyn MeshLoader>) {
-    registry()
-        .lock()
-        .unwrap_or_else(|e| e.into_inner())
-        .push(loader);
+impl Default for Loaders {
+    fn default() -> Self {
+        Self {
+            loaders: vec![Arc::new(ObjLoader), Arc::new(StlLoader)],
+        }
+    }
 }
 
-fn loader_for(ext: &str) -> Option<Arc<dyn MeshLoader>> {
-    let reg = registry().lock().unwrap_or_else(|e| e.into_inner());
-    reg.iter()
-        .rev()
-        .find(|l| l.extensions().iter().any(|e| e.eq_ignore_ascii_case(ext)))
-        .cloned()
+impl std::fmt::Debug for Loaders {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Loaders")
+            .field("extensions", &self.known_extensions())
+            .finish()
+    }
 }
 
-fn known_extensions() -> String {
-    let reg = registry().lock().unwrap_or_else(|e| e.into_inner());
-    let mut all: Vec<String> = reg
-        .iter()
-        .flat_map(|l| l.extensions().iter().map(|e| e.to_string()))
-        .collect();
-    all.sort();
-    all.dedup();
-    all.join(", ")
+impl Loaders {
+    /// Adds a loader; it wins over earlier ones for the extensions it serves.
+    pub fn register(&mut self, loader: Arc<dyn MeshLoader>) {
+        self.loaders.push(loader);
+    }
+
+    /// The loader serving `ext` (case-insensitive, without the dot).
+    pub fn for_extension(&self, ext: &str) -> Option<&dyn MeshLoader> {
+        self.loaders
+            .iter()
+            .rev()
+            .find(|l| l.extensions().iter().any(|e| e.eq_ignore_ascii_case(ext)))
+            .map(|l| &**l)
+    }
+
+    /// Every extension served, sorted, comma-separated (for messages).
+    pub fn known_extensions(&self) -> String {
+        let mut all: Vec<String> = self
+            .loaders
+            .iter()
+            .flat_map(|l| l.extensions().iter().map(|e| e.to_string()))
+            .collect();
+        all.sort();
+        all.dedup();
+        all.join(", ")
+    }
+
+    /// Loads and cleans a mesh file; the format comes from the extension.
+    pub fn load(&self, path: &Path) -> Result<LoadedMesh, LoadError> {
+        let name = path.display().to_string();
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .unwrap_or("")
+            .to_ascii_lowercase();
+        let loader = self
+            .for_extension(&ext)
+            .ok_or_else(|| LoadError::UnknownFormat {
+                file: path.to_path_buf(),
+                extension: ext.clone(),
+                known: self.known_extensions(),
+            })?;
+        let bytes = std::fs::read(path).map_err(|source| LoadError::Io {
+            file: path.to_path_buf(),
+            source,
+        })?;
+        load_with(loader, &bytes, &name)
+    }
 }
 
-/// Loads and cleans a mesh file; the format comes from the extension (for STL,
-/// ASCII or binary is detected from the content). Exact duplicates are welded.
+/// Loads and cleans a mesh file with the built-in loaders ([`Loaders::default`]);
+/// the format comes from the extension (for STL, ASCII or binary is detected
+/// from the content). Exact duplicates are welded.
 pub fn load_mesh(path: &Path) -> Result<LoadedMesh, LoadError> {
-    let name = path.display().to_string();
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .unwrap_or("")
-        .to_ascii_lowercase();
-    let loader = loader_for(&ext).ok_or_else(|| LoadError::UnknownFormat {
-        file: path.to_path_buf(),
-        extension: ext.clone(),
-        known: known_extensions(),
-    })?;
-    let bytes = std::fs::read(path).map_err(|source| LoadError::Io {
-        file: path.to_path_buf(),
-        source,
-    })?;
-    load_with(&*loader, &bytes, &name)
+    Loaders::default().load(path)
 }
 
 /// Loads and cleans a mesh held in memory (for instance embedded in a binary

@@ -139,7 +139,7 @@ impl Default for VoxelizeOptions {
             resolution: Resolution::CellsAlongLongestAxis(24),
             rule: OccupancyRule::Centre,
             padding_cells: 1,
-            max_cells: 4_000_000,
+            max_cells: 2_000_000,
             components: ComponentPolicy::LargestOnly,
         }
     }

@@ -362,7 +362,7 @@ fn build(tris: &mut [[V3; 3]], start: usize, end: usize, nodes: &mut Vec<BvhNode
 
 /// Classifies points as inside or outside a solid, a row at a time.
 ///
-/// Implement it to change the inside test of [`crate::voxelize`]; the built-in
+/// Implement it to change the inside test of [`crate::voxelize()`]; the built-in
 /// one is [`WindingInside`]. Must be deterministic.
 pub trait InsideTest: Sync {
     /// Sets `out[i]` to whether the point `(x0 + i dx, y, z)` is inside.

@@ -223,8 +223,11 @@ fn registered_loader_serves_its_extension() {
             Ok(hexmesh::generate::box_mesh([0.0; 3], [1.0; 3]))
         }
     }
-    hexmesh::load::register_loader(std::sync::Arc::new(Tri));
+    let mut loaders = hexmesh::load::Loaders::default();
+    loaders.register(std::sync::Arc::new(Tri));
     let dir = tempfile::tempdir().unwrap();
     let p = write(dir.path(), "x.tri3", b"anything");
-    assert_eq!(load_mesh(&p).unwrap().mesh.triangles.len(), 12);
+    assert_eq!(loaders.load(&p).unwrap().mesh.triangles.len(), 12);
+    // The default set is not changed by registering into another value.
+    assert!(load_mesh(&p).unwrap_err().to_string().contains("obj, stl"));
 }

@@ -64,8 +64,10 @@ fn refuses_bad_requests_before_allocating() {
     )
     .unwrap_err();
     assert!(matches!(err, VoxelizeError::TooManyCells { .. }), "{err}");
+    let limit = VoxelizeOptions::default().max_cells;
     assert!(
-        err.to_string().contains("exceeds the limit of 4000000"),
+        err.to_string()
+            .contains(&format!("exceeds the limit of {limit}")),
         "{err}"
     );
     for r in [

@@ -31,9 +31,7 @@ use anyhow::Context;
 use clap::{Args, Parser};
 
 pub mod commands;
-pub mod output;
 pub mod progress;
-pub mod setup;
 
 /// Command-line interface of `mss`.
 #[derive(Debug, Parser)]
@@ -163,15 +161,26 @@ fn init_logger(g: &GlobalArgs) {
 }
 
 /// The text the binary prints for an error: one line `error: ...` with every
-/// cause joined by ": ", or under `-v` the error followed by one line per cause.
+/// cause joined by ": ", or under `-v` the error followed by one line per
+/// cause. A cause whose text the message before it already contains (library
+/// errors include their cause's text) is not repeated, so the operating
+/// system's reason appears once.
 pub fn error_report(e: &anyhow::Error) -> String {
     let flat = |s: String| s.split_whitespace().collect::<Vec<_>>().join(" ");
-    if VERBOSITY.load(Ordering::Relaxed) == 0 {
-        return format!("error: {}", flat(format!("{e:#}")));
+    let mut parts: Vec<String> = Vec::new();
+    for cause in e.chain() {
+        let text = flat(cause.to_string());
+        if parts.last().is_some_and(|prev| prev.contains(&text)) {
+            continue;
+        }
+        parts.push(text);
     }
-    let mut out = format!("error: {}", flat(e.to_string()));
-    for cause in e.chain().skip(1) {
-        out.push_str(&format!("\n  caused by: {}", flat(cause.to_string())));
+    if VERBOSITY.load(Ordering::Relaxed) == 0 {
+        return format!("error: {}", parts.join(": "));
+    }
+    let mut out = format!("error: {}", parts.first().map_or("", String::as_str));
+    for cause in parts.iter().skip(1) {
+        out.push_str(&format!("\n  caused by: {cause}"));
     }
     out
 }

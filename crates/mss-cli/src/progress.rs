@@ -2,7 +2,10 @@
 
 use std::time::Duration;
 
+use std::sync::Mutex;
+
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use mss_scene::Progress;
 
 /// A progress bar of `len` steps on stderr (hidden when `show` is false or
 /// stderr is not a terminal), with rate and ETA.
@@ -34,23 +37,76 @@ pub fn bar_of(len: u64, what: &str, unit: &'static str, show: bool) -> ProgressB
     pb
 }
 
-/// Voxelizes `mesh` behind a progress bar of the rows classified (with rate
-/// and ETA), labelled `what`; the bar is cleared when voxelization ends.
-/// The bar's length comes from the voxelizer's first report.
-pub fn voxelize_with_bar(
-    mesh: &hexmesh::TriMesh,
-    opts: &hexmesh::VoxelizeOptions,
-    what: &str,
+/// Turns a job's [`Progress`] reports into progress bars on stderr: a bar of
+/// rows while voxelizing, a spinner during a static solve, a bar of steps
+/// while time stepping (with rate and ETA). Each bar is cleared when its
+/// stage ends, and [`JobBars::clear`] clears whatever is shown (before an
+/// error is printed).
+pub struct JobBars {
+    label: String,
     show: bool,
-) -> Result<hexmesh::Voxelized, hexmesh::VoxelizeError> {
-    let pb = bar_of(0, what, "rows", show);
-    let hook = |done: u64, total: u64| {
-        pb.set_length(total);
-        pb.set_position(done);
-    };
-    let result = hexmesh::voxelize_with_progress(mesh, opts, &hook);
-    pb.finish_and_clear();
-    result
+    current: Mutex<Option<(Stage, ProgressBar)>>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Stage {
+    Voxelizing,
+    Solving,
+    Stepping,
+}
+
+impl JobBars {
+    /// Bars labelled with the mesh or scene `label`; hidden unless `show`.
+    pub fn new(label: &str, show: bool) -> Self {
+        Self {
+            label: label.to_owned(),
+            show,
+            current: Mutex::new(None),
+        }
+    }
+
+    /// Shows one report.
+    pub fn report(&self, p: Progress) {
+        let mut current = self.current.lock().unwrap_or_else(|e| e.into_inner());
+        let stage = match p {
+            Progress::Voxelizing { .. } => Stage::Voxelizing,
+            Progress::Solving => Stage::Solving,
+            Progress::Stepping { .. } => Stage::Stepping,
+            Progress::StageDone => {
+                if let Some((_, bar)) = current.take() {
+                    bar.finish_and_clear();
+                }
+                return;
+            }
+        };
+        if current.as_ref().map(|(s, _)| *s) != Some(stage) {
+            if let Some((_, bar)) = current.take() {
+                bar.finish_and_clear();
+            }
+            let bar = match stage {
+                Stage::Voxelizing => {
+                    bar_of(0, &format!("voxelizing {}", self.label), "rows", self.show)
+                }
+                Stage::Solving => spinner("static solve", self.show),
+                Stage::Stepping => bar(0, "steps", self.show),
+            };
+            *current = Some((stage, bar));
+        }
+        if let Some((_, bar)) = current.as_ref() {
+            match p {
+                Progress::Voxelizing { done, total } | Progress::Stepping { done, total } => {
+                    bar.set_length(total);
+                    bar.set_position(done);
+                }
+                _ => {}
+            }
+        }
+    }
+
+    /// Clears the bar being shown, if any.
+    pub fn clear(&self) {
+        self.report(Progress::StageDone);
+    }
 }
 
 /// A rate as whole units, or with 2 significant digits below 10.
@@ -78,25 +134,6 @@ pub fn spinner(what: &str, show: bool) -> ProgressBar {
     pb
 }
 
-/// Peak resident memory of this process (bytes), from `VmHWM` in
-/// `/proc/self/status`; `None` where that file does not exist.
-pub fn peak_memory_bytes() -> Option<u64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    parse_vm_hwm(&status)
-}
-
-fn parse_vm_hwm(status: &str) -> Option<u64> {
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kb: u64 = line
-        .trim_start_matches("VmHWM:")
-        .trim()
-        .trim_end_matches("kB")
-        .trim()
-        .parse()
-        .ok()?;
-    Some(kb * 1024)
-}
-
 /// Bytes as a short human-readable size (binary units).
 pub fn human_bytes(bytes: u64) -> String {
     const UNITS: [&str; 5] = ["B", "KiB", "MiB", "GiB", "TiB"];
@@ -118,22 +155,18 @@ mod tests {
     use super::*;
 
     #[test]
-    fn parses_vm_hwm() {
-        let s = "Name:\tmss\nVmPeak:\t  2000 kB\nVmHWM:\t    1234 kB\nVmRSS:\t 1000 kB\n";
-        assert_eq!(parse_vm_hwm(s), Some(1234 * 1024));
-        assert_eq!(parse_vm_hwm("Name: x\n"), None);
-        if cfg!(target_os = "linux") {
-            assert!(peak_memory_bytes().unwrap() > 0);
+    fn hidden_bars_follow_the_stages() {
+        let bars = JobBars::new("mesh", false);
+        bars.report(Progress::Voxelizing { done: 1, total: 4 });
+        bars.report(Progress::Stepping { done: 3, total: 10 });
+        {
+            let current = bars.current.lock().unwrap();
+            let (stage, bar) = current.as_ref().unwrap();
+            assert_eq!(*stage, Stage::Stepping);
+            assert_eq!((bar.position(), bar.length()), (3, Some(10)));
         }
-    }
-
-    #[test]
-    fn hidden_bar_voxelizes_like_the_library() {
-        let mesh = hexmesh::generate::critter();
-        let opts = hexmesh::VoxelizeOptions::default();
-        let with_bar = voxelize_with_bar(&mesh, &opts, "voxelizing", false).unwrap();
-        let plain = hexmesh::voxelize(&mesh, &opts).unwrap();
-        assert_eq!(with_bar.lattice, plain.lattice);
+        bars.clear();
+        assert!(bars.current.lock().unwrap().is_none());
     }
 
     #[test]

@@ -190,7 +190,7 @@ fn cases() -> Vec<Case> {
         scene_case(
             "hourglass control twice",
             scene(MATERIAL, "[model]\nparameterization = \"paper+hg+hg\"\n"),
-            &["paper+hg+hg", "volumetric+hg"],
+            &["paper+hg+hg", "paper, springs, volumetric", "+hg"],
         ),
         scene_case(
             "negative duration",

@@ -1,4 +1,4 @@
-//! One static solve of the MODEL.md cantilever (0.4 x 0.1 x 0.1 m, 32x8x8
+//! One static solve of the docs/model.md cantilever (0.4 x 0.1 x 0.1 m, 32x8x8
 //! cells, paper model, nu = 0.3, gravity, x = 0 fixed), under the small load
 //! and under the large-deflection load (total mass 0.0125 kg, 16x4x4).
 
@@ -46,9 +46,7 @@ fn bench(c: &mut Criterion) {
 fn cantilever(model: Model) -> Problem {
     Problem::from_specs(
         model,
-        &[ConstraintSpec::fixed(NodeSelector::BoundingFace(
-            Face::XMin,
-        ))],
+        &[ConstraintSpec::fixed(NodeSelector::face(Face::XMin))],
         &[LoadSpec::Gravity {
             g: [0.0, 0.0, -9.81],
         }],

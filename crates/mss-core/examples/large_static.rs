@@ -6,9 +6,9 @@
 use std::time::Instant;
 
 use hexmesh::Lattice;
+use mss_core::Parameterizations;
 use mss_core::constraints::{ConstraintSpec, Face, NodeSelector};
 use mss_core::loads::{Damping, LoadSpec};
-use mss_core::model::parameterization_by_name;
 use mss_core::solver::{Problem, State, StaticOptions, solve_static};
 use mss_core::{Material, Model};
 
@@ -40,7 +40,9 @@ fn main() {
     let n: u32 = args.next().and_then(|s| s.parse().ok()).unwrap_or(4);
     let name = args.next().unwrap_or_else(|| "paper".into());
     let lattice = Lattice::block([4 * n, n, n], 0.1 / n as f64, [0.0; 3]).unwrap();
-    let param = parameterization_by_name(&name).expect("paper, springs or volumetric");
+    let param = Parameterizations::default()
+        .get(&name)
+        .unwrap_or_else(|e| panic!("{e}"));
     let model = Model::new(
         &lattice,
         Material::new(1000.0, 0.3, 3.125).unwrap(),
@@ -49,9 +51,7 @@ fn main() {
     .unwrap();
     let problem = Problem::from_specs(
         model,
-        &[ConstraintSpec::fixed(NodeSelector::BoundingFace(
-            Face::XMin,
-        ))],
+        &[ConstraintSpec::fixed(NodeSelector::face(Face::XMin))],
         &[LoadSpec::Gravity {
             g: [0.0, 0.0, -9.81],
         }],

@@ -54,26 +54,33 @@ pub enum Side {
     Above,
 }
 
-/// A face of the rest bounding box of the nodes.
+/// A face of the rest bounding box of the nodes; in scene files `"x-"`,
+/// `"x+"`, `"y-"`, `"y+"`, `"z-"` or `"z+"`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
 pub enum Face {
     /// x = min x
+    #[serde(rename = "x-")]
     XMin,
     /// x = max x
+    #[serde(rename = "x+")]
     XMax,
     /// y = min y
+    #[serde(rename = "y-")]
     YMin,
     /// y = max y
+    #[serde(rename = "y+")]
     YMax,
     /// z = min z
+    #[serde(rename = "z-")]
     ZMin,
     /// z = max z
+    #[serde(rename = "z+")]
     ZMax,
 }
 
 impl Face {
-    fn axis_and_max(self) -> (usize, bool) {
+    /// Axis index (0 = x, 1 = y, 2 = z) and whether it is the maximum side.
+    pub fn axis_and_max(self) -> (usize, bool) {
         match self {
             Face::XMin => (0, false),
             Face::XMax => (0, true),
@@ -88,42 +95,132 @@ impl Face {
 /// Selects nodes by their rest position. All geometric tests are inclusive
 /// with a tolerance of `1e-9 h` (h the cell edge), so a plane through a layer
 /// of nodes selects that layer.
+///
+/// In scene files a selector is a table with a `kind` key, for example
+/// `{ kind = "face", face = "x-" }` or `{ kind = "box", min = [0, 0, 0],
+/// max = [0.1, 1, 1], relative = true }`; unknown keys are refused.
+///
+/// ```
+/// use mss_core::constraints::{Face, NodeSelector};
+/// use mss_core::Vec3;
+/// let s: NodeSelector = toml::from_str("kind = \"face\"\nface = \"x+\"").unwrap();
+/// assert_eq!(s, NodeSelector::Face { face: Face::XMax });
+/// let rest = [Vec3::new(0.0, 0.0, 0.0), Vec3::new(1.0, 0.0, 0.0)];
+/// assert_eq!(s.select(&rest, 1.0), vec![1]);
+/// ```
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
+#[serde(tag = "kind", rename_all = "snake_case", from = "SelectorTable")]
 pub enum NodeSelector {
-    /// Nodes inside an axis-aligned box (m).
+    /// Nodes inside an axis-aligned box (bounds included).
     Box {
-        /// Minimum corner.
+        /// Minimum corner (m, or a fraction of the rest bounding box if `relative`).
         min: [f64; 3],
-        /// Maximum corner.
+        /// Maximum corner (m, or a fraction of the rest bounding box if `relative`).
         max: [f64; 3],
+        /// Corners given as fractions (0..1) of the nodes' rest bounding box
+        /// instead of metres (default false).
+        #[serde(default)]
+        relative: bool,
     },
-    /// Nodes on one side of the plane `coordinate(axis) = value`.
+    /// Nodes on one side of the plane `coordinate(axis) = value` (nodes on
+    /// the plane included).
     Plane {
-        /// Axis normal to the plane.
+        /// Axis normal to the plane: `"x"`, `"y"` or `"z"`.
         axis: Axis,
         /// Position of the plane (m).
         value: f64,
-        /// Which side is kept.
+        /// Which side is kept: `"below"` or `"above"`.
         side: Side,
     },
     /// Nodes on a face of the rest bounding box.
-    BoundingFace(Face),
+    Face {
+        /// The face.
+        face: Face,
+    },
     /// Explicit node indices.
-    Indices(Vec<u32>),
+    Indices {
+        /// Node indices.
+        nodes: Vec<u32>,
+    },
     /// Nodes with the minimum z (the layer a body stands on).
     LowestLayer,
+}
+
+/// How a [`NodeSelector`] is read: the same tables, with `lowest_layer` as an
+/// empty struct variant, because serde lets unknown keys pass beside a unit
+/// variant of an internally tagged enum and a typo must not be ignored.
+#[derive(Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+enum SelectorTable {
+    Box {
+        min: [f64; 3],
+        max: [f64; 3],
+        #[serde(default)]
+        relative: bool,
+    },
+    Plane {
+        axis: Axis,
+        value: f64,
+        side: Side,
+    },
+    Face {
+        face: Face,
+    },
+    Indices {
+        nodes: Vec<u32>,
+    },
+    LowestLayer {},
+}
+
+impl From<SelectorTable> for NodeSelector {
+    fn from(t: SelectorTable) -> Self {
+        match t {
+            SelectorTable::Box { min, max, relative } => NodeSelector::Box { min, max, relative },
+            SelectorTable::Plane { axis, value, side } => NodeSelector::Plane { axis, value, side },
+            SelectorTable::Face { face } => NodeSelector::Face { face },
+            SelectorTable::Indices { nodes } => NodeSelector::Indices { nodes },
+            SelectorTable::LowestLayer {} => NodeSelector::LowestLayer,
+        }
+    }
+}
+
+impl NodeSelector {
+    /// A box in metres.
+    pub fn boxed(min: [f64; 3], max: [f64; 3]) -> Self {
+        NodeSelector::Box {
+            min,
+            max,
+            relative: false,
+        }
+    }
+
+    /// The nodes on a face of the rest bounding box.
+    pub fn face(face: Face) -> Self {
+        NodeSelector::Face { face }
+    }
+
+    /// Nodes by index.
+    pub fn indices(nodes: Vec<u32>) -> Self {
+        NodeSelector::Indices { nodes }
+    }
 }
 
 impl std::fmt::Display for NodeSelector {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            NodeSelector::Box { min, max } => write!(f, "box {min:?}..{max:?}"),
+            NodeSelector::Box {
+                min,
+                max,
+                relative: false,
+            } => write!(f, "box {min:?}..{max:?}"),
+            NodeSelector::Box { min, max, .. } => {
+                write!(f, "box {min:?}..{max:?} (fractions of the bounding box)")
+            }
             NodeSelector::Plane { axis, value, side } => {
                 write!(f, "plane {axis:?} {side:?} {value}")
             }
-            NodeSelector::BoundingFace(face) => write!(f, "bounding face {face:?}"),
-            NodeSelector::Indices(v) => write!(f, "{} node indices", v.len()),
+            NodeSelector::Face { face } => write!(f, "bounding face {face:?}"),
+            NodeSelector::Indices { nodes } => write!(f, "{} node indices", nodes.len()),
             NodeSelector::LowestLayer => write!(f, "lowest layer"),
         }
     }
@@ -198,7 +295,16 @@ impl NodeSelector {
                 .collect()
         };
         match self {
-            NodeSelector::Box { min, max } => {
+            NodeSelector::Box { min, max, relative } => {
+                let (min, max) = if *relative {
+                    let (lo, hi) = node_bounds(rest);
+                    let at = |f: &[f64; 3]| -> [f64; 3] {
+                        std::array::from_fn(|k| lo[k] + f[k] * (hi[k] - lo[k]))
+                    };
+                    (at(min), at(max))
+                } else {
+                    (*min, *max)
+                };
                 keep(&|p| (0..3).all(|k| p[k] >= min[k] - tol && p[k] <= max[k] + tol))
             }
             NodeSelector::Plane { axis, value, side } => {
@@ -208,7 +314,7 @@ impl NodeSelector {
                     Side::Above => keep(&|p| p[a] >= value - tol),
                 }
             }
-            NodeSelector::BoundingFace(face) => {
+            NodeSelector::Face { face } => {
                 let (lo, hi) = node_bounds(rest);
                 let (a, is_max) = face.axis_and_max();
                 if is_max {
@@ -217,8 +323,8 @@ impl NodeSelector {
                     keep(&|p| p[a] <= lo[a] + tol)
                 }
             }
-            NodeSelector::Indices(v) => {
-                let mut out: Vec<u32> = v
+            NodeSelector::Indices { nodes } => {
+                let mut out: Vec<u32> = nodes
                     .iter()
                     .copied()
                     .filter(|&i| (i as usize) < rest.len())
@@ -238,15 +344,15 @@ impl NodeSelector {
     /// range is an error naming the selector.
     pub fn select_checked(&self, rest: &[Vec3], h: f64) -> Result<Vec<u32>, ConstraintError> {
         match self {
-            NodeSelector::Indices(v) => {
-                if let Some(&index) = v.iter().find(|&&i| i as usize >= rest.len()) {
+            NodeSelector::Indices { nodes } => {
+                if let Some(&index) = nodes.iter().find(|&&i| i as usize >= rest.len()) {
                     return Err(ConstraintError::NodeIndex {
                         index,
                         count: rest.len(),
                     });
                 }
             }
-            NodeSelector::Box { min, max } => {
+            NodeSelector::Box { min, max, .. } => {
                 check_finite3("box min", min).and_then(|_| check_finite3("box max", max))?
             }
             NodeSelector::Plane { value, .. } => check_finite("plane value", *value)?,
@@ -587,7 +693,7 @@ mod tests {
         let p = grid(2);
         assert_eq!(NodeSelector::LowestLayer.select(&p, 0.5).len(), 9);
         assert_eq!(
-            NodeSelector::BoundingFace(Face::XMax).select(&p, 0.5),
+            NodeSelector::face(Face::XMax).select(&p, 0.5),
             NodeSelector::Plane {
                 axis: Axis::X,
                 value: 1.0,
@@ -595,21 +701,47 @@ mod tests {
             }
             .select(&p, 0.5)
         );
-        let b = NodeSelector::Box {
-            min: [0.0, 0.0, 0.0],
-            max: [0.5, 0.5, 0.5],
-        };
+        let b = NodeSelector::boxed([0.0, 0.0, 0.0], [0.5, 0.5, 0.5]);
         assert_eq!(b.select(&p, 0.5).len(), 8);
-        let empty = NodeSelector::Box {
-            min: [5.0; 3],
-            max: [6.0; 3],
+        // The same box as fractions of the grid's bounding box (0..1 m).
+        let relative = NodeSelector::Box {
+            min: [0.0; 3],
+            max: [0.5; 3],
+            relative: true,
         };
+        assert_eq!(relative.select(&p, 0.5), b.select(&p, 0.5));
+        let empty = NodeSelector::boxed([5.0; 3], [6.0; 3]);
         let err = empty.select_checked(&p, 0.5).unwrap_err();
         assert!(err.to_string().contains("box"), "{err}");
         assert!(matches!(
-            NodeSelector::Indices(vec![1, 999]).select_checked(&p, 0.5),
+            NodeSelector::indices(vec![1, 999]).select_checked(&p, 0.5),
             Err(ConstraintError::NodeIndex { index: 999, .. })
         ));
+    }
+
+    #[test]
+    fn selectors_read_from_scene_tables() {
+        let read = |t: &str| toml::from_str::<NodeSelector>(t).map_err(|e| e.to_string());
+        assert_eq!(
+            read("kind = \"lowest_layer\"").unwrap(),
+            NodeSelector::LowestLayer
+        );
+        assert_eq!(
+            read("kind = \"box\"\nmin = [0, 0, 0]\nmax = [1, 1, 1]").unwrap(),
+            NodeSelector::boxed([0.0; 3], [1.0; 3])
+        );
+        assert_eq!(
+            read("kind = \"indices\"\nnodes = [3, 1]").unwrap(),
+            NodeSelector::indices(vec![3, 1])
+        );
+        for bad in [
+            "kind = \"lowest_layer\"\nheight = 2",
+            "kind = \"box\"\nmin = [0, 0, 0]\nmax = [1, 1, 1]\nsize = 2",
+            "kind = \"face\"\nface = \"x\"",
+            "kind = \"blob\"",
+        ] {
+            assert!(read(bad).is_err(), "{bad}");
+        }
     }
 
     #[test]
@@ -646,7 +778,7 @@ mod tests {
         let specs = vec![
             ConstraintSpec::roller(NodeSelector::LowestLayer, Axis::Z),
             ConstraintSpec {
-                select: NodeSelector::Indices(vec![0]),
+                select: NodeSelector::indices(vec![0]),
                 dofs: Dofs::ALL,
                 motion: Motion::Velocity([1.0, 0.0, 0.0]),
             },

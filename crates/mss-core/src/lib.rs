@@ -1,20 +1,17 @@
 //! # mss-core
 //!
 //! The hexahedral mass-spring model (MSS) of Baudet et al. (WSCG 2009) as
-//! defined in the project's MODEL.md: per-cell edge and body-diagonal springs
+//! defined in the project's `docs/model.md`: per-cell edge and body-diagonal springs
 //! whose stiffnesses follow from Young's modulus and Poisson's ratio, lumped
 //! masses, and the correction forces that make the lattice reproduce both E and
-//! nu. Also boundary conditions, loads, explicit / implicit / static solvers,
-//! virtual material tests and a small hexahedral FEM used as the reference.
+//! nu. Also boundary conditions, loads, and explicit / implicit / static
+//! solvers. The FEM reference and the experiments are in `mss-validate`.
 //!
 //! Knows nothing of file formats: it takes a [`hexmesh::Lattice`].
 
 pub mod constraints;
-pub mod experiments;
-pub mod fem;
 pub mod loads;
 pub mod material;
-pub mod material_test;
 pub mod model;
 pub mod modes;
 pub mod solver;
@@ -24,14 +21,13 @@ pub mod springs;
 pub use constraints::{ConstraintSpec, Constraints, NodeSelector};
 pub use loads::{Damping, Load, LoadSpec};
 pub use material::{Material, MaterialError};
-pub use material_test::{MeasuredMaterial, measure_material};
 pub use model::{
     CellCoefficients, CellDiagnostics, ForceWorkspace, HourglassControl, HourglassError, Model,
-    ModelError, PARAMETERIZATION_NAMES, PaperModel, Parameterization, SpringsOnly, Volumetric,
-    parameterization_by_name,
+    ModelError, PaperModel, Parameterization, ParameterizationError, Parameterizations,
+    SpringsOnly, UnknownParameterization, Volumetric,
 };
 pub use solver::{
-    Integrator, Problem, SolverError, State, StaticOptions, integrator_by_name, solve_static,
+    Integrator, Integrators, Problem, SolverError, State, StaticOptions, solve_static,
 };
 pub use sparse::{BlockCsr, Factorization, LinearSolveError};
 pub use springs::{SpringError, SpringSet};

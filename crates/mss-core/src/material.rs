@@ -28,7 +28,11 @@ pub enum MaterialError {
 
 /// Isotropic material: Young's modulus `young` (Pa), Poisson's ratio `poisson`
 /// (dimensionless) and mass density `density` (kg/m^3).
+///
+/// In scene files this is the `[material]` table (`young`, `poisson`,
+/// `density`; unknown keys are refused).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Material {
     /// Young's modulus E (Pa).
     pub young: f64,

@@ -1,4 +1,4 @@
-//! The model: per-cell springs, lumped masses, correction forces (MODEL.md).
+//! The model: per-cell springs, lumped masses, correction forces (docs/model.md).
 //!
 //! Forces are computed per cell (the cell's 16 springs, then its correction
 //! forces from those springs' forces, then the optional volumetric term) into a
@@ -6,11 +6,12 @@
 //! node -> (cell, corner) adjacency. The gather order does not depend on the
 //! number of threads, so the forces are bitwise reproducible.
 //!
-//! The kernel is written once over a scalar type ([`kernel`]); the Jacobian is
+//! The kernel is written once over a scalar type (`model/kernel.rs`); the Jacobian is
 //! that same kernel evaluated with forward-mode dual numbers, hence exact
 //! (including the derivative of the current cell axes in the corrections).
 
 use std::fmt::Debug;
+use std::sync::Arc;
 
 use hexmesh::Lattice;
 use thiserror::Error;
@@ -53,7 +54,7 @@ pub enum ModelError {
     )]
     BadCoefficients {
         /// Parameterization name.
-        name: &'static str,
+        name: String,
         /// Edge stiffness given.
         k_edge: f64,
         /// Diagonal stiffness given.
@@ -76,7 +77,7 @@ pub struct CellCoefficients {
     pub k_edge: f64,
     /// Stiffness of each of the 4 body-diagonal springs (N/m), rest length sqrt(3) h.
     pub k_diag: f64,
-    /// Correction coefficient `c = (4 nu - 1) / 2` of MODEL.md step 4, or
+    /// Correction coefficient `c = (4 nu - 1) / 2` of docs/model.md step 4, or
     /// `None` for no correction forces.
     pub correction: Option<f64>,
     /// Lame lambda (Pa) of the one-point volumetric energy
@@ -90,8 +91,8 @@ pub struct CellCoefficients {
 /// Maps a material to per-cell spring constants: the plugin point for spring
 /// parameterizations. Implement it to try your own.
 pub trait Parameterization: Send + Sync + Debug {
-    /// Short name used by scene files and the CLI (e.g. `"paper"`).
-    fn name(&self) -> &'static str;
+    /// Short name used by scene files, reports and the CLI (e.g. `"paper"`).
+    fn name(&self) -> String;
     /// Checks the material against the range this parameterization supports.
     fn validate(&self, material: &Material) -> Result<(), MaterialError>;
     /// The per-cell constants for cells of edge `h` (m).
@@ -116,8 +117,8 @@ fn paper_springs(m: &Material, h: f64) -> (f64, f64) {
 }
 
 impl Parameterization for PaperModel {
-    fn name(&self) -> &'static str {
-        "paper"
+    fn name(&self) -> String {
+        "paper".into()
     }
     fn validate(&self, material: &Material) -> Result<(), MaterialError> {
         Material::new(material.young, material.poisson, material.density).map(|_| ())
@@ -135,8 +136,8 @@ impl Parameterization for PaperModel {
 }
 
 impl Parameterization for SpringsOnly {
-    fn name(&self) -> &'static str {
-        "springs"
+    fn name(&self) -> String {
+        "springs".into()
     }
     fn validate(&self, material: &Material) -> Result<(), MaterialError> {
         Material::new(material.young, material.poisson, material.density).map(|_| ())
@@ -155,7 +156,7 @@ impl Parameterization for SpringsOnly {
 
 /// The paper's model evaluated at the same shear modulus and nu' = 0 (springs
 /// and correction forces), plus a one-point volumetric energy
-/// `lambda h^3 (J - 1)^2 / 2` per cell (MODEL.md, last section). Exact E and nu in
+/// `lambda h^3 (J - 1)^2 / 2` per cell (docs/model.md, last section). Exact E and nu in
 /// uniaxial tension, and much closer to converged FEM than the paper's model.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Volumetric;
@@ -166,8 +167,8 @@ impl Volumetric {
 }
 
 impl Parameterization for Volumetric {
-    fn name(&self) -> &'static str {
-        "volumetric"
+    fn name(&self) -> String {
+        "volumetric".into()
     }
     fn validate(&self, material: &Material) -> Result<(), MaterialError> {
         Material::with_poisson_range(
@@ -198,7 +199,7 @@ impl Parameterization for Volumetric {
 /// (the product of their signs along the two other axes) stretches none of the
 /// cell's 16 springs, so neither the springs nor the correction forces (built
 /// from the springs' forces) resist it. A block has three such global modes
-/// (MODEL.md); a part one cell thick, or a few held nodes, leaves them free.
+/// (docs/model.md); a part one cell thick, or a few held nodes, leaves them free.
 /// This adds the energy `W = k/2 sum_i q_i^2` per cell, with
 /// `q_i = a_i . (1/8) sum_n s_j s_k(n) x_n` the mode's amplitude along the
 /// current cell axis `a_i`. `q_i` is zero for every homogeneous deformation and
@@ -212,7 +213,6 @@ impl Parameterization for Volumetric {
 pub struct HourglassControl {
     inner: Box<dyn Parameterization>,
     alpha: f64,
-    name: &'static str,
 }
 
 /// Why a [`HourglassControl`] could not be built.
@@ -239,15 +239,7 @@ impl HourglassControl {
         if !(alpha.is_finite() && alpha >= 0.0) {
             return Err(HourglassError(alpha));
         }
-        // Names must be 'static (models and reports keep them): the built-in
-        // combinations have their own, others share one.
-        let name = match inner.name() {
-            "paper" => "paper+hg",
-            "springs" => "springs+hg",
-            "volumetric" => "volumetric+hg",
-            _ => "custom+hg",
-        };
-        Ok(Self { inner, alpha, name })
+        Ok(Self { inner, alpha })
     }
 
     /// The factor `alpha` of the hourglass stiffness `alpha (8/3) mu h`.
@@ -257,8 +249,8 @@ impl HourglassControl {
 }
 
 impl Parameterization for HourglassControl {
-    fn name(&self) -> &'static str {
-        self.name
+    fn name(&self) -> String {
+        format!("{}+hg", self.inner.name())
     }
     fn validate(&self, material: &Material) -> Result<(), MaterialError> {
         self.inner.validate(material)
@@ -270,36 +262,151 @@ impl Parameterization for HourglassControl {
     }
 }
 
-/// The built-in parameterizations by name: `"paper"` (default), `"springs"`,
-/// `"volumetric"`, and each of them with [`HourglassControl`] at its default
-/// factor: `"paper+hg"`, `"springs+hg"`, `"volumetric+hg"`.
-pub fn parameterization_by_name(name: &str) -> Option<Box<dyn Parameterization>> {
-    if let Some(base) = name.strip_suffix("+hg") {
-        if base.ends_with("+hg") {
-            return None;
-        }
-        let inner = parameterization_by_name(base)?;
-        return HourglassControl::new(inner, HourglassControl::DEFAULT_ALPHA)
-            .ok()
-            .map(|p| Box::new(p) as Box<dyn Parameterization>);
-    }
-    match name {
-        "paper" => Some(Box::new(PaperModel)),
-        "springs" => Some(Box::new(SpringsOnly)),
-        "volumetric" => Some(Box::new(Volumetric)),
-        _ => None,
+/// Builds a fresh parameterization: one entry of [`Parameterizations`].
+pub type ParameterizationFactory = Arc<dyn Fn() -> Box<dyn Parameterization> + Send + Sync>;
+
+/// The parameterizations a program knows, by name: a value that a program
+/// builds, extends with its own and passes where names are resolved (scenes,
+/// experiments). No global state.
+///
+/// [`Parameterizations::default`] holds the built-ins `"paper"`, `"springs"`
+/// and `"volumetric"`. Every registered name `NAME` also resolves as
+/// `"NAME+hg"`: the same with [`HourglassControl`] at its default factor.
+///
+/// ```
+/// use std::sync::Arc;
+/// use mss_core::model::{CellCoefficients, Parameterization, Parameterizations};
+/// use mss_core::{Material, MaterialError};
+///
+/// /// Springs of the paper's stiffness at a fixed nu = 0.25 (no corrections needed).
+/// #[derive(Debug)]
+/// struct QuarterSprings;
+/// impl Parameterization for QuarterSprings {
+///     fn name(&self) -> String {
+///         "quarter".into()
+///     }
+///     fn validate(&self, m: &Material) -> Result<(), MaterialError> {
+///         Material::new(m.young, m.poisson, m.density).map(|_| ())
+///     }
+///     fn coefficients(&self, m: &Material, h: f64) -> CellCoefficients {
+///         CellCoefficients {
+///             k_edge: m.young * h * 2.0 / (8.0 * 1.25),
+///             k_diag: 3.0 * m.young * h / (8.0 * 1.25),
+///             correction: None,
+///             volumetric_lambda: 0.0,
+///             hourglass: 0.0,
+///         }
+///     }
+/// }
+///
+/// let mut known = Parameterizations::default();
+/// known.register("quarter", Arc::new(|| Box::new(QuarterSprings)));
+/// assert_eq!(known.get("quarter").unwrap().name(), "quarter");
+/// assert_eq!(known.get("quarter+hg").unwrap().name(), "quarter+hg");
+/// let err = known.get("fancy").unwrap_err().to_string();
+/// assert!(err.contains("paper, springs, volumetric, quarter"), "{err}");
+/// ```
+#[derive(Clone)]
+pub struct Parameterizations {
+    entries: Vec<(String, ParameterizationFactory)>,
+}
+
+impl Default for Parameterizations {
+    fn default() -> Self {
+        let mut p = Self {
+            entries: Vec::new(),
+        };
+        p.register("paper", Arc::new(|| Box::new(PaperModel)));
+        p.register("springs", Arc::new(|| Box::new(SpringsOnly)));
+        p.register("volumetric", Arc::new(|| Box::new(Volumetric)));
+        p
     }
 }
 
-/// Names accepted by [`parameterization_by_name`].
-pub const PARAMETERIZATION_NAMES: &[&str] = &[
-    "paper",
-    "springs",
-    "volumetric",
-    "paper+hg",
-    "springs+hg",
-    "volumetric+hg",
-];
+impl Debug for Parameterizations {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_list()
+            .entries(self.entries.iter().map(|(n, _)| n))
+            .finish()
+    }
+}
+
+/// A parameterization name that no entry of [`Parameterizations`] serves.
+#[derive(Debug, Error, Clone, PartialEq)]
+#[error(
+    "unknown parameterization \"{name}\"; use one of {known} (each also with \"+hg\": hourglass control)"
+)]
+pub struct UnknownParameterization {
+    /// The name asked for.
+    pub name: String,
+    /// The registered names, comma-separated.
+    pub known: String,
+}
+
+/// Suffix that adds [`HourglassControl`] to a registered parameterization.
+pub const HOURGLASS_SUFFIX: &str = "+hg";
+
+impl Parameterizations {
+    /// Registers (or replaces) the parameterization called `name`.
+    pub fn register(&mut self, name: &str, factory: ParameterizationFactory) {
+        match self.entries.iter_mut().find(|(n, _)| n == name) {
+            Some(entry) => entry.1 = factory,
+            None => self.entries.push((name.to_owned(), factory)),
+        }
+    }
+
+    /// The registered base names, in registration order.
+    pub fn names(&self) -> Vec<String> {
+        self.entries.iter().map(|(n, _)| n.clone()).collect()
+    }
+
+    /// Builds the parameterization `name`, or `"NAME+hg"` for a registered
+    /// `NAME` with hourglass control at [`HourglassControl::DEFAULT_ALPHA`].
+    pub fn get(&self, name: &str) -> Result<Box<dyn Parameterization>, ParameterizationError> {
+        self.build(name, None)
+    }
+
+    /// Builds a parameterization by name with an optional hourglass factor:
+    /// `Some(alpha)` adds [`HourglassControl`] of factor `alpha` to any name
+    /// (and sets the factor of a `"+hg"` name).
+    pub fn build(
+        &self,
+        name: &str,
+        hourglass: Option<f64>,
+    ) -> Result<Box<dyn Parameterization>, ParameterizationError> {
+        let (base, suffixed) = match name.strip_suffix(HOURGLASS_SUFFIX) {
+            Some(base) => (base, true),
+            None => (name, false),
+        };
+        let factory = self
+            .entries
+            .iter()
+            .find(|(n, _)| n == base)
+            .map(|(_, f)| f)
+            .ok_or_else(|| UnknownParameterization {
+                name: name.to_owned(),
+                known: self.names().join(", "),
+            })?;
+        let inner = factory();
+        let alpha = match (hourglass, suffixed) {
+            (Some(alpha), _) => alpha,
+            (None, true) => HourglassControl::DEFAULT_ALPHA,
+            (None, false) => return Ok(inner),
+        };
+        Ok(Box::new(HourglassControl::new(inner, alpha)?))
+    }
+}
+
+/// Why [`Parameterizations::build`] refused.
+#[derive(Debug, Error, Clone, PartialEq)]
+pub enum ParameterizationError {
+    /// No entry of that name.
+    #[error(transparent)]
+    Unknown(#[from] UnknownParameterization),
+    /// The hourglass factor is invalid.
+    #[error(transparent)]
+    Hourglass(#[from] HourglassError),
+}
 
 /// Per-cell state measures for output (VTK) and inspection.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -350,7 +457,7 @@ pub struct Model {
     adj_offsets: Vec<u32>,
     adj: Vec<u32>,
     num_springs: usize,
-    param_name: &'static str,
+    param_name: String,
     /// Upper bound of omega_max^2 (1/s^2) at rest.
     omega_max_sq: f64,
 }
@@ -554,8 +661,8 @@ impl Model {
         self.num_springs
     }
     /// Name of the parameterization the model was built with.
-    pub fn parameterization_name(&self) -> &'static str {
-        self.param_name
+    pub fn parameterization_name(&self) -> &str {
+        &self.param_name
     }
     /// The materials, indexed by [`Model::cell_material`].
     pub fn materials(&self) -> &[Material] {

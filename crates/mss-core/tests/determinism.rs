@@ -95,7 +95,7 @@ fn implicit_and_static(threads: usize) -> (State, State) {
         .unwrap();
         let p = Problem::from_specs(
             model,
-            &[ConstraintSpec::fixed(NodeSelector::BoundingFace(
+            &[ConstraintSpec::fixed(NodeSelector::face(
                 mss_core::constraints::Face::XMin,
             ))],
             &[LoadSpec::Gravity {

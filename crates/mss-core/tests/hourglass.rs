@@ -5,7 +5,11 @@
 use hexmesh::{CORNER_OFFSETS, Lattice};
 use mss_core::model::{HourglassControl, PaperModel, Volumetric};
 use mss_core::modes::zero_energy_modes_dense;
-use mss_core::{Mat3, Material, Model, Vec3, parameterization_by_name};
+use mss_core::{Mat3, Material, Model, Parameterizations, Vec3};
+
+fn parameterization_by_name(name: &str) -> Option<Box<dyn mss_core::Parameterization>> {
+    Parameterizations::default().get(name).ok()
+}
 
 fn mat(nu: f64) -> Material {
     Material::new(100.0, nu, 1.0).unwrap()
@@ -135,7 +139,7 @@ fn hourglass_forces_rotate_with_the_body() {
 
 #[test]
 fn hourglass_control_removes_the_mechanisms() {
-    // MODEL.md: the M2 lattice of a block has 9 zero-energy modes (6 rigid,
+    // docs/model.md: the M2 lattice of a block has 9 zero-energy modes (6 rigid,
     // 3 hourglass); a bar one cell thick both ways has 12. With hourglass
     // control only the rigid ones are left, and a single held node (which fixes
     // translations only) leaves the 3 rotations.

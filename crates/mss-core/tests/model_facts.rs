@@ -1,4 +1,4 @@
-//! Facts of the model (MODEL.md): stiffnesses, assembly, masses, uniaxial
+//! Facts of the model (docs/model.md): stiffnesses, assembly, masses, uniaxial
 //! tension, cantilever, Jacobian, energy, determinism, time step.
 
 use hexmesh::Lattice;
@@ -108,7 +108,7 @@ fn per_cell_assembly_and_masses() {
     assert!((b[(2, 2)] - 2.0 * kx).abs() < 1e-12 * kx);
 }
 
-/// Measured (E, nu) of an n^3 unit block in uniaxial tension (MODEL.md).
+/// Measured (E, nu) of an n^3 unit block in uniaxial tension (docs/model.md).
 fn tension(param: &dyn Parameterization, nu: f64, n: u32) -> (f64, f64) {
     let l = Lattice::block([n, n, n], 1.0 / n as f64, [0.0; 3]).unwrap();
     let model = Model::new(&l, mat(1.0, nu, 1.0), param).unwrap();
@@ -223,7 +223,7 @@ fn corrections_vanish_at_quarter() {
     );
 }
 
-/// Mean z-deflection of the x = 0.4 end of the MODEL.md cantilever.
+/// Mean z-deflection of the x = 0.4 end of the docs/model.md cantilever.
 fn cantilever_tip(k: u32) -> f64 {
     let l = Lattice::block([4 * k, k, k], 0.1 / k as f64, [0.0; 3]).unwrap();
     let model = Model::new(&l, Material::new(1000.0, 0.0, 0.01).unwrap(), &PaperModel).unwrap();
@@ -343,8 +343,8 @@ fn rest_tangent_is_symmetric() {
 #[derive(Debug)]
 struct Conservative;
 impl Parameterization for Conservative {
-    fn name(&self) -> &'static str {
-        "conservative-test"
+    fn name(&self) -> String {
+        "conservative-test".into()
     }
     fn validate(&self, _: &Material) -> Result<(), MaterialError> {
         Ok(())
@@ -480,11 +480,19 @@ fn multi_material_and_errors() {
     let err = Model::new(&l, bad, &PaperModel).unwrap_err().to_string();
     assert!(err.contains("-0.3"), "{err}");
     assert!(Model::new(&l, bad, &Volumetric).is_ok());
-    for name in mss_core::PARAMETERIZATION_NAMES {
-        let p = mss_core::parameterization_by_name(name).unwrap();
-        assert_eq!(p.name(), *name);
+    let known = mss_core::Parameterizations::default();
+    assert_eq!(known.names(), ["paper", "springs", "volumetric"]);
+    for base in known.names() {
+        for name in [base.clone(), format!("{base}+hg")] {
+            let p = known.get(&name).unwrap();
+            assert_eq!(p.name(), name);
+        }
     }
-    assert!(mss_core::parameterization_by_name("nope").is_none());
+    let err = known.get("nope").err().unwrap().to_string();
+    assert!(err.contains("paper, springs, volumetric"), "{err}");
+    assert!(known.get("paper+hg+hg").is_err());
+    assert!(known.build("paper", Some(-1.0)).is_err());
+    assert_eq!(known.build("paper", Some(0.5)).unwrap().name(), "paper+hg");
 }
 
 #[test]
@@ -570,5 +578,36 @@ fn simd_and_scalar_paths_agree_bitwise() {
             }
         }
         assert!(a.iter().zip(&g).all(|(p, q)| (p - q).amax() < 1e-12));
+    }
+}
+
+/// docs/model.md, section 3: internal forces exert no net force on the body
+/// and turn with it (they depend on the shape, not on its placement).
+#[test]
+fn internal_forces_are_balanced_and_frame_invariant() {
+    let lattice = Lattice::block([3, 2, 2], 0.1, [0.0; 3]).unwrap();
+    let params: Vec<Box<dyn Parameterization>> = vec![
+        Box::new(PaperModel),
+        Box::new(SpringsOnly),
+        Box::new(Volumetric),
+        Box::new(with_hourglass(Box::new(PaperModel))),
+    ];
+    // A rotation by 0.7 rad about (1, 2, 3) and a translation.
+    let axis = nalgebra::Unit::new_normalize(Vec3::new(1.0, 2.0, 3.0));
+    let r = nalgebra::Rotation3::from_axis_angle(&axis, 0.7);
+    let shift = Vec3::new(0.3, -1.0, 2.0);
+    for param in &params {
+        let model = Model::new(&lattice, mat(1e4, 0.3, 1000.0), param.as_ref()).unwrap();
+        let x = deformed(&model, 7);
+        let f = forces(&model, &x);
+        let scale = f.iter().map(|v| v.norm()).fold(0.0, f64::max);
+        assert!(scale > 0.0);
+        let net: Vec3 = f.iter().sum();
+        assert!(net.norm() < 1e-10 * scale, "{}: net {net:?}", param.name());
+        let moved: Vec<Vec3> = x.iter().map(|p| r * p + shift).collect();
+        let g = forces(&model, &moved);
+        for (a, b) in f.iter().zip(&g) {
+            assert!((r * a - b).norm() < 1e-9 * scale, "{}", param.name());
+        }
     }
 }

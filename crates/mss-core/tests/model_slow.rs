@@ -1,4 +1,4 @@
-//! Slower model checks: the finest MODEL.md cantilever, mechanism detection on
+//! Slower model checks: the finest docs/model.md cantilever, mechanism detection on
 //! a 10^5-node model, and the negative-Poisson range of the volumetric variant.
 
 use hexmesh::Lattice;

@@ -6,8 +6,9 @@ use mss_core::constraints::{ConstraintSpec, Constraints, Face, NodeSelector};
 use mss_core::loads::{Damping, Gravity, Load, LoadSpec};
 use mss_core::model::{HourglassControl, PaperModel, SpringsOnly, Volumetric};
 use mss_core::solver::{
-    Divergence, Explicit, ExplicitOptions, Implicit, ImplicitOptions, Integrator, Problem,
-    SolverError, State, StaticOptions, explicit_time_step_limit, integrator_by_name, solve_static,
+    Divergence, Explicit, ExplicitOptions, Implicit, ImplicitOptions, Integrator,
+    IntegratorSettings, Integrators, Problem, SolverError, State, StaticOptions,
+    explicit_time_step_limit, solve_static,
 };
 use mss_core::{Mat3, Material, Model, Parameterization, Vec3};
 
@@ -221,11 +222,9 @@ fn cantilever_with(n: [u32; 3], material: Material, param: &dyn Parameterization
 
 #[test]
 fn static_solution_rotates_with_the_lattice_and_loads() {
-    // Large deflection: total mass 0.0125 kg (MODEL.md), tip deflection ~0.1 m.
+    // Large deflection: total mass 0.0125 kg (docs/model.md), tip deflection ~0.1 m.
     let mat = Material::new(1000.0, 0.3, 3.125).unwrap();
-    let fixed = [ConstraintSpec::fixed(NodeSelector::BoundingFace(
-        Face::XMin,
-    ))];
+    let fixed = [ConstraintSpec::fixed(NodeSelector::face(Face::XMin))];
     let g = Vec3::new(0.0, 0.0, -9.81);
     let opts = StaticOptions {
         rtol: 1e-12,
@@ -277,9 +276,7 @@ fn damped_cantilever_with(alpha: f64, param: &dyn Parameterization) -> Problem {
     let mat = Material::new(1000.0, 0.3, 0.01).unwrap();
     Problem::from_specs(
         cantilever_with([8, 2, 2], mat, param),
-        &[ConstraintSpec::fixed(NodeSelector::BoundingFace(
-            Face::XMin,
-        ))],
+        &[ConstraintSpec::fixed(NodeSelector::face(Face::XMin))],
         &[LoadSpec::Gravity {
             g: [0.0, 0.0, -9.81],
         }],
@@ -312,12 +309,30 @@ fn explicit_implicit_and_static_reach_the_same_equilibrium() {
         solve_static(&p, &mut st, &StaticOptions::default()).unwrap();
         let t_end = 0.3;
 
-        let mut ex = integrator_by_name("explicit", &p, None, false).unwrap();
+        let mut ex = Integrators::default()
+            .build(
+                "explicit",
+                &p,
+                &IntegratorSettings {
+                    dt: None,
+                    ..Default::default()
+                },
+            )
+            .unwrap();
         let mut se = State::at_rest(p.model());
         while se.time < t_end {
             ex.step(&p, &mut se).unwrap();
         }
-        let mut im = integrator_by_name("implicit", &p, Some(2e-3), false).unwrap();
+        let mut im = Integrators::default()
+            .build(
+                "implicit",
+                &p,
+                &IntegratorSettings {
+                    dt: Some(2e-3),
+                    ..Default::default()
+                },
+            )
+            .unwrap();
         let mut si = State::at_rest(p.model());
         while si.time < t_end {
             im.step(&p, &mut si).unwrap();
@@ -455,7 +470,16 @@ fn nan_load_is_detected_by_every_solver() {
     let t_bad = 25.5 * dt;
     let p = damped_cantilever(10.0).with_load(Box::new(NanAfter(t_bad)));
     for name in ["verlet", "symplectic-euler", "implicit"] {
-        let mut it = integrator_by_name(name, &p, Some(dt), false).unwrap();
+        let mut it = Integrators::default()
+            .build(
+                name,
+                &p,
+                &IntegratorSettings {
+                    dt: Some(dt),
+                    ..Default::default()
+                },
+            )
+            .unwrap();
         let mut s = State::at_rest(p.model());
         let mut failed = false;
         for k in 0..100 {
@@ -523,10 +547,9 @@ fn empty_selection_is_a_typed_error() {
     let mat = Material::new(1000.0, 0.3, 1.0).unwrap();
     let err = Problem::from_specs(
         cantilever([4, 1, 1], mat),
-        &[ConstraintSpec::fixed(NodeSelector::Box {
-            min: [5.0; 3],
-            max: [6.0; 3],
-        })],
+        &[ConstraintSpec::fixed(NodeSelector::boxed(
+            [5.0; 3], [6.0; 3],
+        ))],
         &[],
         Damping::NONE,
     )
@@ -543,9 +566,7 @@ fn large_deflection_static_solve_takes_few_newton_iterations() {
     let mat = Material::new(1000.0, 0.3, 3.125).unwrap();
     let p = Problem::from_specs(
         cantilever([16, 4, 4], mat),
-        &[ConstraintSpec::fixed(NodeSelector::BoundingFace(
-            Face::XMin,
-        ))],
+        &[ConstraintSpec::fixed(NodeSelector::face(Face::XMin))],
         &[LoadSpec::Gravity {
             g: [0.0, 0.0, -9.81],
         }],

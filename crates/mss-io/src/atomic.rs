@@ -45,7 +45,7 @@ pub enum IoError {
 
 impl IoError {
     /// Shorthand for [`IoError::InvalidData`].
-    pub(crate) fn invalid(path: &Path, reason: impl Into<String>) -> Self {
+    pub fn invalid(path: &Path, reason: impl Into<String>) -> Self {
         IoError::InvalidData {
             path: path.to_path_buf(),
             reason: reason.into(),
@@ -53,7 +53,7 @@ impl IoError {
     }
 
     /// Shorthand for [`IoError::Io`].
-    pub(crate) fn io(path: &Path, source: io::Error) -> Self {
+    pub fn io(path: &Path, source: io::Error) -> Self {
         IoError::Io {
             path: path.to_path_buf(),
             source,

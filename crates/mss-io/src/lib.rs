@@ -1,9 +1,8 @@
 //! # mss-io
 //!
 //! File formats of the hexahedral MSS: lattice frames as VTK (XML `.vtu`,
-//! legacy `.vtk`, `.pvd` time series), skins as OBJ and binary STL, scene files
-//! (TOML), and experiment reports. Every file is written to a temporary name and
-//! renamed when complete ([`atomic::write_atomic`]), so an interrupted run never
+//! legacy `.vtk`, `.pvd` time series) and skins as OBJ and binary STL. Every
+//! file is written to a temporary name and renamed when complete ([`atomic::write_atomic`]), so an interrupted run never
 //! leaves a half-written file.
 //!
 //! The writers take plain slices (`[f64; 3]` positions, `[u32; 8]` cells in
@@ -35,8 +34,7 @@
 //! ```
 
 pub mod atomic;
-pub mod report;
-pub mod scene;
+pub mod exporters;
 pub mod skin;
 pub mod vtk;
 

@@ -206,12 +206,13 @@ pub enum SkinFrames {
     LastOnly,
 }
 
-/// A writer of skins over a run, chosen by name ([`skin_exporter_by_name`]).
+/// A writer of skins over a run, the plug point for skin formats, registered
+/// by name in [`Exporters`](crate::exporters::Exporters).
 ///
 /// The caller calls [`write_skin`](Self::write_skin) with strictly increasing
 /// frame indices, then [`finish`](Self::finish) once.
-pub trait SkinExporter {
-    /// The name this exporter is selected by (one of [`SKIN_EXPORTERS`]).
+pub trait SkinExporter: Send {
+    /// The name this exporter is registered under.
     fn name(&self) -> &'static str;
     /// Writes the skin of frame `frame_index` at simulated time `time`.
     fn write_skin(
@@ -223,31 +224,6 @@ pub trait SkinExporter {
     ) -> Result<(), IoError>;
     /// Completes the series. Idempotent.
     fn finish(&mut self) -> Result<(), IoError>;
-}
-
-/// Names accepted by [`skin_exporter_by_name`].
-pub const SKIN_EXPORTERS: &[&str] = &["obj", "stl"];
-
-/// Creates the skin exporter called `name` (`obj` or `stl`) writing into `dir`
-/// (created if missing).
-pub fn skin_exporter_by_name(
-    name: &str,
-    dir: &Path,
-    prefix: &str,
-    frames: SkinFrames,
-) -> Result<Box<dyn SkinExporter>, IoError> {
-    let format = match name {
-        "obj" => SkinFormat::Obj,
-        "stl" => SkinFormat::Stl,
-        _ => {
-            return Err(IoError::UnknownExporter {
-                kind: "skin",
-                name: name.to_string(),
-                known: SKIN_EXPORTERS.join(", "),
-            });
-        }
-    };
-    Ok(Box::new(SkinSeries::new(dir, prefix, format, frames)?))
 }
 
 /// The built-in skin exporter: OBJ or STL files, every frame or the last one.
@@ -359,6 +335,10 @@ mod tests {
         assert!(err.to_string().contains("vertex 3"), "{err}");
         assert!(write_stl(&path, &[[0.0; 3]; 3], &[]).is_err());
         assert!(!path.exists());
-        assert!(skin_exporter_by_name("ply", dir.path(), "s", SkinFrames::Every).is_err());
+        assert!(
+            crate::exporters::Exporters::default()
+                .skins("ply", dir.path(), "s", SkinFrames::Every)
+                .is_err()
+        );
     }
 }

@@ -3,10 +3,10 @@
 //! tobj (and parsed exactly), binary STL read with stl_io.
 
 use mss_io::IoError;
-use mss_io::skin::{SkinFrames, skin_exporter_by_name, vertex_normals, write_obj, write_stl};
+use mss_io::exporters::Exporters;
+use mss_io::skin::{SkinFrames, vertex_normals, write_obj, write_stl};
 use mss_io::vtk::{
-    Field, LatticeFrame, LegacyFormat, VtuEncoding, exporter_by_name, write_legacy_vtk,
-    write_lines_vtu, write_vtu,
+    Field, LatticeFrame, LegacyFormat, VtuEncoding, write_legacy_vtk, write_lines_vtu, write_vtu,
 };
 use std::collections::HashMap;
 use std::path::Path;
@@ -264,7 +264,7 @@ fn vtu_series_keeps_a_valid_pvd_after_every_frame() {
     let s = sample();
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out/nested");
-    let mut exporter = exporter_by_name("vtu", &out, "run").unwrap();
+    let mut exporter = Exporters::default().frames("vtu", &out, "run").unwrap();
     assert_eq!(exporter.name(), "vtu");
     let times = [0.0, 0.125, 1.0 / 3.0, 2.5e-7];
     for (k, &t) in times.iter().enumerate() {
@@ -291,9 +291,12 @@ fn vtu_series_keeps_a_valid_pvd_after_every_frame() {
 fn every_frame_exporter_writes_readable_files() {
     let s = sample();
     let dir = tempfile::tempdir().unwrap();
-    for name in mss_io::vtk::FRAME_EXPORTERS {
-        let mut e = exporter_by_name(name, dir.path(), name).unwrap();
-        assert_eq!(e.name(), *name);
+    let exporters = Exporters::default();
+    for name in exporters.frame_names() {
+        let name = name.as_str();
+        let mut e = exporters.frames(name, dir.path(), name).unwrap();
+        // "vtu-no-pvd" writes the frames of "vtu", without the collection.
+        assert_eq!(e.name(), name.trim_end_matches("-no-pvd"));
         e.write_frame(0, 0.0, &frame(&s)).unwrap();
         e.write_frame(1, 0.5, &frame(&s)).unwrap();
         e.finish().unwrap();
@@ -309,14 +312,16 @@ fn every_frame_exporter_writes_readable_files() {
             );
         }
     }
-    match exporter_by_name("vtp", dir.path(), "x") {
+    assert!(dir.path().join("vtu.pvd").exists());
+    assert!(!dir.path().join("vtu-no-pvd.pvd").exists());
+    match exporters.frames("vtp", dir.path(), "x") {
         Err(IoError::UnknownExporter { known, .. }) => assert!(known.contains("vtu-ascii")),
         other => panic!(
             "expected UnknownExporter, got {:?}",
             other.map(|e| e.name())
         ),
     }
-    assert!(exporter_by_name("vtu", dir.path(), "a/b").is_err());
+    assert!(exporters.frames("vtu", dir.path(), "a/b").is_err());
 }
 
 #[test]
@@ -435,8 +440,13 @@ fn stl_round_trips_with_stl_io() {
 fn skin_exporters_write_every_frame_or_the_last() {
     let (mut p, t) = octahedron();
     let dir = tempfile::tempdir().unwrap();
-    let mut every = skin_exporter_by_name("obj", dir.path(), "skin", SkinFrames::Every).unwrap();
-    let mut last = skin_exporter_by_name("stl", dir.path(), "last", SkinFrames::LastOnly).unwrap();
+    let exporters = Exporters::default();
+    let mut every = exporters
+        .skins("obj", dir.path(), "skin", SkinFrames::Every)
+        .unwrap();
+    let mut last = exporters
+        .skins("stl", dir.path(), "last", SkinFrames::LastOnly)
+        .unwrap();
     for k in 0..3 {
         p[4][2] = 1.0 + k as f64;
         every.write_skin(k, k as f64, &p, &t).unwrap();

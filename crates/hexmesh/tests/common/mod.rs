@@ -6,9 +6,9 @@ use std::path::PathBuf;
 
 use hexmesh::{Lattice, TriMesh};
 
-/// The Stanford bunny shipped beside the workspace (CI has it).
+/// The Stanford bunny committed as test data (`data/meshes/bunny.obj`).
 pub fn bunny_path() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/bunny.obj")
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../data/meshes/bunny.obj")
 }
 
 /// The bunny, loaded and cleaned.

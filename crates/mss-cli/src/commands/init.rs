@@ -34,7 +34,7 @@ pub fn run(args: &InitArgs, global: &GlobalArgs) -> anyhow::Result<()> {
         );
     }
     mss_io::atomic::write_atomic(path, |w| {
-        w.write_all(mss_io::scene::TEMPLATE_SCENE_TOML.as_bytes())
+        w.write_all(mss_scene::scene::TEMPLATE_SCENE_TOML.as_bytes())
     })
     .with_context(|| format!("cannot write the template scene {}", path.display()))?;
     if global.chatty() {

@@ -7,11 +7,13 @@ use std::time::Instant;
 
 use anyhow::{Context, bail};
 use clap::Args;
-use mss_io::scene::{KeepComponents, MeshSource, VoxelResolution};
 use mss_io::vtk::{Field, LatticeFrame, VtuEncoding, write_lines_vtu, write_vtu};
+use mss_scene::scene::{KeepComponents, MeshSource, OccupancyKind, VoxelizeSection};
+use mss_scene::{Progress, Registry};
 use serde::Serialize;
 
-use crate::{GlobalArgs, progress, setup};
+use crate::GlobalArgs;
+use crate::progress::JobBars;
 
 /// Arguments of `mss voxelize`.
 #[derive(Debug, Clone, Args)]
@@ -27,8 +29,8 @@ pub struct VoxelizeArgs {
     pub size: Option<f64>,
     /// Occupancy rule: centre (cell centre inside), any (cell overlaps the
     /// solid), fraction (at least --fraction of the cell inside).
-    #[arg(long, value_name = "RULE", default_value = "centre")]
-    pub rule: String,
+    #[arg(long, value_name = "RULE", default_value = "centre", value_parser = parse_rule)]
+    pub rule: OccupancyKind,
     /// Minimum inside fraction for --rule fraction.
     #[arg(long, value_name = "F", default_value_t = 0.5)]
     pub fraction: f64,
@@ -36,13 +38,17 @@ pub struct VoxelizeArgs {
     #[arg(long)]
     pub all_components: bool,
     /// Refuse lattices with more cells than this.
-    #[arg(long, value_name = "N", default_value_t = 2_000_000)]
+    #[arg(long, value_name = "N", default_value_t = VoxelizeSection::default().max_cells)]
     pub max_cells: u64,
     /// Also write the springs as lines: springs.vtu (rest_length, diagonal).
     // No strain or stiffness here: those need a material and a deformed
     // state; a scene's `[output] springs` writes them per frame.
     #[arg(long)]
     pub springs: bool,
+}
+
+fn parse_rule(s: &str) -> Result<OccupancyKind, String> {
+    s.parse()
 }
 
 /// What `mss voxelize` measured (printed, and written as `stats.json`).
@@ -87,41 +93,44 @@ pub struct VoxelizeSummary {
 /// Runs `mss voxelize`.
 pub fn run(args: &VoxelizeArgs, global: &GlobalArgs) -> anyhow::Result<()> {
     let out_dir = global.out.clone().unwrap_or_else(|| PathBuf::from("out"));
-    let resolution = match (args.cells, args.size) {
-        (_, Some(h)) => VoxelResolution::CellSize(h),
-        (Some(n), None) => VoxelResolution::Cells(n),
-        (None, None) => VoxelResolution::Cells(mss_io::scene::DEFAULT_CELLS),
-    };
     if !(args.fraction > 0.0 && args.fraction <= 1.0) {
         bail!("--fraction {}: must be in (0, 1]", args.fraction);
     }
-    let components = if args.all_components {
-        KeepComponents::All
-    } else {
-        KeepComponents::Largest
+    if let Some(h) = args.size
+        && !(h.is_finite() && h > 0.0)
+    {
+        bail!("--size {h}: give a positive cell edge in metres");
+    }
+    if args.cells == Some(0) {
+        bail!("--cells 0: the number of cells along the longest axis must be at least 1");
+    }
+    // The same table a scene's [voxelize] is, so both mean the same.
+    let section = VoxelizeSection {
+        cells: args.cells,
+        cell_size: args.size,
+        rule: args.rule,
+        fraction: args.fraction,
+        components: if args.all_components {
+            KeepComponents::All
+        } else {
+            KeepComponents::Largest
+        },
+        max_cells: args.max_cells,
     };
-    let opts = setup::voxelize_options(
-        resolution,
-        &args.rule,
-        args.fraction,
-        components,
-        args.max_cells,
-    )?;
-    let source = match args.mesh.strip_prefix(mss_io::scene::BUILTIN_PREFIX) {
+    let opts = section.options();
+    let source = match args.mesh.strip_prefix(mss_scene::scene::BUILTIN_PREFIX) {
         Some(name) => MeshSource::Builtin(name.to_owned()),
         None => MeshSource::File(PathBuf::from(&args.mesh)),
     };
-    setup::prepare_output_folder(&out_dir)?;
+    mss_scene::build::prepare_output_folder(&out_dir)?;
     let t0 = Instant::now();
-    let (mesh_name, loaded) = setup::load_mesh(&source)?;
+    let (mesh_name, loaded) = mss_scene::build::load_mesh(&source, &Registry::default().loaders)?;
     let load_seconds = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
-    let vox = progress::voxelize_with_bar(
-        &loaded.mesh,
-        &opts,
-        &format!("voxelizing {mesh_name}"),
-        global.chatty(),
-    );
+    let bars = JobBars::new(&mesh_name, global.chatty());
+    let hook = |done: u64, total: u64| bars.report(Progress::Voxelizing { done, total });
+    let vox = hexmesh::voxelize_with_progress(&loaded.mesh, &opts, &hook);
+    bars.clear();
     let vox = vox.with_context(|| format!("cannot voxelize {mesh_name}"))?;
     let voxelize_seconds = t1.elapsed().as_secs_f64();
     let t2 = Instant::now();

@@ -141,10 +141,10 @@ impl<const N: usize> Scalar for Dual<N> {
     }
 }
 
-/// Correction-force constants of one cell (MODEL.md steps 4-5).
+/// Correction-force constants of one cell (docs/model.md steps 4-5).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct Correction {
-    /// `c` of MODEL.md step 4.
+    /// `c` of docs/model.md step 4.
     pub c: f64,
     /// Inverse of `(1 + c) I - c J`.
     pub minv: [[f64; 3]; 3],
@@ -311,7 +311,7 @@ fn hourglass_sign(n: usize, i: usize) -> f64 {
     corner_sign(n, (i + 1) % 3) * corner_sign(n, (i + 2) % 3)
 }
 
-/// The current cell axes `a_i` (normalized `axis_sum[i]`, MODEL.md step 2)
+/// The current cell axes `a_i` (normalized `axis_sum[i]`, docs/model.md step 2)
 /// and `1 / |axis_sum[i]|`.
 #[inline(always)]
 fn cell_axes<T: Scalar>(axis_sum: &[V3<T>; 3]) -> ([V3<T>; 3], [T; 3]) {

@@ -37,8 +37,8 @@ impl Default for ImplicitOptions {
     fn default() -> Self {
         Self {
             dt: 1e-3,
-            max_newton: 25,
-            rtol: 1e-8,
+            max_newton: super::DEFAULT_MAX_NEWTON,
+            rtol: super::DEFAULT_NEWTON_RTOL,
             max_halvings: 4,
         }
     }

@@ -3,8 +3,8 @@
 //!
 //! A [`Problem`] bundles a [`Model`] with its boundary conditions, loads and
 //! damping; a [`State`] holds positions, velocities and time. Time integrators
-//! implement the [`Integrator`] plugin trait ([`integrator_by_name`] builds the
-//! built-ins); [`solve_static`] finds equilibrium.
+//! implement the [`Integrator`] plugin trait, registered by name in an
+//! [`Integrators`] value; [`solve_static`] finds equilibrium.
 //!
 //! Every solver checks for divergence (non-finite values, exploding motion,
 //! inverted cells, Newton failure) and then returns a typed [`SolverError`]
@@ -23,7 +23,7 @@
 //! let model = Model::new(&lattice, Material::new(1000.0, 0.3, 0.01).unwrap(), &PaperModel).unwrap();
 //! let problem = Problem::from_specs(
 //!     model,
-//!     &[ConstraintSpec::fixed(NodeSelector::BoundingFace(Face::XMin))],
+//!     &[ConstraintSpec::fixed(NodeSelector::face(Face::XMin))],
 //!     &[LoadSpec::Gravity { g: [0.0, 0.0, -9.81] }],
 //!     Damping::NONE,
 //! ).unwrap();
@@ -379,12 +379,12 @@ pub enum SolverError {
     #[error("invalid solver option: {0}")]
     BadOption(String),
     /// No integrator of that name.
-    #[error("unknown integrator \"{name}\"; known: {known:?}")]
+    #[error("unknown integrator \"{name}\"; use one of {known}")]
     UnknownIntegrator {
         /// Name given.
         name: String,
-        /// Names accepted.
-        known: &'static [&'static str],
+        /// Names accepted, comma-separated.
+        known: String,
     },
     /// The state does not fit the model.
     #[error(
@@ -436,8 +436,94 @@ const STATIC_HINT: &str =
     "Try more load steps (StaticOptions::min_load_increment), a smaller load, or more fixed nodes.";
 
 /// A time-stepping scheme: the plugin point for integrators.
+///
+/// Contract, which the built-ins keep and every implementation must keep:
+/// - [`step`](Self::step) advances `state` by exactly [`dt`](Self::dt) (it may
+///   take sub-steps) and sets `state.time` accordingly;
+/// - held dofs are the constraints' business, not the forces': update only
+///   the components that [`Constraints::mask`] reports free (a held
+///   component's velocity and position are never changed by forces), then
+///   call [`Problem::apply_constraints`] at the new time, which puts
+///   prescribed dofs on their motion and keeps fixed ones at rest velocity;
+/// - external forces come from [`Problem::external_forces`], and damping
+///   ([`Problem::damping`]) acts as the forces `-alpha m v` and `-beta K0 v`;
+/// - it is deterministic: the same inputs give bitwise the same state for
+///   any thread count;
+/// - on failure it returns a [`SolverError`] and leaves `state` at the last
+///   good state (never a NaN).
+///
+/// ```
+/// use hexmesh::Lattice;
+/// use mss_core::constraints::{ConstraintSpec, Face, NodeSelector};
+/// use mss_core::loads::{Damping, LoadSpec};
+/// use mss_core::solver::{Integrator, IntegratorSettings, Integrators, Problem, SolverError, State, StepInfo};
+/// use mss_core::{Material, Model, PaperModel, Vec3};
+///
+/// /// Symplectic Euler written from outside, honouring the contract.
+/// struct MyEuler {
+///     dt: f64,
+///     f_int: Vec<Vec3>,
+///     f_ext: Vec<Vec3>,
+/// }
+/// impl Integrator for MyEuler {
+///     fn name(&self) -> &'static str {
+///         "my-euler"
+///     }
+///     fn dt(&self) -> f64 {
+///         self.dt
+///     }
+///     fn step(&mut self, problem: &Problem, state: &mut State) -> Result<StepInfo, SolverError> {
+///         let model = problem.model();
+///         model.internal_forces(&state.x, &mut self.f_int);
+///         self.f_ext.iter_mut().for_each(|f| *f = Vec3::zeros());
+///         problem.external_forces(state.time, &state.x, 1.0, &mut self.f_ext);
+///         let alpha = problem.damping().alpha;
+///         for n in 0..model.num_nodes() {
+///             let m = model.masses()[n];
+///             let a = (self.f_int[n] + self.f_ext[n] - alpha * m * state.v[n]) / m;
+///             let free = problem.constraints().mask(n).map(|held| !held);
+///             for d in (0..3).filter(|&d| free[d]) {
+///                 state.v[n][d] += self.dt * a[d];
+///                 state.x[n][d] += self.dt * state.v[n][d];
+///             }
+///         }
+///         state.time += self.dt;
+///         problem.apply_constraints(state);
+///         Ok(StepInfo { time: state.time, dt: self.dt, substeps: 1, newton_iterations: 0 })
+///     }
+/// }
+///
+/// let lattice = Lattice::block([4, 2, 2], 0.05, [0.0; 3]).unwrap();
+/// let model = Model::new(&lattice, Material::new(1e4, 0.3, 1000.0).unwrap(), &PaperModel).unwrap();
+/// let problem = Problem::from_specs(
+///     model,
+///     &[ConstraintSpec::fixed(NodeSelector::face(Face::XMin))],
+///     &[LoadSpec::Gravity { g: [0.0, 0.0, -9.81] }],
+///     Damping::NONE,
+/// )
+/// .unwrap();
+/// let mut known = Integrators::default();
+/// known.register(
+///     "my-euler",
+///     std::sync::Arc::new(|p: &Problem, s: &IntegratorSettings| {
+///         let n = p.model().num_nodes();
+///         let dt = s.dt.unwrap_or(mss_core::solver::explicit_time_step_limit(p, s.safety));
+///         Ok(Box::new(MyEuler { dt, f_int: vec![Vec3::zeros(); n], f_ext: vec![Vec3::zeros(); n] })
+///             as Box<dyn Integrator>)
+///     }),
+/// );
+/// let mut it = known.build("my-euler", &problem, &IntegratorSettings::default()).unwrap();
+/// let mut state = State::at_rest(problem.model());
+/// for _ in 0..10 {
+///     it.step(&problem, &mut state).unwrap();
+/// }
+/// // Held nodes stayed where they were; free ones fell.
+/// let rest = problem.model().rest_positions();
+/// assert!((0..rest.len()).all(|n| !problem.constraints().is_held(n, 2) || state.x[n] == rest[n]));
+/// assert!(state.x.iter().any(|p| p.z < -1e-9));
+/// ```
 pub trait Integrator: Send {
-    /// Short name (as accepted by [`integrator_by_name`] for the built-ins).
+    /// Short name (the name it is registered under in [`Integrators`]).
     fn name(&self) -> &'static str;
     /// Advances `state` by [`Integrator::dt`]. On error, `state` is left at the
     /// last good state.
@@ -446,49 +532,143 @@ pub trait Integrator: Send {
     fn dt(&self) -> f64;
 }
 
-/// Names accepted by [`integrator_by_name`].
-pub const INTEGRATOR_NAMES: &[&str] = &["explicit", "verlet", "symplectic-euler", "implicit"];
+/// Newton iteration limit per step or load increment of the implicit and
+/// static solvers, unless set otherwise (scenes: `[solver] max_iterations`).
+pub const DEFAULT_MAX_NEWTON: u32 = 50;
+/// Newton tolerance on the residual force relative to the largest force term,
+/// unless set otherwise (scenes: `[solver] tolerance`).
+pub const DEFAULT_NEWTON_RTOL: f64 = 1e-8;
 
-/// Builds a built-in integrator: `"explicit"` / `"verlet"` (velocity Verlet),
-/// `"symplectic-euler"`, or `"implicit"` (backward Euler). `dt` of `None` means
-/// the stable explicit step for explicit schemes, and 10 times it for the
-/// implicit one. Explicit schemes refuse a `dt` above the stability limit
-/// unless `substep` is true (then they sub-step and log a warning).
-pub fn integrator_by_name(
-    name: &str,
-    problem: &Problem,
-    dt: Option<f64>,
-    substep: bool,
-) -> Result<Box<dyn Integrator>, SolverError> {
-    match name {
-        "explicit" | "verlet" | "symplectic-euler" => {
-            let scheme = if name == "symplectic-euler" {
-                ExplicitScheme::SymplecticEuler
-            } else {
-                ExplicitScheme::VelocityVerlet
-            };
-            let opts = ExplicitOptions {
-                dt,
-                scheme,
-                substep,
-                ..ExplicitOptions::default()
-            };
-            Ok(Box::new(Explicit::new(problem, opts)?))
+/// What an integrator factory is given besides the problem (a scene's
+/// `[solver]` table, or a program's choice).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct IntegratorSettings {
+    /// Time step (s); `None` for the integrator's own choice (explicit: the
+    /// stable limit times `safety`; implicit: [`ImplicitOptions::default`]'s).
+    pub dt: Option<f64>,
+    /// Fraction of the stable explicit step used (0 < safety <= 1).
+    pub safety: f64,
+    /// Explicit schemes: if `dt` is above the stability limit, sub-step
+    /// instead of refusing.
+    pub substep: bool,
+    /// Newton tolerance (implicit schemes).
+    pub rtol: f64,
+    /// Newton iterations per step (implicit schemes).
+    pub max_newton: u32,
+}
+
+impl Default for IntegratorSettings {
+    fn default() -> Self {
+        Self {
+            dt: None,
+            safety: ExplicitOptions::default().safety,
+            substep: false,
+            rtol: DEFAULT_NEWTON_RTOL,
+            max_newton: DEFAULT_MAX_NEWTON,
         }
-        "implicit" => {
-            let dt = dt.unwrap_or_else(|| 10.0 * explicit_time_step_limit(problem, 0.9));
-            Ok(Box::new(Implicit::new(
-                problem,
-                ImplicitOptions {
-                    dt,
+    }
+}
+
+/// Builds an integrator for a problem: one entry of [`Integrators`].
+pub type IntegratorFactory = std::sync::Arc<
+    dyn Fn(&Problem, &IntegratorSettings) -> Result<Box<dyn Integrator>, SolverError> + Send + Sync,
+>;
+
+/// The time integrators a program knows, by name: a value that a program
+/// extends with its own and passes where names are resolved. No global state.
+///
+/// [`Integrators::default`] holds `"explicit"` (velocity Verlet, alias
+/// `"verlet"`), `"symplectic-euler"` and `"implicit"` (backward Euler).
+/// See [`Integrator`] for an example of a custom one.
+#[derive(Clone)]
+pub struct Integrators {
+    entries: Vec<(String, IntegratorFactory)>,
+}
+
+fn explicit_factory(scheme: ExplicitScheme) -> IntegratorFactory {
+    std::sync::Arc::new(move |problem: &Problem, s: &IntegratorSettings| {
+        let opts = ExplicitOptions {
+            dt: s.dt,
+            scheme,
+            safety: s.safety,
+            substep: s.substep,
+            ..ExplicitOptions::default()
+        };
+        Ok(Box::new(Explicit::new(problem, opts)?) as Box<dyn Integrator>)
+    })
+}
+
+impl Default for Integrators {
+    fn default() -> Self {
+        let mut known = Self {
+            entries: Vec::new(),
+        };
+        known.register("explicit", explicit_factory(ExplicitScheme::VelocityVerlet));
+        known.register("verlet", explicit_factory(ExplicitScheme::VelocityVerlet));
+        known.register(
+            "symplectic-euler",
+            explicit_factory(ExplicitScheme::SymplecticEuler),
+        );
+        known.register(
+            "implicit",
+            std::sync::Arc::new(|problem: &Problem, s: &IntegratorSettings| {
+                let opts = ImplicitOptions {
+                    dt: s.dt.unwrap_or(ImplicitOptions::default().dt),
+                    max_newton: s.max_newton,
+                    rtol: s.rtol,
                     ..ImplicitOptions::default()
-                },
-            )?))
+                };
+                Ok(Box::new(Implicit::new(problem, opts)?) as Box<dyn Integrator>)
+            }),
+        );
+        known
+    }
+}
+
+impl std::fmt::Debug for Integrators {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_list()
+            .entries(self.entries.iter().map(|(n, _)| n))
+            .finish()
+    }
+}
+
+impl Integrators {
+    /// Registers (or replaces) the integrator called `name`.
+    pub fn register(&mut self, name: &str, factory: IntegratorFactory) {
+        match self.entries.iter_mut().find(|(n, _)| n == name) {
+            Some(entry) => entry.1 = factory,
+            None => self.entries.push((name.to_owned(), factory)),
         }
-        _ => Err(SolverError::UnknownIntegrator {
-            name: name.to_string(),
-            known: INTEGRATOR_NAMES,
-        }),
+    }
+
+    /// The registered names, in registration order.
+    pub fn names(&self) -> Vec<String> {
+        self.entries.iter().map(|(n, _)| n.clone()).collect()
+    }
+
+    /// Whether `name` is registered.
+    pub fn contains(&self, name: &str) -> bool {
+        self.entries.iter().any(|(n, _)| n == name)
+    }
+
+    /// Builds the integrator `name` for `problem`.
+    pub fn build(
+        &self,
+        name: &str,
+        problem: &Problem,
+        settings: &IntegratorSettings,
+    ) -> Result<Box<dyn Integrator>, SolverError> {
+        let factory = self
+            .entries
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, f)| f)
+            .ok_or_else(|| SolverError::UnknownIntegrator {
+                name: name.to_owned(),
+                known: self.names().join(", "),
+            })?;
+        factory(problem, settings)
     }
 }
 

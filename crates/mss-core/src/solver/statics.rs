@@ -22,7 +22,7 @@ use crate::{BlockCsr, Vec3};
 /// Options of [`solve_static`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StaticOptions {
-    /// Relative residual to reach (default 1e-8).
+    /// Relative residual to reach (default [`super::DEFAULT_NEWTON_RTOL`]).
     pub rtol: f64,
     /// Newton iterations per load increment before the increment is halved.
     pub max_newton: u32,
@@ -35,8 +35,8 @@ pub struct StaticOptions {
 impl Default for StaticOptions {
     fn default() -> Self {
         Self {
-            rtol: 1e-8,
-            max_newton: 30,
+            rtol: super::DEFAULT_NEWTON_RTOL,
+            max_newton: super::DEFAULT_MAX_NEWTON,
             initial_load_increment: 1.0,
             min_load_increment: 1.0 / 1024.0,
         }

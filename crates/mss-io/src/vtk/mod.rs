@@ -1,7 +1,7 @@
 //! VTK output of lattice frames: XML `.vtu` ([`write_vtu`]), legacy `.vtk`
 //! ([`write_legacy_vtk`]), springs as line cells ([`write_lines_vtu`]), `.pvd`
 //! time-series collections ([`PvdWriter`]) and exporter plugins
-//! ([`FrameExporter`], [`exporter_by_name`]).
+//! ([`FrameExporter`], registered in [`crate::exporters::Exporters`]).
 //!
 //! A frame is plain borrowed data ([`LatticeFrame`]): point positions, hexahedra
 //! as `[u32; 8]` in VTK_HEXAHEDRON order, and named point and cell fields. Every
@@ -15,7 +15,7 @@ mod vtu;
 
 pub use legacy::{LegacyFormat, write_legacy_vtk};
 pub use pvd::{PvdEntry, PvdWriter};
-pub use series::{FRAME_EXPORTERS, FrameExporter, LegacyVtkSeries, VtuSeries, exporter_by_name};
+pub use series::{FrameExporter, LegacyVtkSeries, VtuSeries};
 pub use vtu::{VtuEncoding, write_lines_vtu, write_vtu};
 
 use crate::IoError;

@@ -5,15 +5,15 @@ use crate::IoError;
 use crate::atomic::{check_prefix, ensure_dir};
 use std::path::{Path, PathBuf};
 
-/// A writer of lattice frame series, chosen by name at run time
-/// ([`exporter_by_name`]).
+/// A writer of lattice frame series, the plug point for frame formats,
+/// registered by name in [`Exporters`](crate::exporters::Exporters).
 ///
 /// The caller calls [`write_frame`](Self::write_frame) with strictly
 /// increasing frame indices, then [`finish`](Self::finish) once. Every file is
 /// complete and valid as soon as `write_frame` returns, so an interrupted run
 /// keeps all frames written so far.
-pub trait FrameExporter {
-    /// The name this exporter is selected by (one of [`FRAME_EXPORTERS`]).
+pub trait FrameExporter: Send {
+    /// The name this exporter is registered under.
     fn name(&self) -> &'static str;
     /// Writes frame number `frame_index` at simulated time `time`.
     fn write_frame(
@@ -24,34 +24,6 @@ pub trait FrameExporter {
     ) -> Result<(), IoError>;
     /// Completes the series (e.g. final index files). Idempotent.
     fn finish(&mut self) -> Result<(), IoError>;
-}
-
-/// Names accepted by [`exporter_by_name`]:
-/// `vtu` (ZLib-compressed XML + `.pvd`), `vtu-base64`, `vtu-ascii`,
-/// `vtk` (legacy binary), `vtk-ascii` (legacy text).
-pub const FRAME_EXPORTERS: &[&str] = &["vtu", "vtu-base64", "vtu-ascii", "vtk", "vtk-ascii"];
-
-/// Creates the exporter called `name` (see [`FRAME_EXPORTERS`]) writing into
-/// `dir` (created if missing) with file names `PREFIX_NNNN.ext`.
-pub fn exporter_by_name(
-    name: &str,
-    dir: &Path,
-    prefix: &str,
-) -> Result<Box<dyn FrameExporter>, IoError> {
-    Ok(match name {
-        "vtu" => Box::new(VtuSeries::new(dir, prefix, VtuEncoding::Base64Zlib)?),
-        "vtu-base64" => Box::new(VtuSeries::new(dir, prefix, VtuEncoding::Base64)?),
-        "vtu-ascii" => Box::new(VtuSeries::new(dir, prefix, VtuEncoding::Ascii)?),
-        "vtk" => Box::new(LegacyVtkSeries::new(dir, prefix, LegacyFormat::Binary)?),
-        "vtk-ascii" => Box::new(LegacyVtkSeries::new(dir, prefix, LegacyFormat::Ascii)?),
-        _ => {
-            return Err(IoError::UnknownExporter {
-                kind: "frame",
-                name: name.to_string(),
-                known: FRAME_EXPORTERS.join(", "),
-            });
-        }
-    })
 }
 
 /// Refuses frame indices that do not increase, which would list a frame twice

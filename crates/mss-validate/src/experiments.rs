@@ -3,7 +3,7 @@
 //! virtual material tests. Results are plain structs; file formats live in
 //! `mss-io`.
 //!
-//! Error metric (MODEL.md, the paper's Figures 5 and 6): for every lattice node
+//! Error metric (docs/model.md, the paper's Figures 5 and 6): for every lattice node
 //! `e = |u_mss - u_ref| / max_nodes |u_ref| * 100 %`, reported as mean (M),
 //! population standard deviation (SD) and maximum (MAX) over the nodes.
 //!
@@ -18,14 +18,35 @@
 use hexmesh::Lattice;
 use thiserror::Error;
 
-use crate::constraints::{ConstraintSpec, Constraints, Motion, NodeSelector};
 use crate::fem::FemConstraints;
 use crate::fem::{Fem, FemError, FemLaw, NewtonOptions};
-use crate::loads::{Damping, Load, LoadSpec};
 use crate::material_test::{MaterialTestError, MeasuredMaterial, measure_material};
-use crate::model::parameterization_by_name;
-use crate::solver::{Problem, SolverError, State, StaticOptions, solve_static};
-use crate::{LinearSolveError, Material, MaterialError, Model, ModelError, Vec3};
+use mss_core::Parameterization;
+use mss_core::constraints::{ConstraintSpec, Constraints, Motion, NodeSelector};
+use mss_core::loads::{Damping, Load, LoadSpec};
+use mss_core::solver::{Problem, SolverError, State, StaticOptions, solve_static};
+use mss_core::{LinearSolveError, Material, MaterialError, Model, ModelError, Vec3};
+
+/// A parameterization shared by the runs of an experiment.
+pub type SharedParameterization = std::sync::Arc<dyn Parameterization>;
+
+/// The built-in parameterizations called `names` (each may end in `"+hg"`),
+/// for settings' `models`.
+///
+/// ```
+/// let models = mss_validate::experiments::builtin_models(&["paper", "volumetric+hg"]).unwrap();
+/// assert_eq!(models[1].name(), "volumetric+hg");
+/// assert!(mss_validate::experiments::builtin_models(&["magic"]).is_err());
+/// ```
+pub fn builtin_models(
+    names: &[&str],
+) -> Result<Vec<SharedParameterization>, mss_core::ParameterizationError> {
+    let known = mss_core::Parameterizations::default();
+    names
+        .iter()
+        .map(|n| known.get(n).map(SharedParameterization::from))
+        .collect()
+}
 
 /// Why an experiment failed.
 #[derive(Debug, Error)]
@@ -51,9 +72,6 @@ pub enum ExperimentError {
     /// Material test failed.
     #[error("material test: {0}")]
     MaterialTest(#[from] MaterialTestError),
-    /// Unknown parameterization name.
-    #[error("unknown parameterization {0:?}")]
-    Parameterization(String),
     /// An invalid experiment setting.
     #[error("{0}")]
     Setting(String),
@@ -131,7 +149,7 @@ pub fn error_stats(u: &[Vec3], u_ref: &[Vec3]) -> (Vec<f64>, ErrorStats) {
 /// One MSS run against the reference.
 #[derive(Debug, Clone)]
 pub struct RunResult {
-    /// Parameterization name ("paper", "springs", "volumetric").
+    /// Parameterization name ([`Parameterization::name`], e.g. "paper").
     pub model: String,
     /// Cells along each axis of the lattice's grid.
     pub dims: [u32; 3],
@@ -184,7 +202,7 @@ pub struct BeamSettings {
     /// Cells across the thickness of the finest FEM reference (16 = 64x16x16).
     pub reference: u32,
     /// Parameterizations to run.
-    pub models: Vec<String>,
+    pub models: Vec<SharedParameterization>,
     /// Constitutive law of the FEM reference in the large regime (default,
     /// `None`: compressible neo-Hookean; the linear regime always uses linear
     /// elasticity).
@@ -368,12 +386,10 @@ impl Load for FixedForces {
 fn mss_solve(
     lattice: &Lattice,
     case: &Case,
-    model_name: &str,
+    param: &dyn Parameterization,
     regime: Regime,
 ) -> Result<Vec<Vec3>, ExperimentError> {
-    let param = parameterization_by_name(model_name)
-        .ok_or_else(|| ExperimentError::Parameterization(model_name.to_string()))?;
-    let model = Model::new(lattice, case.material, param.as_ref())?;
+    let model = Model::new(lattice, case.material, param)?;
     let f = lattice_loads(lattice, case)?;
     let fixed: Vec<bool> = lattice.nodes().iter().map(|&p| (case.clamp)(p)).collect();
     match regime {
@@ -408,16 +424,16 @@ fn mss_solve(
 fn run_case(
     lattice: &Lattice,
     case: &Case,
-    model: &str,
+    param: &dyn Parameterization,
     regime: Regime,
     u_ref: Vec<Vec3>,
 ) -> Result<RunResult, ExperimentError> {
     let t0 = std::time::Instant::now();
-    let u = mss_solve(lattice, case, model, regime)?;
+    let u = mss_solve(lattice, case, param, regime)?;
     let seconds = t0.elapsed().as_secs_f64();
     let (node_error, stats) = error_stats(&u, &u_ref);
     Ok(RunResult {
-        model: model.to_string(),
+        model: param.name(),
         dims: lattice.dims(),
         h: lattice.h(),
         stats,
@@ -486,7 +502,13 @@ pub fn beam(settings: &BeamSettings) -> Result<BeamResult, ExperimentError> {
     let mut runs = Vec::new();
     for model in &settings.models {
         for (l, u_ref) in lattices.iter().zip(&refs) {
-            runs.push(run_case(l, &case, model, settings.regime, u_ref.clone())?);
+            runs.push(run_case(
+                l,
+                &case,
+                model.as_ref(),
+                settings.regime,
+                u_ref.clone(),
+            )?);
         }
     }
     let q = settings.density * GRAVITY * BEAM_SIDE * BEAM_SIDE;
@@ -589,7 +611,7 @@ pub struct LShapeSettings {
     /// Cells per unit of the finest FEM reference.
     pub reference: u32,
     /// Parameterizations.
-    pub models: Vec<String>,
+    pub models: Vec<SharedParameterization>,
 }
 
 /// Results of the L-shape experiment.
@@ -676,7 +698,13 @@ pub fn lshape(settings: &LShapeSettings) -> Result<LShapeResult, ExperimentError
     let mut runs = Vec::new();
     for model in &settings.models {
         for (l, u_ref) in lattices.iter().zip(&refs) {
-            runs.push(run_case(l, &case, model, Regime::Linear, u_ref.clone())?);
+            runs.push(run_case(
+                l,
+                &case,
+                model.as_ref(),
+                Regime::Linear,
+                u_ref.clone(),
+            )?);
         }
     }
     Ok(LShapeResult {
@@ -704,18 +732,16 @@ pub struct MaterialRow {
 /// Virtual material tests on an `n^3` unit block for each nu and model.
 pub fn material(
     poissons: &[f64],
-    models: &[String],
+    models: &[SharedParameterization],
     n: u32,
 ) -> Result<Vec<MaterialRow>, ExperimentError> {
     let mut rows = Vec::new();
-    for model in models {
-        let param = parameterization_by_name(model)
-            .ok_or_else(|| ExperimentError::Parameterization(model.clone()))?;
+    for param in models {
         for &nu in poissons {
             let m = Material::new(1000.0, nu, 1.0)?;
             let measured = measure_material(m, param.as_ref(), n)?;
             rows.push(MaterialRow {
-                model: model.clone(),
+                model: param.name(),
                 poisson: nu,
                 measured,
                 exact_shear: m.shear_modulus(),
@@ -750,7 +776,7 @@ pub struct SceneSettings {
     /// Linear, large deformation, or automatic.
     pub regime: RegimeChoice,
     /// Parameterizations to compare.
-    pub models: Vec<String>,
+    pub models: Vec<SharedParameterization>,
 }
 
 /// Results of [`scene`].
@@ -814,7 +840,7 @@ fn fine_selection(
 ) -> Result<Vec<u32>, ExperimentError> {
     let fine = fem.lattice();
     match select {
-        NodeSelector::Indices(_) => {
+        NodeSelector::Indices { .. } => {
             let coarse: Vec<Vec3> = lattice.nodes().iter().map(|&p| Vec3::from(p)).collect();
             let nodes = select
                 .select_checked(&coarse, lattice.h())
@@ -933,8 +959,7 @@ pub fn scene(
             settings.refine
         )));
     }
-    let first = parameterization_by_name(&settings.models[0])
-        .ok_or_else(|| ExperimentError::Parameterization(settings.models[0].clone()))?;
+    let first = &settings.models[0];
     // Nodal forces of the `force` loads, as the MSS distributes them.
     let model0 = Model::new(lattice, material, first.as_ref())?;
     let rest = model0.rest_positions().to_vec();
@@ -964,7 +989,7 @@ pub fn scene(
         RegimeChoice::Auto => {
             let (fem, u) = fem_at(settings.refine, FemLaw::Linear)?;
             let umax = u.iter().map(|v| v.norm()).fold(0.0, f64::max);
-            let (lo, hi) = crate::constraints::node_bounds(&rest);
+            let (lo, hi) = mss_core::constraints::node_bounds(&rest);
             let diag = (0..3).map(|k| (hi[k] - lo[k]).powi(2)).sum::<f64>().sqrt();
             let ratio = umax / diag.max(f64::MIN_POSITIVE);
             let regime = if ratio > AUTO_LARGE_FRACTION {
@@ -1017,9 +1042,7 @@ pub fn scene(
         seconds: t0.elapsed().as_secs_f64(),
     };
     let mut runs = Vec::new();
-    for name in &settings.models {
-        let param = parameterization_by_name(name)
-            .ok_or_else(|| ExperimentError::Parameterization(name.clone()))?;
+    for param in &settings.models {
         let t = std::time::Instant::now();
         let model = Model::new(lattice, material, param.as_ref())?;
         let problem = Problem::from_specs(model, constraints, loads, Damping::NONE)
@@ -1049,7 +1072,7 @@ pub fn scene(
         let seconds = t.elapsed().as_secs_f64();
         let (node_error, stats) = error_stats(&u, &u_ref);
         runs.push(RunResult {
-            model: name.clone(),
+            model: param.name(),
             dims: lattice.dims(),
             h: lattice.h(),
             stats,

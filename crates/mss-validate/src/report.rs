@@ -1,12 +1,12 @@
 //! Experiment reports: Markdown sections, CSV tables, SVG line plots and VTU
-//! files of the results computed by `mss_core::experiments`.
+//! files of the results computed by `crate::experiments`.
 //!
 //! Every file is written atomically. SVG plots are drawn directly (polylines,
 //! axes with ticks, a legend; optional log-log axes), so no font or plotting
 //! library is needed.
 //!
 //! ```
-//! use mss_io::report::{Series, svg_line_plot};
+//! use mss_validate::report::{Series, svg_line_plot};
 //! let dir = tempfile::tempdir().unwrap();
 //! let p = dir.path().join("plot.svg");
 //! let s = Series { label: "y = x^2".into(), points: vec![(1.0, 1.0), (2.0, 4.0)], dashed: false };
@@ -17,13 +17,11 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use mss_core::experiments::{
-    BeamResult, LShapeResult, MaterialRow, Regime, RunResult, SceneResult,
-};
+use crate::experiments::{BeamResult, LShapeResult, MaterialRow, Regime, RunResult, SceneResult};
 
-use crate::IoError;
-use crate::atomic::write_atomic;
-use crate::vtk::{Field, LatticeFrame, VtuEncoding, write_vtu};
+use mss_io::IoError;
+use mss_io::atomic::write_atomic;
+use mss_io::vtk::{Field, LatticeFrame, VtuEncoding, write_vtu};
 
 /// One curve of a plot.
 #[derive(Debug, Clone, PartialEq)]
@@ -340,7 +338,7 @@ const STATS_HEADER: [&str; 9] = [
 
 /// How a reference was computed, for the reports: law, grid, extrapolation
 /// (from the half `halved`, "resolution" or "refinement") and time.
-fn reference_phrase(info: &mss_core::experiments::ReferenceInfo, halved: &str) -> String {
+fn reference_phrase(info: &crate::experiments::ReferenceInfo, halved: &str) -> String {
     format!(
         "Q1 FEM ({:?}) on {} cells{}, {:.1} s",
         info.law,

@@ -4,15 +4,16 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::Context;
 use hexmesh::{Embedding, Lattice, Skin, TriMesh};
 use mss_core::solver::{Problem, State};
 use mss_core::{SpringSet, Vec3};
-use mss_io::scene::OutputSection;
-use mss_io::vtk::{
-    Field, FrameExporter, LatticeFrame, PvdWriter, VtuEncoding, VtuSeries, exporter_by_name,
-    write_lines_vtu,
-};
+use mss_io::IoError;
+use mss_io::exporters::Exporters;
+use mss_io::skin::{SkinExporter, SkinFrames};
+use mss_io::vtk::{Field, FrameExporter, LatticeFrame, PvdWriter, VtuEncoding, write_lines_vtu};
+
+use crate::error::JobError;
+use crate::scene::OutputSection;
 
 /// File name stem of the lattice frames (`lattice_0000.vtu`, `lattice.pvd`).
 pub const LATTICE_PREFIX: &str = "lattice";
@@ -31,17 +32,24 @@ struct SpringsOutput {
     pvd: Option<PvdWriter>,
 }
 
+/// The input surface carried by the lattice, and its exporter.
+struct EmbeddedOutput {
+    embedding: Embedding,
+    triangles: Vec<[u32; 3]>,
+    exporter: Box<dyn SkinExporter>,
+}
+
 /// Writes the frames of one run into one folder.
 pub struct FrameWriter {
     dir: PathBuf,
-    vtu: Option<Box<dyn FrameExporter>>,
+    /// Lattice frame exporters with the extension of the files they write
+    /// (`None` for custom exporters, whose files are not counted).
+    lattice: Vec<(Box<dyn FrameExporter>, Option<&'static str>)>,
     /// Whether the `.vtu` series keeps `lattice.pvd` (`[output] pvd`).
     lattice_pvd: bool,
-    vtk: Option<Box<dyn FrameExporter>>,
     skin: Option<Skin>,
-    skin_obj: bool,
-    skin_stl: bool,
-    embedded: Option<(Embedding, Vec<[u32; 3]>)>,
+    skin_exporters: Vec<(Box<dyn SkinExporter>, &'static str)>,
+    embedded: Option<EmbeddedOutput>,
     springs: Option<SpringsOutput>,
     cells: Vec<[u32; 8]>,
     next_index: usize,
@@ -54,28 +62,40 @@ fn to_arr(v: &[Vec3]) -> Vec<[f64; 3]> {
 }
 
 impl FrameWriter {
-    /// Prepares the writers the `[output]` table asks for (the folder must exist).
+    /// Prepares the writers the `[output]` table asks for, from `exporters`
+    /// (the folder must exist).
     pub fn new(
         dir: &Path,
         out: &OutputSection,
+        exporters: &Exporters,
         lattice: &Lattice,
         mesh: &TriMesh,
-    ) -> anyhow::Result<Self> {
-        let vtu: Option<Box<dyn FrameExporter>> = match (out.vtu, out.pvd) {
-            (false, _) => None,
-            (true, true) => Some(exporter_by_name("vtu", dir, LATTICE_PREFIX)?),
-            (true, false) => Some(Box::new(
-                VtuSeries::new(dir, LATTICE_PREFIX, VtuEncoding::Base64Zlib)?.without_pvd(),
-            )),
-        };
-        let vtk = if out.vtk {
-            Some(exporter_by_name("vtk", dir, LATTICE_PREFIX)?)
-        } else {
-            None
-        };
+    ) -> Result<Self, JobError> {
+        let mut lattice_exporters = Vec::new();
+        if out.vtu {
+            let name = if out.pvd { "vtu" } else { "vtu-no-pvd" };
+            lattice_exporters.push((exporters.frames(name, dir, LATTICE_PREFIX)?, Some("vtu")));
+        }
+        if out.vtk {
+            lattice_exporters.push((exporters.frames("vtk", dir, LATTICE_PREFIX)?, Some("vtk")));
+        }
+        for name in &out.exporters {
+            lattice_exporters.push((exporters.frames(name, dir, LATTICE_PREFIX)?, None));
+        }
         let skin = (out.skin_obj || out.skin_stl).then(|| hexmesh::boundary_skin(lattice));
+        let mut skin_exporters = Vec::new();
+        for (on, name) in [(out.skin_obj, "obj"), (out.skin_stl, "stl")] {
+            if on {
+                let e = exporters.skins(name, dir, SKIN_PREFIX, SkinFrames::Every)?;
+                skin_exporters.push((e, name));
+            }
+        }
         let embedded = if out.embedded {
-            Some((Embedding::new(lattice, mesh), mesh.triangles.clone()))
+            Some(EmbeddedOutput {
+                embedding: Embedding::new(lattice, mesh),
+                triangles: mesh.triangles.clone(),
+                exporter: exporters.skins("obj", dir, SURFACE_PREFIX, SkinFrames::Every)?,
+            })
         } else {
             None
         };
@@ -87,12 +107,10 @@ impl FrameWriter {
         });
         Ok(Self {
             dir: dir.to_path_buf(),
-            vtu,
-            lattice_pvd: out.pvd,
-            vtk,
+            lattice: lattice_exporters,
+            lattice_pvd: out.vtu && out.pvd,
             skin,
-            skin_obj: out.skin_obj,
-            skin_stl: out.skin_stl,
+            skin_exporters,
             embedded,
             springs,
             cells: lattice.cells().to_vec(),
@@ -118,7 +136,7 @@ impl FrameWriter {
     }
 
     /// Writes one frame of `state` (time `state.time`).
-    pub fn write(&mut self, problem: &Problem, state: &State) -> anyhow::Result<()> {
+    pub fn write(&mut self, problem: &Problem, state: &State) -> Result<(), JobError> {
         let model = problem.model();
         let n = model.num_nodes();
         let index = self.next_index;
@@ -145,7 +163,7 @@ impl FrameWriter {
         let vol: Vec<f64> = diag.iter().map(|d| d.volumetric_strain).collect();
         let shear: Vec<f64> = diag.iter().map(|d| d.shear_strain).collect();
         let corr: Vec<f64> = diag.iter().map(|d| d.correction_force).collect();
-        if self.vtu.is_some() || self.vtk.is_some() {
+        if !self.lattice.is_empty() {
             let frame = LatticeFrame::new(&points, &self.cells)
                 .with_point_field(Field::vectors("displacement", &displacement))
                 .with_point_field(Field::vectors("velocity", &velocity))
@@ -155,15 +173,12 @@ impl FrameWriter {
                 .with_cell_field(Field::scalars("volumetric_strain", &vol))
                 .with_cell_field(Field::scalars("shear_strain", &shear))
                 .with_cell_field(Field::scalars("correction_force", &corr));
-            for exporter in [self.vtu.as_mut(), self.vtk.as_mut()].into_iter().flatten() {
-                exporter.write_frame(index, state.time, &frame)?;
-            }
             let mut written = Vec::new();
-            if self.vtu.is_some() {
-                written.push(self.dir.join(format!("{LATTICE_PREFIX}_{index:04}.vtu")));
-            }
-            if self.vtk.is_some() {
-                written.push(self.dir.join(format!("{LATTICE_PREFIX}_{index:04}.vtk")));
+            for (exporter, ext) in &mut self.lattice {
+                exporter.write_frame(index, state.time, &frame)?;
+                if let Some(ext) = ext {
+                    written.push(self.dir.join(format!("{LATTICE_PREFIX}_{index:04}.{ext}")));
+                }
             }
             for p in written {
                 self.count(&p);
@@ -171,25 +186,20 @@ impl FrameWriter {
         }
         if let Some(skin) = &self.skin {
             let pos = skin.positions(&points);
-            let tris = skin.triangles.clone();
-            if self.skin_obj {
-                let p = self.dir.join(format!("{SKIN_PREFIX}_{index:04}.obj"));
-                mss_io::skin::write_obj(&p, &pos, &tris)
-                    .with_context(|| format!("frame {index}: boundary skin"))?;
-                self.count(&p);
+            let mut written = Vec::new();
+            for (exporter, ext) in &mut self.skin_exporters {
+                exporter.write_skin(index, state.time, &pos, &skin.triangles)?;
+                written.push(self.dir.join(format!("{SKIN_PREFIX}_{index:04}.{ext}")));
             }
-            if self.skin_stl {
-                let p = self.dir.join(format!("{SKIN_PREFIX}_{index:04}.stl"));
-                mss_io::skin::write_stl(&p, &pos, &tris)
-                    .with_context(|| format!("frame {index}: boundary skin"))?;
+            for p in written {
                 self.count(&p);
             }
         }
-        if let Some((embedding, tris)) = &self.embedded {
-            let pos = embedding.deform(&points);
+        if let Some(e) = &mut self.embedded {
+            let pos = e.embedding.deform(&points);
+            e.exporter
+                .write_skin(index, state.time, &pos, &e.triangles)?;
             let p = self.dir.join(format!("{SURFACE_PREFIX}_{index:04}.obj"));
-            mss_io::skin::write_obj(&p, &pos, tris)
-                .with_context(|| format!("frame {index}: embedded surface"))?;
             self.count(&p);
         }
         if self.springs.is_some() {
@@ -206,18 +216,18 @@ impl FrameWriter {
         problem: &Problem,
         state: &State,
         points: &[[f64; 3]],
-    ) -> anyhow::Result<()> {
+    ) -> Result<(), JobError> {
         let Some(out) = self.springs.as_mut() else {
             return Ok(());
         };
         let set = out
             .set
             .get_or_insert_with(|| SpringSet::new(problem.model()));
-        let strain = set
-            .strains(&state.x)
-            .with_context(|| format!("frame {index}: springs"))?;
         let file = format!("{SPRINGS_PREFIX}_{index:04}.vtu");
         let path = self.dir.join(&file);
+        let strain = set
+            .strains(&state.x)
+            .map_err(|e| IoError::invalid(&path, format!("frame {index}: springs: {e}")))?;
         write_lines_vtu(
             &path,
             points,
@@ -229,8 +239,7 @@ impl FrameWriter {
                 Field::flags("diagonal", &set.topology.diagonal),
             ],
             VtuEncoding::default(),
-        )
-        .with_context(|| format!("frame {index}: springs"))?;
+        )?;
         // `add_frame` rewrites the .pvd, like the lattice's, so that an
         // interrupted run still has a collection of what it wrote.
         if let Some(pvd) = out.pvd.as_mut() {
@@ -241,12 +250,18 @@ impl FrameWriter {
     }
 
     /// Completes the series (final `.pvd`).
-    pub fn finish(&mut self) -> anyhow::Result<()> {
-        for exporter in [self.vtu.as_mut(), self.vtk.as_mut()].into_iter().flatten() {
+    pub fn finish(&mut self) -> Result<(), JobError> {
+        for (exporter, _) in &mut self.lattice {
             exporter.finish()?;
         }
+        for (exporter, _) in &mut self.skin_exporters {
+            exporter.finish()?;
+        }
+        if let Some(e) = &mut self.embedded {
+            e.exporter.finish()?;
+        }
         let p = self.dir.join(format!("{LATTICE_PREFIX}.pvd"));
-        if self.vtu.is_some() && self.lattice_pvd {
+        if self.lattice_pvd && p.exists() {
             self.count(&p);
         }
         if let Some(pvd) = self.springs.as_ref().and_then(|s| s.pvd.as_ref())

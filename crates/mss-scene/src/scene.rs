@@ -7,12 +7,17 @@
 //! every error is one line naming the file, the line and column, and what is
 //! wrong (for an unknown key: the list of valid keys).
 //!
-//! This module only parses and checks what can be checked without the
-//! physics (ranges, consistency); the conversion to the library's parameter
-//! structs lives in the `mss` CLI (`setup.rs`), in one place.
+//! Tables deserialize into the libraries' own types where the library has
+//! one (`[material]` is [`mss_core::Material`], every `select` is a
+//! [`NodeSelector`]); the others are thin tables whose conversion sits beside
+//! them ([`LoadsSection::specs`], [`MotionSpec::constraint`],
+//! [`VoxelizeSection::options`], [`SolverSection::damping`]), and every
+//! default is the library's. This module checks what needs no physics
+//! (ranges, consistency); names (parameterization, integrator) are resolved
+//! against a [`Registry`](crate::Registry) when the job is built.
 //!
 //! ```
-//! use mss_io::scene::{Scene, SolverKind, VoxelResolution};
+//! use mss_scene::scene::{Scene, VoxelResolution};
 //! let scene = Scene::from_toml_str(
 //!     r#"
 //!     [mesh]
@@ -27,7 +32,7 @@
 //!     "example.toml",
 //! )
 //! .unwrap();
-//! assert_eq!(scene.solver.kind, SolverKind::Explicit);
+//! assert_eq!(scene.solver.kind, "explicit");
 //! assert_eq!(scene.voxelize.resolution(), VoxelResolution::Cells(24));
 //!
 //! let err = Scene::from_toml_str("[mesh]\npath = \"a.obj\"\ncolour = 1\n", "bad.toml")
@@ -40,6 +45,11 @@
 use std::fmt;
 use std::path::{Path, PathBuf};
 
+use hexmesh::voxelize::{ComponentPolicy, OccupancyRule, Resolution, VoxelizeOptions};
+use mss_core::Material;
+use mss_core::constraints::{ConstraintSpec, Dofs, Keyframe, Motion, NodeSelector};
+use mss_core::loads::{Damping, ForceDistribution, LoadSpec};
+use mss_core::solver::{DEFAULT_MAX_NEWTON, DEFAULT_NEWTON_RTOL, ExplicitOptions};
 use serde::Deserialize;
 use serde::de::{self, Deserializer, Visitor};
 use thiserror::Error;
@@ -57,6 +67,13 @@ pub const BUNDLED_MESH_PATH: &str = "../meshes/critter.obj";
 /// The bundled default scene (`data/scenes/default.toml`), run by `mss run`
 /// without arguments. Its mesh path is [`BUNDLED_MESH_PATH`].
 pub const DEFAULT_SCENE_TOML: &str = include_str!("../../../data/scenes/default.toml");
+
+/// The bundled default mesh (`data/meshes/critter.obj`), so that the default
+/// job runs from any folder.
+pub const BUNDLED_CRITTER_OBJ: &[u8] = include_bytes!("../../../data/meshes/critter.obj");
+
+/// Names of the bundled meshes (`"builtin:NAME"` in a scene).
+pub const BUILTIN_MESHES: &[&str] = &["critter"];
 
 /// The commented template scene (`data/scenes/template.toml`) written by `mss init`.
 pub const TEMPLATE_SCENE_TOML: &str = include_str!("../../../data/scenes/template.toml");
@@ -119,14 +136,15 @@ pub struct Scene {
     /// `[voxelize]`: how the surface becomes a cubic lattice.
     #[serde(default)]
     pub voxelize: VoxelizeSection,
-    /// `[material]`: elastic constants and density.
-    pub material: MaterialSection,
+    /// `[material]`: Young's modulus `young` (Pa), Poisson's ratio `poisson`
+    /// and density `density` (kg/m^3).
+    pub material: Material,
     /// `[model]`: the spring parameterization.
     #[serde(default)]
     pub model: ModelSection,
     /// `[[fixed]]`: node sets held at their rest positions.
     #[serde(default)]
-    pub fixed: Vec<Selector>,
+    pub fixed: Vec<NodeSelector>,
     /// `[loads]`: gravity, forces, tractions, drag springs.
     #[serde(default)]
     pub loads: LoadsSection,
@@ -161,6 +179,58 @@ pub enum KeepComponents {
     All,
 }
 
+/// The occupancy rule of `[voxelize] rule`: which grid cells become lattice
+/// cells.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum OccupancyKind {
+    /// The cell's centre is inside the surface (default).
+    #[default]
+    Centre,
+    /// The cell overlaps the solid.
+    Any,
+    /// At least `fraction` of the cell is inside.
+    Fraction,
+}
+
+impl OccupancyKind {
+    /// Every rule, by its scene name.
+    pub const ALL: [(&'static str, OccupancyKind); 3] = [
+        ("centre", OccupancyKind::Centre),
+        ("any", OccupancyKind::Any),
+        ("fraction", OccupancyKind::Fraction),
+    ];
+
+    /// The voxelizer's rule; `fraction` is the threshold of [`OccupancyKind::Fraction`].
+    pub fn rule(self, fraction: f64) -> OccupancyRule {
+        match self {
+            OccupancyKind::Centre => OccupancyRule::Centre,
+            OccupancyKind::Any => OccupancyRule::AnyOverlap,
+            OccupancyKind::Fraction => OccupancyRule::Fraction {
+                threshold: fraction,
+                samples_per_axis: 4,
+            },
+        }
+    }
+}
+
+impl std::str::FromStr for OccupancyKind {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Self::ALL
+            .iter()
+            .find(|(name, _)| *name == s)
+            .map(|(_, k)| *k)
+            .ok_or_else(|| {
+                format!(
+                    "unknown occupancy rule \"{s}\"; use one of {}",
+                    Self::ALL.map(|(n, _)| n).join(", ")
+                )
+            })
+    }
+}
+
 /// `[voxelize]`: how the surface becomes a lattice. Give `cells` or
 /// `cell_size`, not both; with neither, `cells = 24` ([`DEFAULT_CELLS`]).
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -173,27 +243,25 @@ pub struct VoxelizeSection {
     /// Occupancy rule: `"centre"` (cell centre inside the surface, default),
     /// `"any"` (cell overlaps the solid), `"fraction"` (at least `fraction` of
     /// the cell inside).
-    #[serde(default = "default_rule")]
-    pub rule: String,
+    #[serde(default)]
+    pub rule: OccupancyKind,
     /// Minimum inside fraction for `rule = "fraction"` (0 < f <= 1, default 0.5).
     #[serde(default = "default_fraction")]
     pub fraction: f64,
     /// Connected components kept: `"largest"` (default) or `"all"`.
     #[serde(default)]
     pub components: KeepComponents,
-    /// Refuse lattices with more cells than this (default 2,000,000).
+    /// Refuse lattices with more cells than this (default:
+    /// [`VoxelizeOptions::default`]'s).
     #[serde(default = "default_max_cells")]
     pub max_cells: u64,
 }
 
-fn default_rule() -> String {
-    "centre".to_owned()
-}
 fn default_fraction() -> f64 {
     0.5
 }
 fn default_max_cells() -> u64 {
-    2_000_000
+    VoxelizeOptions::default().max_cells
 }
 
 impl Default for VoxelizeSection {
@@ -201,7 +269,7 @@ impl Default for VoxelizeSection {
         Self {
             cells: None,
             cell_size: None,
-            rule: default_rule(),
+            rule: OccupancyKind::default(),
             fraction: default_fraction(),
             components: KeepComponents::default(),
             max_cells: default_max_cells(),
@@ -231,21 +299,24 @@ impl VoxelizeSection {
             (None, None) => VoxelResolution::Cells(DEFAULT_CELLS),
         }
     }
-}
 
-/// Occupancy rule names accepted in `[voxelize] rule`.
-pub const RULE_NAMES: &[&str] = &["centre", "any", "fraction"];
-
-/// `[material]`: isotropic elastic material.
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct MaterialSection {
-    /// Young's modulus E (Pa), > 0.
-    pub young: f64,
-    /// Poisson's ratio nu; the paper's model needs -0.25 < nu < 0.5.
-    pub poisson: f64,
-    /// Mass density rho (kg/m^3), > 0.
-    pub density: f64,
+    /// The voxelizer's options for this table (ranges are checked by
+    /// [`Scene::validate`]).
+    pub fn options(&self) -> VoxelizeOptions {
+        VoxelizeOptions {
+            resolution: match self.resolution() {
+                VoxelResolution::Cells(n) => Resolution::CellsAlongLongestAxis(n),
+                VoxelResolution::CellSize(h) => Resolution::CellSize(h),
+            },
+            rule: self.rule.rule(self.fraction),
+            max_cells: self.max_cells,
+            components: match self.components {
+                KeepComponents::Largest => ComponentPolicy::LargestOnly,
+                KeepComponents::All => ComponentPolicy::All,
+            },
+            ..VoxelizeOptions::default()
+        }
+    }
 }
 
 /// `[model]`: the spring parameterization.
@@ -260,8 +331,8 @@ pub struct ModelSection {
     /// Factor alpha of the hourglass control on the lattice's mechanisms
     /// (dimensionless, >= 0; 1 gives a mechanism its elastic strain energy).
     /// Given, it adds the control to any parameterization (or sets the factor
-    /// of a `"+hg"` one); absent, `"+hg"` names use the library's default (0.05)
-    /// and the others have none.
+    /// of a `"+hg"` one); absent, `"+hg"` names use the library's default
+    /// ([`mss_core::HourglassControl::DEFAULT_ALPHA`]) and the others have none.
     #[serde(default)]
     pub hourglass: Option<f64>,
 }
@@ -277,106 +348,6 @@ impl Default for ModelSection {
             hourglass: None,
         }
     }
-}
-
-/// A face of the lattice's bounding box.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
-pub enum BoxFace {
-    /// Minimum x.
-    #[serde(rename = "x-")]
-    XMin,
-    /// Maximum x.
-    #[serde(rename = "x+")]
-    XMax,
-    /// Minimum y.
-    #[serde(rename = "y-")]
-    YMin,
-    /// Maximum y.
-    #[serde(rename = "y+")]
-    YMax,
-    /// Minimum z.
-    #[serde(rename = "z-")]
-    ZMin,
-    /// Maximum z.
-    #[serde(rename = "z+")]
-    ZMax,
-}
-
-impl BoxFace {
-    /// Axis index (0 = x, 1 = y, 2 = z) and whether it is the maximum side.
-    pub fn axis_side(self) -> (usize, bool) {
-        match self {
-            BoxFace::XMin => (0, false),
-            BoxFace::XMax => (0, true),
-            BoxFace::YMin => (1, false),
-            BoxFace::YMax => (1, true),
-            BoxFace::ZMin => (2, false),
-            BoxFace::ZMax => (2, true),
-        }
-    }
-}
-
-/// A coordinate axis.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Axis {
-    /// x
-    X,
-    /// y
-    Y,
-    /// z
-    Z,
-}
-
-/// A side of a plane.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Side {
-    /// Coordinate <= value.
-    Below,
-    /// Coordinate >= value.
-    Above,
-}
-
-/// A set of lattice nodes, as a table with a `kind` key.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
-pub enum Selector {
-    /// The nodes of the lowest layer (minimum z) of the lattice.
-    LowestLayer {},
-    /// Nodes inside an axis-aligned box (bounds included). Coordinates are in
-    /// metres, or fractions of the lattice's bounding box if `relative`.
-    Box {
-        /// Minimum corner.
-        min: [f64; 3],
-        /// Maximum corner.
-        max: [f64; 3],
-        /// Coordinates as fractions (0..1) of the lattice's bounding box
-        /// (default false: metres).
-        #[serde(default)]
-        relative: bool,
-    },
-    /// Nodes on one side of the plane `coordinate(axis) = value` (nodes on the
-    /// plane included).
-    Plane {
-        /// Axis normal to the plane: `"x"`, `"y"` or `"z"`.
-        axis: Axis,
-        /// Position of the plane along the axis (m).
-        value: f64,
-        /// Side kept: `"below"` (coordinate <= value) or `"above"`.
-        side: Side,
-    },
-    /// Nodes on a face of the lattice's bounding box: `"x-"`, `"x+"`, `"y-"`,
-    /// `"y+"`, `"z-"` or `"z+"`.
-    Face {
-        /// The face.
-        face: BoxFace,
-    },
-    /// Nodes by index.
-    Indices {
-        /// Node indices.
-        nodes: Vec<u32>,
-    },
 }
 
 /// `[loads]`: external loads. All default to none.
@@ -401,7 +372,7 @@ pub struct LoadsSection {
 #[serde(deny_unknown_fields)]
 pub struct ForceSpec {
     /// The nodes.
-    pub select: Selector,
+    pub select: NodeSelector,
     /// Force (N): the total, shared equally by the selected nodes, or with
     /// `per_node = true` the force on each node.
     pub force: [f64; 3],
@@ -429,11 +400,60 @@ pub struct TractionSpec {
 #[serde(deny_unknown_fields)]
 pub struct DragSpec {
     /// The nodes.
-    pub select: Selector,
+    pub select: NodeSelector,
     /// Target of the set's centroid (m).
     pub target: [f64; 3],
     /// Total spring stiffness (N/m), > 0.
     pub stiffness: f64,
+}
+
+impl LoadsSection {
+    /// The library's load descriptions: gravity, then forces, tractions and
+    /// drag springs in the order written.
+    pub fn specs(&self) -> Vec<LoadSpec> {
+        let mut specs = Vec::new();
+        if let Some(g) = self.gravity {
+            specs.push(LoadSpec::Gravity { g });
+        }
+        specs.extend(self.forces.iter().map(LoadSpec::from));
+        specs.extend(self.tractions.iter().map(LoadSpec::from));
+        specs.extend(self.drags.iter().map(LoadSpec::from));
+        specs
+    }
+}
+
+impl From<&ForceSpec> for LoadSpec {
+    fn from(f: &ForceSpec) -> Self {
+        LoadSpec::Force {
+            select: f.select.clone(),
+            force: f.force,
+            distribution: if f.per_node {
+                ForceDistribution::PerNode
+            } else {
+                ForceDistribution::Total
+            },
+        }
+    }
+}
+
+impl From<&TractionSpec> for LoadSpec {
+    fn from(t: &TractionSpec) -> Self {
+        LoadSpec::Traction {
+            min: t.min,
+            max: t.max,
+            traction: t.traction,
+        }
+    }
+}
+
+impl From<&DragSpec> for LoadSpec {
+    fn from(d: &DragSpec) -> Self {
+        LoadSpec::Drag {
+            select: d.select.clone(),
+            target: d.target,
+            stiffness: d.stiffness,
+        }
+    }
 }
 
 /// A node set moved rigidly by a prescribed displacement.
@@ -441,30 +461,50 @@ pub struct DragSpec {
 #[serde(deny_unknown_fields)]
 pub struct MotionSpec {
     /// The nodes.
-    pub select: Selector,
+    pub select: NodeSelector,
     /// Final displacement (m), reached linearly from t = 0 to `ramp`, then held.
     pub displacement: [f64; 3],
     /// Ramp time (s), > 0; default: the whole duration.
     pub ramp: Option<f64>,
 }
 
-/// Solver kinds.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
-#[serde(rename_all = "snake_case")]
-pub enum SolverKind {
-    /// Symplectic Euler at a step below the stability limit (default).
-    #[default]
-    Explicit,
-    /// Backward Euler with Newton iterations.
-    Implicit,
-    /// Static equilibrium (no inertia).
-    Static,
+impl MotionSpec {
+    /// The library's constraint: all three dofs follow a linear ramp from
+    /// rest to `displacement` over `ramp` seconds (or `duration`), then hold.
+    pub fn constraint(&self, duration: f64) -> ConstraintSpec {
+        ConstraintSpec {
+            select: self.select.clone(),
+            dofs: Dofs::ALL,
+            motion: Motion::Keyframes(vec![
+                Keyframe {
+                    time: 0.0,
+                    displacement: [0.0; 3],
+                },
+                Keyframe {
+                    time: self.ramp.unwrap_or(duration),
+                    displacement: self.displacement,
+                },
+            ]),
+        }
+    }
 }
+
+/// `[solver] kind` of a static solve (equilibrium, no inertia); every other
+/// kind names an integrator of the [`Registry`](crate::Registry).
+pub const STATIC_KIND: &str = "static";
+
+/// Integrator names whose `dt = "auto"` is the stable explicit step.
+pub const EXPLICIT_KINDS: &[&str] = &["explicit", "verlet", "symplectic-euler"];
+
+/// Steps of an implicit (or other non-explicit) run when `dt = "auto"`: the
+/// step is `duration / IMPLICIT_AUTO_STEPS`.
+pub const IMPLICIT_AUTO_STEPS: u32 = 100;
 
 /// A time step: `"auto"` (from the model's stability limit) or seconds.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub enum TimeStep {
-    /// The model's stable step times `safety` (explicit), or duration / 100 (implicit).
+    /// The model's stable step times `safety` (explicit schemes,
+    /// [`EXPLICIT_KINDS`]), or `duration / IMPLICIT_AUTO_STEPS` (the others).
     #[default]
     Auto,
     /// A fixed step (s).
@@ -500,17 +540,22 @@ impl<'de> Deserialize<'de> for TimeStep {
     }
 }
 
-/// `[solver]`: time integration.
+/// `[solver]`: time integration. Defaults are the library's
+/// ([`IntegratorSettings`](mss_core::solver::IntegratorSettings) and the
+/// Newton constants of [`mss_core::solver`]).
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SolverSection {
-    /// `"explicit"` (default), `"implicit"` or `"static"`.
-    #[serde(default)]
-    pub kind: SolverKind,
+    /// `"explicit"` (default, velocity Verlet), `"symplectic-euler"`,
+    /// `"implicit"` (backward Euler), `"static"` (equilibrium), or the name of
+    /// an integrator registered by the program.
+    #[serde(default = "default_kind")]
+    pub kind: String,
     /// Time step: `"auto"` (default) or seconds.
     #[serde(default)]
     pub dt: TimeStep,
-    /// Fraction of the stable step used when `dt = "auto"` (0 < s <= 1, default 0.9).
+    /// Fraction of the stable step used when `dt = "auto"` (0 < s <= 1,
+    /// default [`ExplicitOptions::default`]'s 0.9).
     #[serde(default = "default_safety")]
     pub safety: f64,
     /// Explicit solver only: if `dt` is above the stability limit, take as many
@@ -528,31 +573,35 @@ pub struct SolverSection {
     #[serde(default = "default_duration")]
     pub duration: f64,
     /// Newton tolerance on the residual force, relative to the load (implicit,
-    /// static; default 1e-8).
+    /// static; default [`DEFAULT_NEWTON_RTOL`]).
     #[serde(default = "default_tolerance")]
     pub tolerance: f64,
-    /// Newton iteration limit per step (implicit, static; default 50).
+    /// Newton iteration limit per step or load increment (implicit, static;
+    /// default [`DEFAULT_MAX_NEWTON`]).
     #[serde(default = "default_max_iterations")]
     pub max_iterations: u32,
 }
 
+fn default_kind() -> String {
+    EXPLICIT_KINDS[0].to_owned()
+}
 fn default_safety() -> f64 {
-    0.9
+    ExplicitOptions::default().safety
 }
 fn default_duration() -> f64 {
     1.0
 }
 fn default_tolerance() -> f64 {
-    1e-8
+    DEFAULT_NEWTON_RTOL
 }
 fn default_max_iterations() -> u32 {
-    50
+    DEFAULT_MAX_NEWTON
 }
 
 impl Default for SolverSection {
     fn default() -> Self {
         Self {
-            kind: SolverKind::default(),
+            kind: default_kind(),
             dt: TimeStep::Auto,
             substep: false,
             safety: default_safety(),
@@ -561,6 +610,26 @@ impl Default for SolverSection {
             duration: default_duration(),
             tolerance: default_tolerance(),
             max_iterations: default_max_iterations(),
+        }
+    }
+}
+
+impl SolverSection {
+    /// Whether this is a static solve.
+    pub fn is_static(&self) -> bool {
+        self.kind == STATIC_KIND
+    }
+
+    /// Whether `dt = "auto"` means the stable explicit step for this kind.
+    pub fn is_explicit(&self) -> bool {
+        EXPLICIT_KINDS.contains(&self.kind.as_str())
+    }
+
+    /// The damping of the run.
+    pub fn damping(&self) -> Damping {
+        Damping {
+            alpha: self.damping,
+            beta: self.stiffness_damping,
         }
     }
 }
@@ -603,6 +672,10 @@ pub struct OutputSection {
     /// Write only the final state (default false).
     #[serde(default)]
     pub last_only: bool,
+    /// More lattice frame exporters, by the names a program registered in its
+    /// [`Registry`](crate::Registry) (default none).
+    #[serde(default)]
+    pub exporters: Vec<String>,
 }
 
 fn default_folder() -> PathBuf {
@@ -626,6 +699,7 @@ impl Default for OutputSection {
             every_steps: None,
             every_time: None,
             last_only: false,
+            exporters: Vec::new(),
         }
     }
 }
@@ -646,6 +720,9 @@ pub enum SceneOrigin {
     File(PathBuf),
     /// The scene bundled with the program.
     Bundled,
+    /// Text given by a program (not a file), with the name it goes by in
+    /// messages; relative mesh paths are relative to the working directory.
+    Text(String),
 }
 
 impl SceneOrigin {
@@ -654,6 +731,7 @@ impl SceneOrigin {
         match self {
             SceneOrigin::File(p) => p.display().to_string(),
             SceneOrigin::Bundled => "<bundled default.toml>".to_owned(),
+            SceneOrigin::Text(name) => name.clone(),
         }
     }
 }
@@ -753,12 +831,26 @@ impl Scene {
             SceneOrigin::Bundled if p == BUNDLED_MESH_PATH => {
                 MeshSource::Builtin("critter".to_owned())
             }
-            SceneOrigin::Bundled => MeshSource::File(PathBuf::from(p)),
+            SceneOrigin::Bundled | SceneOrigin::Text(_) => MeshSource::File(PathBuf::from(p)),
             SceneOrigin::File(scene) => {
                 let base = scene.parent().unwrap_or(Path::new(""));
                 MeshSource::File(base.join(p))
             }
         }
+    }
+
+    /// The library's boundary conditions: `[[fixed]]` sets, then `[[motions]]`.
+    pub fn constraint_specs(&self) -> Vec<ConstraintSpec> {
+        self.fixed
+            .iter()
+            .cloned()
+            .map(ConstraintSpec::fixed)
+            .chain(
+                self.motions
+                    .iter()
+                    .map(|m| m.constraint(self.solver.duration)),
+            )
+            .collect()
     }
 
     /// Checks ranges and consistency that need no physics. Material and
@@ -802,16 +894,6 @@ impl Scene {
                 );
             }
             _ => {}
-        }
-        if !RULE_NAMES.contains(&v.rule.as_str()) {
-            return bad(
-                "[voxelize] rule",
-                format!(
-                    "unknown occupancy rule \"{}\"; use one of {}",
-                    v.rule,
-                    RULE_NAMES.join(", ")
-                ),
-            );
         }
         if !(v.fraction > 0.0 && v.fraction <= 1.0) {
             return bad(
@@ -944,7 +1026,20 @@ impl Scene {
                 "a .pvd collection lists .vtu frames: set vtu = true too, or pvd = false".into(),
             );
         }
-        if !(o.vtu || o.vtk || o.skin_obj || o.skin_stl || o.embedded || o.springs) {
+        if let Some(i) = o.exporters.iter().position(|n| n.trim().is_empty()) {
+            return bad(
+                "[output] exporters",
+                format!("entry #{} is empty; give an exporter name", i + 1),
+            );
+        }
+        if !(o.vtu
+            || o.vtk
+            || o.skin_obj
+            || o.skin_stl
+            || o.embedded
+            || o.springs
+            || !o.exporters.is_empty())
+        {
             return bad(
                 "[output]",
                 "every output kind is off; enable at least one of vtu, vtk, skin_obj, \
@@ -987,7 +1082,7 @@ fn check_box(min: &[f64; 3], max: &[f64; 3], key: &str, name: &str) -> Result<()
     Ok(())
 }
 
-fn check_selector(s: &Selector, key: &str, name: &str) -> Result<(), SceneError> {
+fn check_selector(s: &NodeSelector, key: &str, name: &str) -> Result<(), SceneError> {
     let bad = |message: String| {
         Err(SceneError::Invalid {
             path: name.to_owned(),
@@ -996,9 +1091,9 @@ fn check_selector(s: &Selector, key: &str, name: &str) -> Result<(), SceneError>
         })
     };
     match s {
-        Selector::LowestLayer {} | Selector::Face { .. } => Ok(()),
-        Selector::Box { min, max, .. } => check_box(min, max, key, name),
-        Selector::Plane { value, .. } => {
+        NodeSelector::LowestLayer | NodeSelector::Face { .. } => Ok(()),
+        NodeSelector::Box { min, max, .. } => check_box(min, max, key, name),
+        NodeSelector::Plane { value, .. } => {
             if !value.is_finite() {
                 return bad(format!(
                     "plane value = {value}; must be a finite position (m)"
@@ -1006,7 +1101,7 @@ fn check_selector(s: &Selector, key: &str, name: &str) -> Result<(), SceneError>
             }
             Ok(())
         }
-        Selector::Indices { nodes } => {
+        NodeSelector::Indices { nodes } => {
             if nodes.is_empty() {
                 return bad("`nodes` is empty; list at least one node index".into());
             }
@@ -1018,6 +1113,7 @@ fn check_selector(s: &Selector, key: &str, name: &str) -> Result<(), SceneError>
 #[cfg(test)]
 mod tests {
     use super::*;
+    use mss_core::constraints::{Axis, Side};
 
     const MIN: &str = "[mesh]\npath = \"m.obj\"\n[material]\nyoung = 1e4\npoisson = 0.3\n\
                        density = 1000.0\n";
@@ -1071,8 +1167,6 @@ mod tests {
             e.contains("unknown variant `blob`") && e.contains("`box`"),
             "{e}"
         );
-        let e = err(&format!("{MIN}[solver]\nkind = \"rk4\"\n"));
-        assert!(e.contains("`rk4`") && e.contains("`explicit`"), "{e}");
         let e = err(&format!("{MIN}[extras]\na = 1\n"));
         assert!(
             e.contains("unknown field `extras`") && e.contains("`mesh`"),
@@ -1103,7 +1197,10 @@ mod tests {
             ("[solver]\nsafety = 1.5\n", "[solver] safety"),
             ("[voxelize]\ncells = 0\n", "[voxelize] cells"),
             ("[voxelize]\ncells = 4\ncell_size = 0.1\n", "not both"),
-            ("[voxelize]\nrule = \"most\"\n", "centre, any, fraction"),
+            (
+                "[voxelize]\nrule = \"most\"\n",
+                "`centre`, `any`, `fraction`",
+            ),
             ("[output]\nevery_steps = 0\n", "[output] every_steps"),
             (
                 "[[fixed]]\nkind = \"box\"\nmin = [1,0,0]\nmax = [0,1,1]\n",
@@ -1166,7 +1263,7 @@ mod tests {
         assert_eq!(s.fixed.len(), 3);
         assert_eq!(
             s.fixed[1],
-            Selector::Plane {
+            NodeSelector::Plane {
                 axis: Axis::Y,
                 value: 0.5,
                 side: Side::Above
@@ -1176,14 +1273,14 @@ mod tests {
         assert_eq!(s.loads.tractions.len(), 1);
         assert_eq!(s.loads.drags[0].stiffness, 2.0);
         assert_eq!(s.motions[0].ramp, Some(0.5));
-        assert_eq!(s.solver.kind, SolverKind::Static);
+        assert!(s.solver.is_static());
     }
 
     #[test]
     fn bundled_scenes_parse() {
         let d = Scene::from_toml_str(DEFAULT_SCENE_TOML, "default.toml").unwrap();
         assert_eq!(d.mesh.path, BUNDLED_MESH_PATH);
-        assert_eq!(d.fixed, vec![Selector::LowestLayer {}]);
+        assert_eq!(d.fixed, vec![NodeSelector::LowestLayer]);
         assert_eq!(d.loads.gravity, Some([0.0, 0.0, -9.81]));
         let t = Scene::from_toml_str(TEMPLATE_SCENE_TOML, "template.toml").unwrap();
         assert_eq!(

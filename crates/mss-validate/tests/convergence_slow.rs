@@ -2,13 +2,13 @@
 //! minute on 2 cores).
 
 use hexmesh::Lattice;
-use mss_core::experiments::{BeamSettings, Regime, beam};
-use mss_core::fem::{Fem, FemLaw, NewtonOptions};
 use mss_core::{Material, Vec3};
+use mss_validate::experiments::{BeamSettings, Regime, beam, builtin_models};
+use mss_validate::fem::{Fem, FemLaw, NewtonOptions};
 
 /// Q1 at 64x16x16, nu = 0: mean tip deflection within 1% of Timoshenko's
-/// 3.9554e-4 m (MODEL.md), and equal to the paper's MSS value at nu = 0
-/// (MODEL.md: 3.9459e-4; at nu = 0 the paper's lattice is Q1-equivalent).
+/// 3.9554e-4 m (docs/model.md), and equal to the paper's MSS value at nu = 0
+/// (docs/model.md: 3.9459e-4; at nu = 0 the paper's lattice is Q1-equivalent).
 #[test]
 fn fine_q1_cantilever_matches_timoshenko() {
     let lat = Lattice::block([4, 1, 1], 0.1, [0.0; 3]).unwrap();
@@ -29,7 +29,7 @@ fn fine_q1_cantilever_matches_timoshenko() {
 }
 
 /// The full small-load cantilever at nu = 0.3 against the 64x16x16 reference:
-/// MODEL.md's figures (paper's model M 12.5 / 4.3 / 1.3 and MAX 29 / 10.1 / 3.0
+/// docs/model.md's figures (paper's model M 12.5 / 4.3 / 1.3 and MAX 29 / 10.1 / 3.0
 /// at 8x2x2 / 16x4x4 / 32x8x8; volumetric 3.2 / 1.05 / 0.35 and 6.7 / 2.2 /
 /// 0.71) within the differences of the references; errors fall; paper beats
 /// springs from 16x4x4 on.
@@ -42,10 +42,7 @@ fn small_load_cantilever_against_fine_reference() {
         regime: Regime::Linear,
         resolutions: vec![2, 4, 8],
         reference: 16,
-        models: ["paper", "springs", "volumetric"]
-            .iter()
-            .map(|s| s.to_string())
-            .collect(),
+        models: builtin_models(&["paper", "springs", "volumetric"]).unwrap(),
     };
     let r = beam(&s).unwrap();
     let at = |m: &str, n: u32| {
@@ -83,8 +80,8 @@ fn small_load_cantilever_against_fine_reference() {
 }
 
 /// Large deflection (total mass 0.0125 kg): tip about 0.116 m; paper's model
-/// M about 4 % / MAX about 10 % at 16x4x4 (MODEL.md 4.4 / 10.1), volumetric
-/// about 1 % / 2 % (MODEL.md 1.5 / 3.0).
+/// M about 4 % / MAX about 10 % at 16x4x4 (docs/model.md 4.4 / 10.1), volumetric
+/// about 1 % / 2 % (docs/model.md 1.5 / 3.0).
 #[test]
 fn large_deflection_cantilever_against_fine_reference() {
     let s = BeamSettings {
@@ -94,7 +91,7 @@ fn large_deflection_cantilever_against_fine_reference() {
         regime: Regime::Large,
         resolutions: vec![2, 4],
         reference: 8,
-        models: vec!["paper".into(), "volumetric".into()],
+        models: builtin_models(&["paper", "volumetric"]).unwrap(),
     };
     let r = beam(&s).unwrap();
     let tip = -r.reference.monitor_ref.z;

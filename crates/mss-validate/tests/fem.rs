@@ -3,8 +3,8 @@
 //! load.
 
 use hexmesh::Lattice;
-use mss_core::fem::{Fem, FemConstraints, FemError, FemLaw, NewtonOptions, refine};
 use mss_core::{Material, Vec3};
+use mss_validate::fem::{Fem, FemConstraints, FemError, FemLaw, NewtonOptions, refine};
 
 fn affine(p: [f64; 3]) -> Vec3 {
     // A general (non-symmetric) small gradient plus a translation.
@@ -132,7 +132,7 @@ fn refined_cantilever_converges() {
     for w in steps.windows(2) {
         assert!(w[1] < 0.5 * w[0], "differences do not fall: {d:?}");
     }
-    // 32x8x8 is already within 2% of Timoshenko's 3.9554e-4 (MODEL.md).
+    // 32x8x8 is already within 2% of Timoshenko's 3.9554e-4 (docs/model.md).
     assert!((d[3] - 3.9554e-4).abs() < 0.02 * 3.9554e-4, "{d:?}");
 }
 

@@ -1,9 +1,9 @@
-//! Virtual material tests against MODEL.md: the paper's model reproduces E and
+//! Virtual material tests against docs/model.md: the paper's model reproduces E and
 //! nu exactly in uniaxial tension; springs alone give nu' = 1 / (4 nu + 3).
 
 use mss_core::Material;
-use mss_core::material_test::{measure_material, uniaxial_tension};
 use mss_core::model::{PaperModel, SpringsOnly};
+use mss_validate::material_test::{measure_material, uniaxial_tension};
 
 const NUS: [f64; 6] = [-0.2, 0.0, 0.25, 0.3, 0.45, 0.49];
 

@@ -30,7 +30,7 @@ use hexmesh::{Lattice, LatticeError};
 use rayon::prelude::*;
 use thiserror::Error;
 
-use crate::{Material, MaterialError, Vec3};
+use mss_core::{Material, MaterialError, Vec3};
 
 /// Why a finite-element problem could not be set up or solved.
 #[derive(Debug, Error, Clone, PartialEq)]
@@ -836,9 +836,9 @@ fn stress_and_tangent(
             }
         }
         FemLaw::NeoHookean => {
-            let fm = nalgebra::Matrix3::from_fn(|i, j| f[i][j]);
+            let fm = mss_core::Mat3::from_fn(|i, j| f[i][j]);
             let det = fm.determinant();
-            let finv = fm.try_inverse().unwrap_or_else(nalgebra::Matrix3::identity);
+            let finv = fm.try_inverse().unwrap_or_else(mss_core::Mat3::identity);
             // A non-positive J has no energy: return a huge stress so the line
             // search rejects the step.
             let ln_j = if det > 0.0 { det.ln() } else { f64::INFINITY };
@@ -1045,7 +1045,7 @@ impl System {
     /// Cholesky factor values of the matrix with upper triangle `values`.
     fn factor(&self, values: &[f64]) -> Result<Vec<f64>, FemError> {
         let sym = self.symbolic_factor()?;
-        crate::sparse::sequential_factorizations();
+        mss_core::sparse::sequential_factorizations();
         let par = faer::get_global_parallelism();
         let mat = SparseColMatRef::new(self.symbolic.as_ref(), values);
         let mut l = vec![0.0; sym.len_val()];
@@ -1087,7 +1087,7 @@ impl System {
         let Ok(sym) = self.symbolic_factor() else {
             return;
         };
-        crate::sparse::sequential_factorizations();
+        mss_core::sparse::sequential_factorizations();
         let par = faer::get_global_parallelism();
         let mut buf = MemBuffer::new(sym.solve_in_place_scratch::<f64>(1, par));
         LltRef::<u32, f64>::new(sym, l).solve_in_place_with_conj(

@@ -6,7 +6,7 @@
 //! second-order (geometric) terms, so the measured moduli are the small-strain
 //! ones to about 1e-12 relative.
 //!
-//! - Uniaxial tension (MODEL.md): rollers on x = 0, y = 0, z = 0 (each holds
+//! - Uniaxial tension (docs/model.md): rollers on x = 0, y = 0, z = 0 (each holds
 //!   only the normal component), uniform traction `sigma` on z = 1 (consistent
 //!   loads h^2/4 per face node). `eps_zz` = mean `u_z` on z = 1, `eps_xx` = mean
 //!   `u_x` on x = 1; `E = sigma / eps_zz`, `nu = -eps_xx / eps_zz`.
@@ -23,12 +23,12 @@
 use hexmesh::Lattice;
 use thiserror::Error;
 
-use crate::constraints::{
+use mss_core::constraints::{
     Axis, ConstraintError, ConstraintSpec, Constraints, Dofs, Face, Keyframe, Motion, NodeSelector,
 };
-use crate::loads::LoadSpec;
-use crate::solver::{Problem, ProblemError, SolverError, State, StaticOptions, solve_static};
-use crate::{Material, Model, ModelError, Parameterization, Vec3};
+use mss_core::loads::LoadSpec;
+use mss_core::solver::{Problem, ProblemError, SolverError, State, StaticOptions, solve_static};
+use mss_core::{Material, Model, ModelError, Parameterization, Vec3};
 
 /// Moduli measured by [`measure_material`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -102,15 +102,15 @@ pub fn uniaxial_tension(
             NodeSelector::Plane {
                 axis: a,
                 value: 0.0,
-                side: crate::constraints::Side::Below,
+                side: mss_core::constraints::Side::Below,
             },
             a,
         )
     });
     let sigma = material.young * STRAIN;
     let rest = model.rest_positions();
-    let top = NodeSelector::BoundingFace(Face::ZMax).select(rest, model.h());
-    let right = NodeSelector::BoundingFace(Face::XMax).select(rest, model.h());
+    let top = NodeSelector::face(Face::ZMax).select(rest, model.h());
+    let right = NodeSelector::face(Face::XMax).select(rest, model.h());
     let mut u = [Vec::new(), Vec::new()];
     for (k, sign) in [1.0, -1.0].into_iter().enumerate() {
         let m = model.clone();
@@ -119,7 +119,7 @@ pub fn uniaxial_tension(
             max: [2.0, 2.0, 1.0],
             traction: [0.0, 0.0, sign * sigma],
         };
-        let problem = Problem::from_specs(m, &rollers, &[load], crate::loads::Damping::NONE)?;
+        let problem = Problem::from_specs(m, &rollers, &[load], mss_core::loads::Damping::NONE)?;
         let mut state = State::at_rest(problem.model());
         solve_static(&problem, &mut state, &static_opts())?;
         u[k] = state.displacements(problem.model());
@@ -204,7 +204,7 @@ pub fn bulk_modulus(
 /// Runs the three virtual tests on an `n^3` unit block.
 ///
 /// ```
-/// use mss_core::material_test::measure_material;
+/// use mss_validate::material_test::measure_material;
 /// use mss_core::model::PaperModel;
 /// use mss_core::Material;
 /// let m = Material::new(1000.0, 0.3, 1.0).unwrap();

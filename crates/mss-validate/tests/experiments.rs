@@ -4,18 +4,16 @@
 //! values (so that a regression fails).
 
 use mss_core::Vec3;
-use mss_core::experiments::{
-    BeamSettings, LLoad, LShapeSettings, Regime, beam, error_stats, lshape, material,
+use mss_validate::experiments::{
+    BeamSettings, LLoad, LShapeSettings, Regime, SharedParameterization, beam, builtin_models,
+    error_stats, lshape, material,
 };
 
-fn models() -> Vec<String> {
-    ["paper", "springs", "volumetric"]
-        .iter()
-        .map(|s| s.to_string())
-        .collect()
+fn models() -> Vec<SharedParameterization> {
+    builtin_models(&["paper", "springs", "volumetric"]).unwrap()
 }
 
-fn stats(r: &mss_core::experiments::BeamResult, model: &str, n: u32) -> (f64, f64, f64) {
+fn stats(r: &mss_validate::experiments::BeamResult, model: &str, n: u32) -> (f64, f64, f64) {
     let run = r
         .runs
         .iter()
@@ -89,10 +87,10 @@ fn nu_zero_cantilever_matches_model_md_tips() {
         regime: Regime::Linear,
         resolutions: vec![1, 2, 4],
         reference: 8,
-        models: vec!["paper".into()],
+        models: builtin_models(&["paper"]).unwrap(),
     };
     let r = beam(&s).unwrap();
-    // MODEL.md: 2.6732e-4, 3.5060e-4, 3.8293e-4.
+    // docs/model.md: 2.6732e-4, 3.5060e-4, 3.8293e-4.
     for (n, want) in [(1, 2.6732e-4), (2, 3.5060e-4), (4, 3.8293e-4)] {
         let run = r.runs.iter().find(|x| x.dims[1] == n).unwrap();
         assert!(
@@ -115,7 +113,7 @@ fn large_deflection_cantilever_errors_fall() {
         regime: Regime::Large,
         resolutions: vec![1, 2],
         reference: 4,
-        models: vec!["paper".into(), "volumetric".into()],
+        models: builtin_models(&["paper", "volumetric"]).unwrap(),
     };
     let r = beam(&s).unwrap();
     let tip = -r.reference.monitor_ref.z;
@@ -151,7 +149,12 @@ fn lshape_errors_fall_with_resolution() {
 
 #[test]
 fn material_tests_recover_e_and_nu_for_the_paper_model_only() {
-    let rows = material(&[0.0, 0.3], &["paper".into(), "springs".into()], 1).unwrap();
+    let rows = material(
+        &[0.0, 0.3],
+        &builtin_models(&["paper", "springs"]).unwrap(),
+        1,
+    )
+    .unwrap();
     for r in &rows {
         let e_ok = (r.measured.young - 1000.0).abs() < 1e-6 * 1000.0;
         let nu_ok = (r.measured.poisson - r.poisson).abs() < 1e-6;
@@ -175,10 +178,7 @@ fn hourglass_control_fixes_the_one_cell_beam_and_leaves_16x4x4_alone() {
         regime: Regime::Linear,
         resolutions: vec![1, 4],
         reference: 8,
-        models: ["paper", "paper+hg", "volumetric", "volumetric+hg"]
-            .iter()
-            .map(|s| s.to_string())
-            .collect(),
+        models: builtin_models(&["paper", "paper+hg", "volumetric", "volumetric+hg"]).unwrap(),
     };
     let r = beam(&s).unwrap();
     for base in ["paper", "volumetric"] {
@@ -213,9 +213,7 @@ fn scene_specs() -> (
 ) {
     use mss_core::constraints::{ConstraintSpec, Face, NodeSelector};
     use mss_core::loads::{ForceDistribution, LoadSpec};
-    let fixed = vec![ConstraintSpec::fixed(NodeSelector::BoundingFace(
-        Face::XMin,
-    ))];
+    let fixed = vec![ConstraintSpec::fixed(NodeSelector::face(Face::XMin))];
     let loads = vec![
         LoadSpec::Gravity {
             g: [0.0, 0.0, -9.81],
@@ -228,10 +226,7 @@ fn scene_specs() -> (
             traction: [0.0, 0.0, -1.0],
         },
         LoadSpec::Force {
-            select: NodeSelector::Box {
-                min: [0.2, 0.0, 0.05],
-                max: [0.2, 0.05, 0.05],
-            },
+            select: NodeSelector::boxed([0.2, 0.0, 0.05], [0.2, 0.05, 0.05]),
             force: [0.0, 1e-4, 0.0],
             distribution: ForceDistribution::Total,
         },
@@ -246,7 +241,7 @@ fn scene_specs() -> (
 
 #[test]
 fn scene_comparison_error_is_bounded_and_falls_with_resolution() {
-    use mss_core::experiments::{RegimeChoice, SceneSettings, scene};
+    use mss_validate::experiments::{RegimeChoice, SceneSettings, scene};
     let (fixed, loads, mat) = scene_specs();
     let settings = SceneSettings {
         refine: 2,
@@ -260,7 +255,7 @@ fn scene_comparison_error_is_bounded_and_falls_with_resolution() {
     assert_eq!(coarse.regime, Regime::Linear, "{:?}", coarse.auto_ratio);
     assert!(coarse.reference.richardson);
     for m in ["paper", "springs", "volumetric"] {
-        let at = |r: &mss_core::experiments::SceneResult| {
+        let at = |r: &mss_validate::experiments::SceneResult| {
             r.runs.iter().find(|x| x.model == m).unwrap().stats
         };
         let (c, f) = (at(&coarse), at(&fine));
@@ -276,7 +271,7 @@ fn scene_comparison_error_is_bounded_and_falls_with_resolution() {
         &loads,
         &SceneSettings {
             regime: RegimeChoice::Fixed(Regime::Large),
-            models: vec!["volumetric".into()],
+            models: builtin_models(&["volumetric"]).unwrap(),
             ..settings
         },
     )
@@ -288,16 +283,16 @@ fn scene_comparison_error_is_bounded_and_falls_with_resolution() {
 #[test]
 fn scene_comparison_refuses_drag_springs_and_prescribed_motions() {
     use mss_core::constraints::{ConstraintSpec, Motion, NodeSelector};
-    use mss_core::experiments::{ExperimentError, RegimeChoice, SceneSettings, scene};
     use mss_core::loads::LoadSpec;
+    use mss_validate::experiments::{ExperimentError, RegimeChoice, SceneSettings, scene};
     let (mut fixed, mut loads, mat) = scene_specs();
     let settings = SceneSettings {
         refine: 2,
         regime: RegimeChoice::Auto,
-        models: vec!["paper".into()],
+        models: builtin_models(&["paper"]).unwrap(),
     };
     loads.push(LoadSpec::Drag {
-        select: NodeSelector::Indices(vec![3]),
+        select: NodeSelector::indices(vec![3]),
         target: [0.3, 0.0, 0.0],
         stiffness: 1.0,
     });
@@ -311,7 +306,7 @@ fn scene_comparison_refuses_drag_springs_and_prescribed_motions() {
     loads.pop();
     fixed.push(ConstraintSpec {
         motion: Motion::Velocity([0.0, 0.0, 0.01]),
-        ..ConstraintSpec::fixed(NodeSelector::Indices(vec![5]))
+        ..ConstraintSpec::fixed(NodeSelector::indices(vec![5]))
     });
     let err = scene(&scene_box(1), mat, &fixed, &loads, &settings).unwrap_err();
     println!("{err}");

@@ -1,0 +1,90 @@
+//! The error type of building and running a job.
+
+use std::path::PathBuf;
+
+use thiserror::Error;
+
+use crate::scene::SceneError;
+
+/// Why a job could not be built or did not finish. Every message is one line
+/// that names the scene (file or bundled default) and the key or stage
+/// concerned, and says what to change.
+#[derive(Debug, Error)]
+pub enum JobError {
+    /// The scene file could not be read or parsed, or a value is out of range.
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    /// A value is refused once it meets the mesh, the library or the
+    /// registry (an unknown name, a material outside the model's range, a
+    /// selection that selects nothing, ...).
+    #[error("{scene}: {key}: {message}")]
+    Setting {
+        /// Scene name.
+        scene: String,
+        /// The key, as `[table] key` or `[[array]] #n`.
+        key: String,
+        /// What is wrong and what to do.
+        message: String,
+    },
+    /// The mesh could not be loaded.
+    #[error("{scene}: [mesh] path: {source}")]
+    Mesh {
+        /// Scene name.
+        scene: String,
+        /// What the loader said.
+        source: hexmesh::LoadError,
+    },
+    /// The mesh could not be voxelized.
+    #[error("{scene}: cannot voxelize {mesh}: {source}")]
+    Voxelize {
+        /// Scene name.
+        scene: String,
+        /// Mesh name.
+        mesh: String,
+        /// What the voxelizer said.
+        source: hexmesh::VoxelizeError,
+    },
+    /// The model could not be built from the lattice and material.
+    #[error("{scene}: cannot build the model: {source}")]
+    Model {
+        /// Scene name.
+        scene: String,
+        /// What the model said.
+        source: mss_core::ModelError,
+    },
+    /// A solver failed (the simulation diverged, Newton did not converge, a
+    /// static problem is singular, ...). What was simulated up to the last
+    /// good state has been written.
+    #[error("{scene}: {stage}: {source}")]
+    Solver {
+        /// Scene name.
+        scene: String,
+        /// `"static solve failed"` or `"the simulation failed"`.
+        stage: &'static str,
+        /// What the solver said.
+        source: Box<mss_core::SolverError>,
+    },
+    /// The output folder cannot be created or written.
+    #[error("the output folder {} {problem}: {source}", path.display())]
+    OutputFolder {
+        /// The folder.
+        path: PathBuf,
+        /// `"cannot be created"` or `"is not writable"`.
+        problem: &'static str,
+        /// The operating system's error.
+        source: std::io::Error,
+    },
+    /// Writing an output file failed.
+    #[error(transparent)]
+    Output(#[from] mss_io::IoError),
+    /// The job was cancelled through its [`Cancel`](crate::Cancel) flag.
+    #[error("{scene}: interrupted at t = {time:.3e} s after {steps} steps")]
+    Cancelled {
+        /// Scene name.
+        scene: String,
+        /// Steps completed.
+        steps: u64,
+        /// Simulated time reached (s).
+        time: f64,
+    },
+}

@@ -1,0 +1,410 @@
+//! Running a scene: [`Job::prepare`] loads, voxelizes and builds the problem;
+//! [`Job::run`] time-steps (or solves statically) and writes the outputs.
+//! Progress goes to a callback, and a [`Cancel`] flag stops a run between
+//! steps with everything written so far kept.
+
+use std::path::Path;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+use mss_core::Model;
+use mss_core::solver::{Problem, State, StaticOptions, solve_static};
+use serde::Serialize;
+
+use crate::build::{SceneInput, TimePlan, load_mesh, prepare_output_folder};
+use crate::error::JobError;
+use crate::output::FrameWriter;
+use crate::registry::Registry;
+
+/// What a running job reports, through the callback given to
+/// [`Job::prepare`] and [`Job::run`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Progress {
+    /// Voxelizing: grid rows classified out of the total.
+    Voxelizing {
+        /// Rows done.
+        done: u64,
+        /// Rows in all.
+        total: u64,
+    },
+    /// A static solve is running (its length is not known in advance).
+    Solving,
+    /// Time stepping: steps done out of the total.
+    Stepping {
+        /// Steps done.
+        done: u64,
+        /// Steps in all.
+        total: u64,
+    },
+    /// The current stage ended (a front end clears its bar).
+    StageDone,
+}
+
+/// A progress callback; it must be cheap (a progress bar's update).
+pub type ProgressFn<'a> = &'a (dyn Fn(Progress) + Sync);
+
+/// A progress callback that ignores everything.
+pub fn no_progress(_: Progress) {}
+
+/// A flag that asks a running job to stop after the current step (set it from
+/// another thread or a signal handler). The job then finishes the frame being
+/// written, writes the last state reached and returns [`JobError::Cancelled`].
+#[derive(Debug, Clone, Default)]
+pub struct Cancel(Arc<AtomicBool>);
+
+impl Cancel {
+    /// A flag that is not set.
+    pub fn new() -> Self {
+        Self::default()
+    }
+    /// Asks the job to stop.
+    pub fn cancel(&self) {
+        self.0.store(true, Ordering::Relaxed);
+    }
+    /// Whether [`cancel`](Self::cancel) was called.
+    pub fn is_cancelled(&self) -> bool {
+        self.0.load(Ordering::Relaxed)
+    }
+}
+
+/// Everything built from a scene before time stepping.
+pub struct Job {
+    /// The scene.
+    pub input: SceneInput,
+    /// The plug points it was built with.
+    pub registry: Registry,
+    /// Display name of the mesh.
+    pub mesh_name: String,
+    /// The cleaned input surface.
+    pub mesh: hexmesh::TriMesh,
+    /// The voxelized lattice.
+    pub lattice: hexmesh::Lattice,
+    /// Voxelization statistics.
+    pub vox_stats: hexmesh::voxelize::VoxelizeStats,
+    /// The problem (model, constraints, loads, damping).
+    pub problem: Problem,
+    /// Time stepping plan.
+    pub plan: TimePlan,
+    /// Seconds spent loading and voxelizing the mesh.
+    pub voxelize_seconds: f64,
+}
+
+impl std::fmt::Debug for Job {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Job")
+            .field("scene", &self.input.name())
+            .field("mesh", &self.mesh_name)
+            .field("cells", &self.lattice.num_cells())
+            .field("plan", &self.plan)
+            .finish()
+    }
+}
+
+/// Figures of a finished run (printed by the CLI, written as `summary.json`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RunSummary {
+    /// Scene file, or the bundled default.
+    pub scene: String,
+    /// Mesh name.
+    pub mesh: String,
+    /// Lattice cells.
+    pub cells: usize,
+    /// Lattice nodes.
+    pub nodes: usize,
+    /// Springs.
+    pub springs: usize,
+    /// Cell edge (m).
+    pub cell_size: f64,
+    /// Total mass (kg).
+    pub mass: f64,
+    /// Fully or partly held nodes.
+    pub held_nodes: usize,
+    /// Solver kind.
+    pub solver: String,
+    /// Time step (s).
+    pub time_step: f64,
+    /// Stable explicit step with the scene's safety factor (s).
+    pub stable_time_step: f64,
+    /// Steps taken.
+    pub steps: u64,
+    /// Simulated time (s).
+    pub simulated_time: f64,
+    /// Frames written.
+    pub frames: usize,
+    /// Files written.
+    pub files: usize,
+    /// Bytes written.
+    pub bytes_written: u64,
+    /// Largest node displacement at the end (m).
+    pub max_displacement: f64,
+    /// Wall time of voxelization (s).
+    pub voxelize_seconds: f64,
+    /// Wall time of time stepping, including output (s).
+    pub simulate_seconds: f64,
+    /// Total wall time (s).
+    pub wall_seconds: f64,
+    /// Peak resident memory (bytes), if known.
+    pub peak_memory_bytes: Option<u64>,
+    /// Output folder.
+    pub output_folder: String,
+}
+
+impl Job {
+    /// Loads the mesh, voxelizes it and builds the problem and time plan of a
+    /// scene, resolving its names against `registry`. Nothing is written.
+    pub fn prepare(
+        input: SceneInput,
+        registry: Registry,
+        progress: ProgressFn<'_>,
+    ) -> Result<Job, JobError> {
+        let scene_name = input.name();
+        let scene = &input.scene;
+        let t0 = Instant::now();
+        let (mesh_name, loaded) =
+            load_mesh(&input.mesh_source(), &registry.loaders).map_err(|e| match e {
+                crate::build::MeshSourceError::Load(source) => JobError::Mesh {
+                    scene: scene_name.clone(),
+                    source,
+                },
+                other => JobError::Setting {
+                    scene: scene_name.clone(),
+                    key: "[mesh] path".into(),
+                    message: other.to_string(),
+                },
+            })?;
+        let opts = scene.voxelize.options();
+        let hook = |done: u64, total: u64| progress(Progress::Voxelizing { done, total });
+        let vox = hexmesh::voxelize_with_progress(&loaded.mesh, &opts, &hook);
+        progress(Progress::StageDone);
+        let vox = vox.map_err(|source| JobError::Voxelize {
+            scene: scene_name.clone(),
+            mesh: mesh_name.clone(),
+            source,
+        })?;
+        let voxelize_seconds = t0.elapsed().as_secs_f64();
+        let (material, param) = input.material(&registry)?;
+        let model =
+            Model::new(&vox.lattice, material, &*param).map_err(|source| JobError::Model {
+                scene: scene_name.clone(),
+                source,
+            })?;
+        let problem = input.problem(model)?;
+        let plan = input.time_plan(&problem)?;
+        // Refuse a bad integrator choice (unknown name, a dt above the
+        // stability limit) here, before anything is written.
+        input.integrator(&registry, &problem, &plan)?;
+        Ok(Job {
+            mesh_name,
+            mesh: loaded.mesh,
+            lattice: vox.lattice,
+            vox_stats: vox.stats,
+            problem,
+            plan,
+            voxelize_seconds,
+            input,
+            registry,
+        })
+    }
+
+    /// Time-steps (or statically solves) the job, writing frames into
+    /// `out_dir` (created if missing). On a solver failure the last good
+    /// state is written as the final frame before the error is returned; on
+    /// cancellation likewise, with [`JobError::Cancelled`].
+    pub fn run(
+        &self,
+        out_dir: &Path,
+        progress: ProgressFn<'_>,
+        cancel: &Cancel,
+    ) -> Result<RunSummary, JobError> {
+        let start = Instant::now();
+        let name = self.input.name();
+        let scene = &self.input.scene;
+        let problem = &self.problem;
+        let plan = self.plan;
+        let s = &scene.solver;
+        let integrator = self.input.integrator(&self.registry, problem, &plan)?;
+        let mut state = State::at_rest(problem.model());
+        problem.apply_constraints(&mut state);
+        let mut steps_done = 0;
+        let mut writer;
+        match integrator {
+            None => {
+                // A static solve is the whole computation: do it before creating
+                // any file, so that a failure leaves nothing behind.
+                let rest_state = state.clone();
+                let opts = StaticOptions {
+                    rtol: s.tolerance,
+                    max_newton: s.max_iterations,
+                    ..StaticOptions::default()
+                };
+                state.time = s.duration;
+                progress(Progress::Solving);
+                let r = solve_static(problem, &mut state, &opts);
+                progress(Progress::StageDone);
+                let info = r.map_err(|source| JobError::Solver {
+                    scene: name.clone(),
+                    stage: "static solve failed",
+                    source: Box::new(source),
+                })?;
+                log::info!(
+                    "static equilibrium: {} load steps, {} Newton iterations, relative residual {:.2e}",
+                    info.load_steps,
+                    info.newton_iterations,
+                    info.relative_residual
+                );
+                steps_done = 1;
+                prepare_output_folder(out_dir)?;
+                writer = self.writer(out_dir)?;
+                if !plan.last_only {
+                    writer.write(problem, &rest_state)?;
+                }
+                writer.write(problem, &state)?;
+            }
+            Some(mut integrator) => {
+                // Fail on an unwritable folder before the long part.
+                prepare_output_folder(out_dir)?;
+                writer = self.writer(out_dir)?;
+                if !plan.last_only {
+                    writer.write(problem, &state)?;
+                }
+                for k in 1..=plan.steps {
+                    if cancel.is_cancelled() {
+                        progress(Progress::StageDone);
+                        // Keep what was simulated: the state reached is a frame.
+                        if steps_done > 0 && !plan.frame_after(steps_done) {
+                            writer.write(problem, &state)?;
+                        }
+                        writer.finish()?;
+                        return Err(JobError::Cancelled {
+                            scene: name,
+                            steps: steps_done,
+                            time: state.time,
+                        });
+                    }
+                    if let Err(source) = integrator.step(problem, &mut state) {
+                        progress(Progress::StageDone);
+                        // Keep what was simulated: the last good state is a frame.
+                        let _ = writer.write(problem, &state);
+                        let _ = writer.finish();
+                        return Err(JobError::Solver {
+                            scene: name,
+                            stage: "the simulation failed",
+                            source: Box::new(source),
+                        });
+                    }
+                    steps_done = k;
+                    if plan.frame_after(k) {
+                        writer.write(problem, &state)?;
+                    }
+                    progress(Progress::Stepping {
+                        done: k,
+                        total: plan.steps,
+                    });
+                }
+                progress(Progress::StageDone);
+            }
+        }
+        writer.finish()?;
+        let model = problem.model();
+        let max_displacement = state
+            .x
+            .iter()
+            .zip(model.rest_positions())
+            .map(|(x, r)| (x - r).norm())
+            .fold(0.0, f64::max);
+        let (files, bytes) = writer.files_and_bytes();
+        let held_nodes = (0..model.num_nodes())
+            .filter(|&n| problem.constraints().mask(n).iter().any(|&h| h))
+            .count();
+        Ok(RunSummary {
+            scene: name,
+            mesh: self.mesh_name.clone(),
+            cells: model.num_cells(),
+            nodes: model.num_nodes(),
+            springs: model.num_springs(),
+            cell_size: model.h(),
+            mass: model.total_mass(),
+            held_nodes,
+            solver: s.kind.clone(),
+            time_step: plan.dt,
+            stable_time_step: plan.stable_dt,
+            steps: steps_done,
+            simulated_time: state.time,
+            frames: writer.frames(),
+            files,
+            bytes_written: bytes,
+            max_displacement,
+            voxelize_seconds: self.voxelize_seconds,
+            simulate_seconds: start.elapsed().as_secs_f64(),
+            wall_seconds: self.voxelize_seconds + start.elapsed().as_secs_f64(),
+            peak_memory_bytes: peak_memory_bytes(),
+            output_folder: out_dir.display().to_string(),
+        })
+    }
+
+    fn writer(&self, out_dir: &Path) -> Result<FrameWriter, JobError> {
+        FrameWriter::new(
+            out_dir,
+            &self.input.scene.output,
+            &self.registry.exporters,
+            &self.lattice,
+            &self.mesh,
+        )
+    }
+}
+
+/// Writes `summary` as `summary.json` in `dir` (atomically).
+pub fn write_summary(dir: &Path, summary: &RunSummary) -> Result<(), JobError> {
+    let path = dir.join("summary.json");
+    let json = serde_json::to_string_pretty(summary)
+        .map_err(|e| mss_io::IoError::invalid(&path, e.to_string()))?;
+    mss_io::atomic::write_atomic(&path, |w| {
+        w.write_all(json.as_bytes())?;
+        w.write_all(b"\n")
+    })?;
+    Ok(())
+}
+
+/// Peak resident memory of this process (bytes), from `VmHWM` in
+/// `/proc/self/status`; `None` where that file does not exist.
+pub fn peak_memory_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    parse_vm_hwm(&status)
+}
+
+fn parse_vm_hwm(status: &str) -> Option<u64> {
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: u64 = line
+        .trim_start_matches("VmHWM:")
+        .trim()
+        .trim_end_matches("kB")
+        .trim()
+        .parse()
+        .ok()?;
+    Some(kb * 1024)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_vm_hwm() {
+        let s = "Name:\tmss\nVmPeak:\t  2000 kB\nVmHWM:\t    1234 kB\nVmRSS:\t 1000 kB\n";
+        assert_eq!(parse_vm_hwm(s), Some(1234 * 1024));
+        assert_eq!(parse_vm_hwm("Name: x\n"), None);
+        if cfg!(target_os = "linux") {
+            assert!(peak_memory_bytes().unwrap() > 0);
+        }
+    }
+
+    #[test]
+    fn cancel_flag_is_shared_by_clones() {
+        let c = Cancel::new();
+        let d = c.clone();
+        assert!(!d.is_cancelled());
+        c.cancel();
+        assert!(d.is_cancelled());
+    }
+}

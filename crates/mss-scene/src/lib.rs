@@ -1,0 +1,67 @@
+//! # mss-scene
+//!
+//! Scene files and running them: what every front end of the hexahedral
+//! mass-spring system (the `mss` CLI, a Python package, a viewer, a user's
+//! own program) shares.
+//!
+//! - [`scene`]: the TOML schema. Tables deserialize into the libraries' own
+//!   parameter types where they have one; unknown keys are refused; every
+//!   error is one line naming the file, line and column or the key.
+//! - [`build`]: scene values to library parameters (mesh, voxelizer options,
+//!   material and parameterization, problem, integrator, time plan).
+//! - [`Registry`]: the plug points a scene names (mesh loaders,
+//!   parameterizations, integrators, exporters), as one value a program
+//!   extends and passes in.
+//! - [`Job`]: prepare (load, voxelize, build) and run (time loop, outputs),
+//!   with progress through a callback and cancellation through [`Cancel`].
+//! - [`check`]: size, memory and output estimates and the mechanism warning
+//!   of a prepared job.
+//! - [`output`]: the frames of a run (lattice, skins, embedded surface,
+//!   springs).
+//!
+//! ```
+//! use mss_scene::{Cancel, Job, Registry, SceneInput, no_progress};
+//!
+//! let scene = SceneInput::from_toml(
+//!     r#"
+//!     [mesh]
+//!     path = "builtin:critter"
+//!     [voxelize]
+//!     cells = 8
+//!     [material]
+//!     young = 1.0e5
+//!     poisson = 0.3
+//!     density = 1000.0
+//!     [[fixed]]
+//!     kind = "lowest_layer"
+//!     [loads]
+//!     gravity = [0.0, 0.0, -9.81]
+//!     [solver]
+//!     duration = 0.01
+//!     [output]
+//!     last_only = true
+//!     "#,
+//!     "example.toml",
+//! )
+//! .unwrap();
+//! let job = Job::prepare(scene, Registry::default(), &no_progress).unwrap();
+//! let out = tempfile::tempdir().unwrap();
+//! let summary = job.run(out.path(), &no_progress, &Cancel::new()).unwrap();
+//! assert_eq!(summary.frames, 1);
+//! assert!(summary.max_displacement > 0.0);
+//! assert!(out.path().join("lattice.pvd").exists());
+//! ```
+
+pub mod build;
+pub mod check;
+pub mod error;
+pub mod job;
+pub mod output;
+pub mod registry;
+pub mod scene;
+
+pub use build::{SceneInput, TimePlan};
+pub use error::JobError;
+pub use job::{Cancel, Job, Progress, ProgressFn, RunSummary, no_progress, write_summary};
+pub use registry::Registry;
+pub use scene::{Scene, SceneError};

@@ -1,0 +1,239 @@
+//! A scene run through the library: progress, cancellation, plug points
+//! reached by name, frame times and the time plan.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use mss_core::solver::{Integrator, IntegratorSettings, Problem, SolverError, State, StepInfo};
+use mss_scene::{Cancel, Job, JobError, Progress, Registry, SceneInput, no_progress};
+
+fn scene(extra: &str) -> String {
+    format!(
+        "[mesh]\npath = \"builtin:critter\"\n[voxelize]\ncells = 8\n[material]\nyoung = 1.0e5\n\
+         poisson = 0.3\ndensity = 1000.0\n[[fixed]]\nkind = \"lowest_layer\"\n[loads]\n\
+         gravity = [0.0, 0.0, -9.81]\n{extra}"
+    )
+}
+
+fn input(extra: &str) -> SceneInput {
+    SceneInput::from_toml(&scene(extra), "test.toml").unwrap()
+}
+
+/// Times listed in a `.pvd` file.
+fn pvd_times(path: &std::path::Path) -> Vec<f64> {
+    let text = std::fs::read_to_string(path).unwrap();
+    text.split("timestep=\"")
+        .skip(1)
+        .map(|t| t.split('"').next().unwrap().parse().unwrap())
+        .collect()
+}
+
+#[test]
+fn frames_land_on_multiples_of_every_time() {
+    let job = Job::prepare(
+        input("[solver]\nduration = 0.02\n[output]\nevery_time = 0.005\n"),
+        Registry::default(),
+        &no_progress,
+    )
+    .unwrap();
+    // The automatic step divides the frame interval.
+    let per_frame = 0.005 / job.plan.dt;
+    assert!((per_frame - per_frame.round()).abs() < 1e-9, "{per_frame}");
+    assert!(job.plan.dt <= job.plan.stable_dt);
+    let out = tempfile::tempdir().unwrap();
+    let steps = AtomicU64::new(0);
+    let summary = job
+        .run(
+            out.path(),
+            &|p| {
+                if let Progress::Stepping { done, total } = p {
+                    assert!(done <= total);
+                    steps.store(done, Ordering::Relaxed);
+                }
+            },
+            &Cancel::new(),
+        )
+        .unwrap();
+    assert_eq!(steps.load(Ordering::Relaxed), summary.steps);
+    assert_eq!(summary.frames as u64, job.plan.num_frames());
+    let times = pvd_times(&out.path().join("lattice.pvd"));
+    assert_eq!(times.len(), 5);
+    for (k, t) in times.iter().enumerate() {
+        assert!((t - 0.005 * k as f64).abs() < 1e-12, "frame {k} at {t}");
+    }
+    assert!((summary.simulated_time - 0.02).abs() < 1e-12);
+}
+
+#[test]
+fn a_given_step_that_does_not_divide_the_interval_writes_at_the_first_step_past_it() {
+    let job = Job::prepare(
+        input("[solver]\nduration = 0.01\ndt = 3e-4\n[output]\nevery_time = 0.002\n"),
+        Registry::default(),
+        &no_progress,
+    )
+    .unwrap();
+    let out = tempfile::tempdir().unwrap();
+    let summary = job.run(out.path(), &no_progress, &Cancel::new()).unwrap();
+    let times = pvd_times(&out.path().join("lattice.pvd"));
+    assert_eq!(times.len() as u64, job.plan.num_frames());
+    assert_eq!(summary.frames, times.len());
+    // 0, then the first step at or past 0.002, 0.004, ..., and the last step.
+    for (k, t) in times.iter().enumerate().skip(1).take(4) {
+        let due = 0.002 * k as f64;
+        assert!(*t >= due - 1e-12 && *t < due + 3e-4, "frame {k} at {t}");
+    }
+}
+
+#[test]
+fn cancel_stops_between_steps_and_keeps_the_state_reached() {
+    let job = Job::prepare(
+        input("[solver]\nduration = 0.05\n[output]\nevery_steps = 1000\n"),
+        Registry::default(),
+        &no_progress,
+    )
+    .unwrap();
+    let out = tempfile::tempdir().unwrap();
+    let cancel = Cancel::new();
+    let err = job
+        .run(
+            out.path(),
+            &|p| {
+                if let Progress::Stepping { done: 7, .. } = p {
+                    cancel.cancel();
+                }
+            },
+            &cancel,
+        )
+        .unwrap_err();
+    match err {
+        JobError::Cancelled { steps, time, .. } => {
+            assert_eq!(steps, 7);
+            assert!((time - 7.0 * job.plan.dt).abs() < 1e-12);
+        }
+        other => panic!("expected Cancelled, got {other}"),
+    }
+    // The initial frame and the state reached.
+    let times = pvd_times(&out.path().join("lattice.pvd"));
+    assert_eq!(times.len(), 2);
+    assert!((times[1] - 7.0 * job.plan.dt).abs() < 1e-12);
+}
+
+/// Symplectic Euler written outside the library, keeping the integrator contract.
+struct OutsideEuler {
+    dt: f64,
+    f: Vec<mss_core::Vec3>,
+    g: Vec<mss_core::Vec3>,
+}
+
+impl Integrator for OutsideEuler {
+    fn name(&self) -> &'static str {
+        "outside-euler"
+    }
+    fn dt(&self) -> f64 {
+        self.dt
+    }
+    fn step(&mut self, problem: &Problem, state: &mut State) -> Result<StepInfo, SolverError> {
+        let model = problem.model();
+        model.internal_forces(&state.x, &mut self.f);
+        self.g.iter_mut().for_each(|v| *v = mss_core::Vec3::zeros());
+        problem.external_forces(state.time, &state.x, 1.0, &mut self.g);
+        for n in 0..model.num_nodes() {
+            let a = (self.f[n] + self.g[n]) * (self.dt / model.masses()[n]);
+            let held = problem.constraints().mask(n);
+            for d in (0..3).filter(|&d| !held[d]) {
+                state.v[n][d] += a[d];
+                state.x[n][d] += state.v[n][d] * self.dt;
+            }
+        }
+        state.time += self.dt;
+        problem.apply_constraints(state);
+        Ok(StepInfo {
+            time: state.time,
+            dt: self.dt,
+            substeps: 1,
+            newton_iterations: 0,
+        })
+    }
+}
+
+#[test]
+fn registered_plugins_are_reached_from_scene_names() {
+    let mut registry = Registry::default();
+    registry.integrators.register(
+        "outside-euler",
+        Arc::new(|p: &Problem, s: &IntegratorSettings| {
+            let n = p.model().num_nodes();
+            Ok(Box::new(OutsideEuler {
+                dt: s.dt.unwrap_or(1e-4),
+                f: vec![mss_core::Vec3::zeros(); n],
+                g: vec![mss_core::Vec3::zeros(); n],
+            }) as Box<dyn Integrator>)
+        }),
+    );
+    let extra = "[solver]\nkind = \"outside-euler\"\ndt = 1e-4\nduration = 0.002\n\
+                 [output]\nlast_only = true\n";
+    let job = Job::prepare(input(extra), registry.clone(), &no_progress).unwrap();
+    let out = tempfile::tempdir().unwrap();
+    let outside = job.run(out.path(), &no_progress, &Cancel::new()).unwrap();
+    assert_eq!(outside.solver, "outside-euler");
+    assert_eq!(outside.steps, 20);
+    // The same run with the built-in symplectic Euler gives the same motion.
+    let builtin = input(&extra.replace("outside-euler", "symplectic-euler"));
+    let job = Job::prepare(builtin, registry.clone(), &no_progress).unwrap();
+    let out2 = tempfile::tempdir().unwrap();
+    let inside = job.run(out2.path(), &no_progress, &Cancel::new()).unwrap();
+    let rel = (outside.max_displacement - inside.max_displacement).abs() / inside.max_displacement;
+    assert!(
+        rel < 1e-9,
+        "{} vs {}",
+        outside.max_displacement,
+        inside.max_displacement
+    );
+    // Unknown names are refused with the registry's list, before any file is written.
+    let err = Job::prepare(input("[solver]\nkind = \"rk4\"\n"), registry, &no_progress)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("[solver] kind") && err.contains("outside-euler"),
+        "{err}"
+    );
+}
+
+#[test]
+fn names_and_values_are_refused_with_their_key() {
+    let cases = [
+        (
+            "[model]\nparameterization = \"magic\"\n",
+            "[model] parameterization",
+        ),
+        ("[model]\nhourglass = -1.0\n", "[model] hourglass"),
+        (
+            "[[motions]]\nselect = { kind = \"box\", min = [5, 5, 5], max = [6, 6, 6] }\ndisplacement = [0, 0, 0.01]\n",
+            "[[motions]] #1",
+        ),
+        ("[output]\nexporters = [\"vtp\"]\n", "vtp"),
+    ];
+    for (extra, needle) in cases {
+        let r = Job::prepare(input(extra), Registry::default(), &no_progress);
+        let err = match r {
+            Err(e) => e.to_string(),
+            Ok(job) => {
+                let out = tempfile::tempdir().unwrap();
+                job.run(out.path(), &no_progress, &Cancel::new())
+                    .unwrap_err()
+                    .to_string()
+            }
+        };
+        assert!(err.contains(needle), "{extra:?}: {err}");
+        assert!(!err.contains('\n'), "{err}");
+    }
+}
+
+#[test]
+fn the_bundled_scene_parses_and_plans() {
+    let input = SceneInput::bundled_default();
+    assert_eq!(input.scene.solver.kind, "explicit");
+    let job = Job::prepare(input, Registry::default(), &no_progress).unwrap();
+    assert!(job.plan.steps > 1000);
+    assert_eq!(job.plan.num_frames(), 41);
+}
