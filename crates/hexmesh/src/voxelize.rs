@@ -295,8 +295,49 @@ pub struct OccupancyContext<'a> {
     pub inside: &'a dyn InsideTest,
 }
 
-/// A user occupancy rule: returns, for every grid cell in linear order (see
-/// [`Grid::index`]), whether it is occupied. Must be deterministic.
+/// A user occupancy rule, the plug point for how grid cells become lattice
+/// cells ([`OccupancyRule::Custom`]).
+///
+/// Contract: return one flag per grid cell in linear order ([`Grid::index`],
+/// x fastest), `ctx.grid.len()` in all; be deterministic (the same answer for
+/// any thread count); never panic. Components are filtered afterwards as the
+/// options say, like for the built-in rules.
+///
+/// ```
+/// use std::sync::Arc;
+/// use hexmesh::voxelize::{Occupancy, OccupancyContext, OccupancyRule, Resolution, VoxelizeOptions};
+///
+/// /// Keeps the cells whose centre is inside and below the mesh's mid-height.
+/// struct LowerHalf;
+/// impl Occupancy for LowerHalf {
+///     fn occupied(&self, ctx: &OccupancyContext<'_>) -> Vec<bool> {
+///         let g = ctx.grid;
+///         let [nx, ny, nz] = g.dims.map(|d| d as usize);
+///         let mut out = vec![false; g.len()];
+///         let mut row = vec![false; nx];
+///         for z in 0..nz {
+///             let cz = g.origin[2] + (z as f64 + 0.5) * g.h;
+///             for y in 0..ny {
+///                 let cy = g.origin[1] + (y as f64 + 0.5) * g.h;
+///                 ctx.inside.classify_row(cy, cz, g.origin[0] + 0.5 * g.h, g.h, &mut row);
+///                 for x in 0..nx {
+///                     out[g.index(x, y, z)] = row[x] && cz < 0.5;
+///                 }
+///             }
+///         }
+///         out
+///     }
+/// }
+///
+/// let cube = hexmesh::generate::box_mesh([0.0; 3], [1.0; 3]);
+/// let opts = VoxelizeOptions {
+///     resolution: Resolution::CellsAlongLongestAxis(4),
+///     rule: OccupancyRule::Custom(Arc::new(LowerHalf)),
+///     ..VoxelizeOptions::default()
+/// };
+/// let vox = hexmesh::voxelize(&cube, &opts).unwrap();
+/// assert_eq!(vox.lattice.num_cells(), 4 * 4 * 2);
+/// ```
 pub trait Occupancy: Send + Sync {
     /// Classifies every cell of `ctx.grid`.
     fn occupied(&self, ctx: &OccupancyContext<'_>) -> Vec<bool>;

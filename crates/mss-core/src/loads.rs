@@ -15,8 +15,51 @@ use thiserror::Error;
 use crate::constraints::{ConstraintError, NodeSelector, check_finite, check_finite3};
 use crate::{BlockCsr, Mat3, Model, Vec3};
 
-/// An external load. Implementations must be deterministic and must not
-/// allocate in [`Load::add_forces`] (it runs every explicit step).
+/// An external load, the plug point for forces from outside the body.
+///
+/// Contract: [`add_forces`](Self::add_forces) adds (never overwrites) its
+/// forces, is deterministic, and does not allocate (it runs every explicit
+/// step); a position-dependent load also adds its exact Jacobian in
+/// [`add_jacobian`](Self::add_jacobian), which the implicit and static solvers
+/// use; a load that stiffens the body says so in
+/// [`restrains`](Self::restrains).
+///
+/// ```
+/// use hexmesh::Lattice;
+/// use mss_core::constraints::{ConstraintSpec, Face, NodeSelector};
+/// use mss_core::loads::{Damping, Load};
+/// use mss_core::solver::{Problem, State, StaticOptions, solve_static};
+/// use mss_core::{Material, Model, PaperModel, Vec3};
+///
+/// /// A uniform pull along +x on every node (N per node), scaled by the load factor.
+/// #[derive(Debug)]
+/// struct Wind(f64);
+/// impl Load for Wind {
+///     fn name(&self) -> String {
+///         format!("wind of {} N per node", self.0)
+///     }
+///     fn add_forces(&self, _m: &Model, _t: f64, _x: &[Vec3], scale: f64, f: &mut [Vec3]) {
+///         f.iter_mut().for_each(|fi| fi.x += scale * self.0);
+///     }
+/// }
+///
+/// let lattice = Lattice::block([4, 2, 2], 0.05, [0.0; 3]).unwrap();
+/// let model = Model::new(&lattice, Material::new(1e4, 0.3, 1000.0).unwrap(), &PaperModel).unwrap();
+/// let problem = Problem::from_specs(
+///     model,
+///     &[ConstraintSpec::fixed(NodeSelector::face(Face::XMin))],
+///     &[],
+///     Damping::NONE,
+/// )
+/// .unwrap()
+/// .with_load(Box::new(Wind(1e-3)));
+/// let mut state = State::at_rest(problem.model());
+/// solve_static(&problem, &mut state, &StaticOptions::default()).unwrap();
+/// // The free end moved along the wind.
+/// let rest = problem.model().rest_positions();
+/// assert!((0..rest.len()).all(|n| state.x[n].x >= rest[n].x - 1e-12));
+/// assert!(state.x.iter().zip(rest).any(|(x, r)| x.x - r.x > 1e-6));
+/// ```
 pub trait Load: Send + Sync + Debug {
     /// Short description for logs and error messages.
     fn name(&self) -> String;

@@ -209,8 +209,42 @@ pub enum SkinFrames {
 /// A writer of skins over a run, the plug point for skin formats, registered
 /// by name in [`Exporters`](crate::exporters::Exporters).
 ///
-/// The caller calls [`write_skin`](Self::write_skin) with strictly increasing
-/// frame indices, then [`finish`](Self::finish) once.
+/// Contract: the caller calls [`write_skin`](Self::write_skin) with strictly
+/// increasing frame indices, then [`finish`](Self::finish) once. Every file is
+/// complete when `write_skin` returns (write through
+/// [`write_atomic`](crate::atomic::write_atomic)), errors name the file, and
+/// nothing panics on any input.
+///
+/// ```
+/// use std::io::Write;
+/// use std::path::PathBuf;
+/// use mss_io::IoError;
+/// use mss_io::skin::SkinExporter;
+///
+/// /// Writes each frame's vertices as `x y z` lines.
+/// struct Xyz(PathBuf);
+/// impl SkinExporter for Xyz {
+///     fn name(&self) -> &'static str {
+///         "xyz"
+///     }
+///     fn write_skin(&mut self, index: usize, _time: f64, positions: &[[f64; 3]], _triangles: &[[u32; 3]]) -> Result<(), IoError> {
+///         let path = self.0.join(format!("skin_{index:04}.xyz"));
+///         mss_io::atomic::write_atomic(&path, |w| {
+///             positions.iter().try_for_each(|p| writeln!(w, "{} {} {}", p[0], p[1], p[2]))
+///         })
+///     }
+///     fn finish(&mut self) -> Result<(), IoError> {
+///         Ok(())
+///     }
+/// }
+///
+/// let dir = tempfile::tempdir().unwrap();
+/// let mut e = Xyz(dir.path().to_path_buf());
+/// e.write_skin(0, 0.0, &[[0.0, 1.0, 2.0]], &[]).unwrap();
+/// e.finish().unwrap();
+/// let text = std::fs::read_to_string(dir.path().join("skin_0000.xyz")).unwrap();
+/// assert_eq!(text, "0 1 2\n");
+/// ```
 pub trait SkinExporter: Send {
     /// The name this exporter is registered under.
     fn name(&self) -> &'static str;

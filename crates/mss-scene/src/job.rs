@@ -14,7 +14,7 @@ use serde::Serialize;
 
 use crate::build::{SceneInput, TimePlan, load_mesh, prepare_output_folder};
 use crate::error::JobError;
-use crate::output::FrameWriter;
+use crate::output::{FrameWriter, remove_previous_run};
 use crate::registry::Registry;
 
 /// What a running job reports, through the callback given to
@@ -208,7 +208,10 @@ impl Job {
     }
 
     /// Time-steps (or statically solves) the job, writing frames into
-    /// `out_dir` (created if missing). On a solver failure the last good
+    /// `out_dir` (created if missing). The files of an earlier run in that
+    /// folder are removed first (and only those:
+    /// [`previous_run_files`](crate::output::previous_run_files)), so a
+    /// shorter run does not leave stale frames beside its own. On a solver failure the last good
     /// state is written as the final frame before the error is returned; on
     /// cancellation likewise, with [`JobError::Cancelled`].
     pub fn run(
@@ -255,6 +258,7 @@ impl Job {
                 );
                 steps_done = 1;
                 prepare_output_folder(out_dir)?;
+                remove_previous_run(out_dir)?;
                 writer = self.writer(out_dir)?;
                 if !plan.last_only {
                     writer.write(problem, &rest_state)?;
@@ -264,6 +268,7 @@ impl Job {
             Some(mut integrator) => {
                 // Fail on an unwritable folder before the long part.
                 prepare_output_folder(out_dir)?;
+                remove_previous_run(out_dir)?;
                 writer = self.writer(out_dir)?;
                 if !plan.last_only {
                     writer.write(problem, &state)?;

@@ -24,6 +24,88 @@ pub const SURFACE_PREFIX: &str = "surface";
 /// File name stem of the springs as lines (`springs_0000.vtu`, `springs.pvd`).
 pub const SPRINGS_PREFIX: &str = "springs";
 
+/// Series a run writes: file-name stem and the extensions of its numbered
+/// frames (`STEM_NNNN.EXT`).
+const SERIES: [(&str, &[&str]); 4] = [
+    (LATTICE_PREFIX, &["vtu", "vtk"]),
+    (SKIN_PREFIX, &["obj", "stl"]),
+    (SURFACE_PREFIX, &["obj"]),
+    (SPRINGS_PREFIX, &["vtu"]),
+];
+
+/// Single files a run writes.
+const RUN_FILES: [&str; 3] = ["lattice.pvd", "springs.pvd", "summary.json"];
+
+/// Whether `name` is a file a run writes: `STEM_NNNN.EXT` of one of the
+/// series (four or more digits), or one of the run's single files.
+fn is_run_file(name: &str) -> bool {
+    if RUN_FILES.contains(&name) {
+        return true;
+    }
+    SERIES.iter().any(|(stem, exts)| {
+        let Some(rest) = name.strip_prefix(stem).and_then(|r| r.strip_prefix('_')) else {
+            return false;
+        };
+        let Some((digits, ext)) = rest.split_once('.') else {
+            return false;
+        };
+        digits.len() >= 4 && digits.bytes().all(|b| b.is_ascii_digit()) && exts.contains(&ext)
+    })
+}
+
+/// For a temporary file of [`mss_io::atomic::write_atomic`]
+/// (`.NAME.tmp-PID-N`), the final name and the writing process.
+fn temporary_of(name: &str) -> Option<(&str, u32)> {
+    let rest = name.strip_prefix('.')?;
+    let (target, tail) = rest.rsplit_once(".tmp-")?;
+    let (pid, n) = tail.split_once('-')?;
+    n.parse::<u64>().ok()?;
+    Some((target, pid.parse().ok()?))
+}
+
+fn process_is_running(pid: u32) -> bool {
+    pid == std::process::id() || Path::new(&format!("/proc/{pid}")).exists()
+}
+
+/// The files an earlier run left in `dir` that a new run there would mix
+/// with its own: the numbered frames of every series, the `.pvd` files and
+/// `summary.json`, and temporary files of runs that were interrupted (their
+/// process is gone). Nothing else is touched. Sorted by name.
+pub fn previous_run_files(dir: &Path) -> Vec<PathBuf> {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Vec::new();
+    };
+    let mut out: Vec<PathBuf> = entries
+        .filter_map(Result::ok)
+        .filter(|e| e.file_type().is_ok_and(|t| t.is_file()))
+        .filter_map(|e| {
+            let name = e.file_name().to_str()?.to_owned();
+            let ours = is_run_file(&name)
+                || temporary_of(&name)
+                    .is_some_and(|(target, pid)| is_run_file(target) && !process_is_running(pid));
+            ours.then(|| e.path())
+        })
+        .collect();
+    out.sort();
+    out
+}
+
+/// Removes [`previous_run_files`] from `dir`; returns how many were removed.
+pub fn remove_previous_run(dir: &Path) -> Result<usize, JobError> {
+    let files = previous_run_files(dir);
+    for f in &files {
+        std::fs::remove_file(f).map_err(|e| IoError::io(f, e))?;
+    }
+    if !files.is_empty() {
+        log::info!(
+            "removed {} files of an earlier run in {}",
+            files.len(),
+            dir.display()
+        );
+    }
+    Ok(files.len())
+}
+
 /// The springs output of a run.
 struct SpringsOutput {
     /// Built at the first frame, from the model being run.
@@ -323,4 +405,74 @@ pub fn frame_size_estimate(out: &OutputSection, n: &FrameCounts) -> u64 {
         total += springs * 4 / 3;
     }
     total
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn run_files_are_recognised_by_name() {
+        for yes in [
+            "lattice_0000.vtu",
+            "lattice_12345.vtk",
+            "skin_0003.stl",
+            "surface_0040.obj",
+            "springs_0001.vtu",
+            "lattice.pvd",
+            "summary.json",
+        ] {
+            assert!(is_run_file(yes), "{yes}");
+        }
+        for no in [
+            "lattice_01.vtu",
+            "lattice_000a.vtu",
+            "lattice_0000.obj",
+            "notes.txt",
+            "mesh.obj",
+            "skin.obj",
+            "lattice.vtu",
+        ] {
+            assert!(!is_run_file(no), "{no}");
+        }
+        assert_eq!(
+            temporary_of(".lattice_0003.vtu.tmp-123-7"),
+            Some(("lattice_0003.vtu", 123))
+        );
+        assert_eq!(temporary_of("lattice_0003.vtu"), None);
+    }
+
+    #[test]
+    fn only_an_earlier_runs_files_are_removed() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        // A pid that cannot be a running process.
+        let dead = u32::MAX - 1;
+        for name in [
+            "lattice_0000.vtu".to_owned(),
+            "lattice_0001.vtu".to_owned(),
+            "lattice.pvd".to_owned(),
+            "summary.json".to_owned(),
+            format!(".lattice_0002.vtu.tmp-{dead}-0"),
+            format!(".lattice_0002.vtu.tmp-{}-0", std::process::id()),
+            "mesh.obj".to_owned(),
+            "notes.txt".to_owned(),
+        ] {
+            std::fs::write(d.join(name), b"x").unwrap();
+        }
+        assert_eq!(remove_previous_run(d).unwrap(), 5);
+        let mut left: Vec<String> = std::fs::read_dir(d)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().into_string().unwrap())
+            .collect();
+        left.sort();
+        assert_eq!(
+            left,
+            vec![
+                format!(".lattice_0002.vtu.tmp-{}-0", std::process::id()),
+                "mesh.obj".to_owned(),
+                "notes.txt".to_owned()
+            ]
+        );
+    }
 }

@@ -237,3 +237,28 @@ fn the_bundled_scene_parses_and_plans() {
     assert!(job.plan.steps > 1000);
     assert_eq!(job.plan.num_frames(), 41);
 }
+
+#[test]
+fn a_run_replaces_an_earlier_runs_series_and_nothing_else() {
+    let out = tempfile::tempdir().unwrap();
+    std::fs::write(out.path().join("notes.txt"), b"mine").unwrap();
+    let long = input("[solver]\nduration = 0.004\n[output]\nevery_steps = 1\n");
+    let job = Job::prepare(long, Registry::default(), &no_progress).unwrap();
+    let first = job.run(out.path(), &no_progress, &Cancel::new()).unwrap();
+    let short = input("[solver]\nduration = 0.001\n[output]\nevery_steps = 1\n");
+    let job = Job::prepare(short, Registry::default(), &no_progress).unwrap();
+    let second = job.run(out.path(), &no_progress, &Cancel::new()).unwrap();
+    assert!(first.frames > second.frames);
+    let vtu = std::fs::read_dir(out.path())
+        .unwrap()
+        .filter(|e| {
+            let name = e.as_ref().unwrap().file_name().into_string().unwrap();
+            name.starts_with("lattice_") && name.ends_with(".vtu")
+        })
+        .count();
+    assert_eq!(vtu, second.frames);
+    assert_eq!(
+        std::fs::read(out.path().join("notes.txt")).unwrap(),
+        b"mine"
+    );
+}

@@ -34,5 +34,6 @@ pub mod fem;
 pub mod figures;
 pub mod material_test;
 pub mod report;
+pub mod suite;
 
 pub use material_test::{MeasuredMaterial, measure_material};
