@@ -388,7 +388,8 @@ mod tests {
         let m = critter();
         assert_eq!(edge_defects(&m), (0, 0));
         assert!(m.signed_volume() > 0.0);
-        let (lo, hi) = m.bounding_box().unwrap();
+        let bbox = m.bounding_box().unwrap();
+        let (lo, hi) = (bbox.min, bbox.max);
         let ext: Vec<f64> = (0..3).map(|k| hi[k] - lo[k]).collect();
         assert!(ext[0] > 0.17 && ext[0] < 0.22, "length {ext:?}");
         assert!(ext[0] > ext[1] && ext[0] > ext[2]);

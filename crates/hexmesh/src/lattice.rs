@@ -278,17 +278,12 @@ impl Lattice {
             .map(|i| i as u32)
     }
 
-    /// Axis-aligned bounding box of the nodes as `(min, max)`.
-    pub fn bounding_box(&self) -> ([f64; 3], [f64; 3]) {
-        let mut lo = [f64::INFINITY; 3];
-        let mut hi = [f64::NEG_INFINITY; 3];
-        for p in &self.nodes {
-            for k in 0..3 {
-                lo[k] = lo[k].min(p[k]);
-                hi[k] = hi[k].max(p[k]);
-            }
-        }
-        (lo, hi)
+    /// Axis-aligned bounding box of the nodes (a lattice has at least one cell).
+    pub fn bounding_box(&self) -> crate::Aabb {
+        crate::Aabb::of_points(self.nodes.iter().copied()).unwrap_or(crate::Aabb {
+            min: self.origin,
+            max: self.origin,
+        })
     }
 
     /// Number of distinct cell edges (each shared edge counted once).
@@ -609,7 +604,10 @@ mod tests {
         let l = Lattice::l_shape(2, 2.0).unwrap();
         assert_eq!(l.num_cells(), 6 * 8);
         assert_eq!(l.h(), 1.0);
-        assert_eq!(l.bounding_box(), ([0.0; 3], [4.0; 3]));
+        assert_eq!(
+            (l.bounding_box().min, l.bounding_box().max),
+            ([0.0; 3], [4.0; 3])
+        );
         assert!(l.cell_at([3, 0, 0]).is_none());
         assert!(l.cell_at([3, 0, 3]).is_some());
     }

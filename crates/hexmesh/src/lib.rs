@@ -77,7 +77,7 @@ pub use lattice::{
 pub use load::{
     LoadError, LoadReport, LoadedMesh, MeshFormat, MeshLoader, load_mesh, load_mesh_bytes,
 };
-pub use mesh::TriMesh;
+pub use mesh::{Aabb, TriMesh};
 pub use skin::{Skin, boundary_skin};
 pub use springs::SpringTopology;
 pub use voxelize::{

@@ -667,17 +667,15 @@ pub fn clean_mesh(raw: TriMesh, weld_tolerance: f64, name: &str) -> Result<Loade
         triangles,
     };
     // Extent of the vertices used by triangles only.
-    let mut lo = [f64::INFINITY; 3];
-    let mut hi = [f64::NEG_INFINITY; 3];
-    for t in &mesh.triangles {
-        for &i in t {
-            let p = mesh.vertices[i as usize];
-            for k in 0..3 {
-                lo[k] = lo[k].min(p[k]);
-                hi[k] = hi[k].max(p[k]);
-            }
-        }
-    }
+    let used = mesh
+        .triangles
+        .iter()
+        .flatten()
+        .map(|&i| mesh.vertices[i as usize]);
+    let crate::Aabb { min: lo, max: hi } = crate::Aabb::of_points(used).unwrap_or(crate::Aabb {
+        min: [0.0; 3],
+        max: [0.0; 3],
+    });
     if let Some(k) = (0..3).find(|&k| hi[k] <= lo[k]) {
         return Err(LoadError::ZeroExtent {
             file: file(name),

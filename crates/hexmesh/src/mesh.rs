@@ -13,19 +13,60 @@ pub struct TriMesh {
     pub triangles: Vec<[u32; 3]>,
 }
 
-impl TriMesh {
-    /// Axis-aligned bounding box as `(min, max)`; `None` for a mesh without vertices.
-    pub fn bounding_box(&self) -> Option<([f64; 3], [f64; 3])> {
-        let first = *self.vertices.first()?;
-        let mut lo = first;
-        let mut hi = first;
-        for v in &self.vertices {
-            for k in 0..3 {
-                lo[k] = lo[k].min(v[k]);
-                hi[k] = hi[k].max(v[k]);
-            }
+/// An axis-aligned box `min ..= max` (m).
+///
+/// ```
+/// use hexmesh::Aabb;
+/// let b = Aabb::of_points([[0.0, 1.0, 2.0], [1.0, -1.0, 4.0]]).unwrap();
+/// assert_eq!((b.min, b.max), ([0.0, -1.0, 2.0], [1.0, 1.0, 4.0]));
+/// assert_eq!(b.extent(), [1.0, 2.0, 2.0]);
+/// assert_eq!(b.diagonal(), 3.0);
+/// assert_eq!(b.at_fraction([0.5, 0.5, 1.0]), [0.5, 0.0, 4.0]);
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Aabb {
+    /// Minimum corner.
+    pub min: [f64; 3],
+    /// Maximum corner.
+    pub max: [f64; 3],
+}
+
+impl Aabb {
+    /// The smallest box holding every point; `None` without points.
+    pub fn of_points<P: Into<[f64; 3]>>(points: impl IntoIterator<Item = P>) -> Option<Self> {
+        let mut it = points.into_iter().map(Into::into);
+        let first = it.next()?;
+        let mut b = Aabb {
+            min: first,
+            max: first,
+        };
+        for p in it {
+            b.min = std::array::from_fn(|k| b.min[k].min(p[k]));
+            b.max = std::array::from_fn(|k| b.max[k].max(p[k]));
         }
-        Some((lo, hi))
+        Some(b)
+    }
+
+    /// Edge lengths along x, y, z.
+    pub fn extent(&self) -> [f64; 3] {
+        std::array::from_fn(|k| self.max[k] - self.min[k])
+    }
+
+    /// Length of the diagonal.
+    pub fn diagonal(&self) -> f64 {
+        self.extent().iter().map(|e| e * e).sum::<f64>().sqrt()
+    }
+
+    /// The point at fractions `f` (0 = min, 1 = max) of the box along each axis.
+    pub fn at_fraction(&self, f: [f64; 3]) -> [f64; 3] {
+        std::array::from_fn(|k| self.min[k] + f[k] * (self.max[k] - self.min[k]))
+    }
+}
+
+impl TriMesh {
+    /// Axis-aligned bounding box of the vertices; `None` for a mesh without vertices.
+    pub fn bounding_box(&self) -> Option<Aabb> {
+        Aabb::of_points(self.vertices.iter().copied())
     }
 
     /// Signed enclosed volume by the divergence theorem (positive for a closed,

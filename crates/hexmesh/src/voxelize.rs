@@ -345,7 +345,7 @@ pub trait Occupancy: Send + Sync {
 
 /// Chooses the grid for `mesh`; checks the cell budget before anything is allocated.
 pub fn plan_grid(mesh: &TriMesh, opts: &VoxelizeOptions) -> Result<Grid, VoxelizeError> {
-    let (lo, hi) = mesh.bounding_box().ok_or(VoxelizeError::EmptyMesh)?;
+    let crate::Aabb { min: lo, max: hi } = mesh.bounding_box().ok_or(VoxelizeError::EmptyMesh)?;
     if let Some(i) = mesh
         .vertices
         .iter()

@@ -333,17 +333,13 @@ fn build(tris: &mut [[V3; 3]], start: usize, end: usize, nodes: &mut Vec<BvhNode
         leaf: true,
     });
     if end - start > LEAF {
-        let mut lo = [f64::INFINITY; 3];
-        let mut hi = [f64::NEG_INFINITY; 3];
         let centroid =
             |t: &[V3; 3]| -> V3 { std::array::from_fn(|k| (t[0][k] + t[1][k] + t[2][k]) / 3.0) };
-        for t in slice {
-            let c = centroid(t);
-            for k in 0..3 {
-                lo[k] = lo[k].min(c[k]);
-                hi[k] = hi[k].max(c[k]);
-            }
-        }
+        let crate::Aabb { min: lo, max: hi } = crate::Aabb::of_points(slice.iter().map(centroid))
+            .unwrap_or(crate::Aabb {
+                min: [0.0; 3],
+                max: [0.0; 3],
+            });
         let axis = (0..3)
             .max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b])))
             .unwrap_or(0);
@@ -388,7 +384,10 @@ impl WindingInside {
     /// Prepares `mesh` (orientation repair, y-z bins of edge `bin_size`).
     pub fn new(mesh: &TriMesh, bin_size: f64) -> Self {
         let (mesh, report) = orient(mesh);
-        let (lo, hi) = mesh.bounding_box().unwrap_or(([0.0; 3], [0.0; 3]));
+        let crate::Aabb { min: lo, max: hi } = mesh.bounding_box().unwrap_or(crate::Aabb {
+            min: [0.0; 3],
+            max: [0.0; 3],
+        });
         let bin_size = if bin_size.is_finite() && bin_size > 0.0 {
             bin_size
         } else {

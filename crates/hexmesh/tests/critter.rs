@@ -31,7 +31,8 @@ fn critter_file_is_closed_outward_and_one_component() {
     );
     assert_closed_oriented(&m.triangles);
     assert!(m.signed_volume() > 0.0);
-    let (lo, hi) = m.bounding_box().unwrap();
+    let b = m.bounding_box().unwrap();
+    let (lo, hi) = (b.min, b.max);
     assert!(hi[0] - lo[0] > 0.18 && hi[0] - lo[0] < 0.22);
     let v = voxelize(
         m,

@@ -190,7 +190,8 @@ fn bunny_agrees_with_parry_flood_fill() {
         .map(|v| [v.coords.x, v.coords.y, v.coords.z])
         .collect();
     // Same grid: parry's voxel i is centred at min + i * scale.
-    let (lo, hi) = b.bounding_box().unwrap();
+    let bb = b.bounding_box().unwrap();
+    let (lo, hi) = (bb.min, bb.max);
     let longest = (0..3).map(|k| hi[k] - lo[k]).fold(0.0, f64::max);
     let s = longest / (res - 1) as f64;
     assert!((set.scale - s).abs() < 1e-12 * s);

@@ -193,3 +193,26 @@ pub fn exit_code(e: &anyhow::Error) -> u8 {
         1
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_cause_already_in_the_message_is_not_repeated() {
+        let os = std::io::Error::new(std::io::ErrorKind::NotFound, "No such file or directory");
+        let lib = mss_io::IoError::io(std::path::Path::new("out/a.vtu"), os);
+        let e = anyhow::Error::new(lib).context("frame 3");
+        let line = error_report(&e);
+        assert_eq!(
+            line.matches("No such file or directory").count(),
+            1,
+            "{line}"
+        );
+        assert!(
+            line.starts_with("error: frame 3: cannot write out/a.vtu"),
+            "{line}"
+        );
+        assert!(!line.contains('\n'));
+    }
+}

@@ -233,6 +233,30 @@ fn cases() -> Vec<Case> {
             ),
             &["stability limit"],
         ),
+        case(
+            "check refuses the time step that run refuses",
+            vec![
+                text(
+                    "scene.toml",
+                    scene(
+                        MATERIAL,
+                        &format!("{fixed_floor}[solver]\nkind = \"explicit\"\ndt = 0.1\n"),
+                    ),
+                ),
+                good_mesh(),
+            ],
+            &["check", "scene.toml"],
+            &["stability limit", "1.000e-1 s"],
+        ),
+        case(
+            "unknown solver kind",
+            vec![
+                text("scene.toml", scene(MATERIAL, "[solver]\nkind = \"rk4\"\n")),
+                good_mesh(),
+            ],
+            &["check", "scene.toml"],
+            &["[solver] kind", "rk4", "implicit", "static"],
+        ),
         scene_case(
             "static solver, gravity, nothing fixed",
             scene(

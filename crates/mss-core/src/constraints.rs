@@ -19,6 +19,8 @@
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
+use hexmesh::Aabb;
+
 use crate::Vec3;
 
 /// A coordinate axis.
@@ -267,17 +269,13 @@ pub enum ConstraintError {
     Dofs(String),
 }
 
-/// Axis-aligned bounding box `(min, max)` of node positions.
-pub fn node_bounds(rest: &[Vec3]) -> ([f64; 3], [f64; 3]) {
-    let mut lo = [f64::INFINITY; 3];
-    let mut hi = [f64::NEG_INFINITY; 3];
-    for p in rest {
-        for k in 0..3 {
-            lo[k] = lo[k].min(p[k]);
-            hi[k] = hi[k].max(p[k]);
-        }
-    }
-    (lo, hi)
+/// Axis-aligned bounding box of node positions (an empty one, min = +inf and
+/// max = -inf, without nodes).
+pub fn node_bounds(rest: &[Vec3]) -> Aabb {
+    Aabb::of_points(rest.iter().map(|p| [p.x, p.y, p.z])).unwrap_or(Aabb {
+        min: [f64::INFINITY; 3],
+        max: [f64::NEG_INFINITY; 3],
+    })
 }
 
 impl NodeSelector {
@@ -297,11 +295,8 @@ impl NodeSelector {
         match self {
             NodeSelector::Box { min, max, relative } => {
                 let (min, max) = if *relative {
-                    let (lo, hi) = node_bounds(rest);
-                    let at = |f: &[f64; 3]| -> [f64; 3] {
-                        std::array::from_fn(|k| lo[k] + f[k] * (hi[k] - lo[k]))
-                    };
-                    (at(min), at(max))
+                    let b = node_bounds(rest);
+                    (b.at_fraction(*min), b.at_fraction(*max))
                 } else {
                     (*min, *max)
                 };
@@ -315,7 +310,7 @@ impl NodeSelector {
                 }
             }
             NodeSelector::Face { face } => {
-                let (lo, hi) = node_bounds(rest);
+                let Aabb { min: lo, max: hi } = node_bounds(rest);
                 let (a, is_max) = face.axis_and_max();
                 if is_max {
                     keep(&|p| p[a] >= hi[a] - tol)
@@ -334,7 +329,7 @@ impl NodeSelector {
                 out
             }
             NodeSelector::LowestLayer => {
-                let (lo, _) = node_bounds(rest);
+                let lo = node_bounds(rest).min;
                 keep(&|p| p[2] <= lo[2] + tol)
             }
         }
@@ -360,7 +355,7 @@ impl NodeSelector {
         }
         let sel = self.select(rest, h);
         if sel.is_empty() {
-            let (min, max) = node_bounds(rest);
+            let Aabb { min, max } = node_bounds(rest);
             return Err(ConstraintError::EmptySelection {
                 selector: self.to_string(),
                 min,

@@ -139,30 +139,78 @@ pub enum LinearSolveError {
     Library(String),
 }
 
-/// Numbering of the free dofs (3 per node) of a constrained system.
-#[derive(Debug, Clone)]
-struct DofMap {
+/// Numbering of the free degrees of freedom (3 per node, dof `3 node + d`)
+/// of a constrained system: free dofs are numbered in dof order. The one
+/// numbering that every solve restricted to free dofs uses (direct solves,
+/// Newton, the FEM reference).
+///
+/// ```
+/// use mss_core::sparse::DofMap;
+/// let map = DofMap::new(&[[true, false, false], [false, true, false]]);
+/// assert_eq!(map.num_free(), 4);
+/// assert_eq!(map.free_index(0), None);
+/// assert_eq!(map.free_index(1), Some(0));
+/// assert_eq!(map.free_index(4), None);
+/// assert_eq!(map.free_index(5), Some(3));
+/// ```
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct DofMap {
     /// Free index of each dof `3 node + d`, or `u32::MAX` if fixed.
     index: Vec<u32>,
     free: usize,
 }
 
 impl DofMap {
-    fn new(fixed: &[[bool; 3]]) -> Self {
+    /// The numbering of the dofs not held in `fixed` (per node, per axis).
+    pub fn new(fixed: &[[bool; 3]]) -> Self {
+        Self::from_free_flags(fixed.iter().flatten().map(|&f| !f))
+    }
+
+    /// The numbering of the dofs whose flag is true (`free[3 node + d]`).
+    pub fn from_free(free: &[bool]) -> Self {
+        Self::from_free_flags(free.iter().copied())
+    }
+
+    fn from_free_flags(flags: impl Iterator<Item = bool>) -> Self {
         let mut free = 0usize;
-        let index = fixed
-            .iter()
-            .flat_map(|f| f.iter())
-            .map(|&f| {
+        let index = flags
+            .map(|f| {
                 if f {
-                    u32::MAX
-                } else {
                     free += 1;
                     (free - 1) as u32
+                } else {
+                    u32::MAX
                 }
             })
             .collect();
         Self { index, free }
+    }
+
+    /// Number of free dofs.
+    pub fn num_free(&self) -> usize {
+        self.free
+    }
+
+    /// Number of dofs in all (3 per node).
+    pub fn num_dofs(&self) -> usize {
+        self.index.len()
+    }
+
+    /// The free index of dof `dof` (`3 node + d`), or `None` if it is held.
+    pub fn free_index(&self, dof: usize) -> Option<usize> {
+        match self.index[dof] {
+            u32::MAX => None,
+            i => Some(i as usize),
+        }
+    }
+
+    /// `(dof, free index)` of every free dof, in order.
+    pub fn free_dofs(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
+        self.index
+            .iter()
+            .enumerate()
+            .filter(|(_, i)| **i != u32::MAX)
+            .map(|(d, &i)| (d, i as usize))
     }
 }
 

@@ -989,7 +989,7 @@ pub fn scene(
         RegimeChoice::Auto => {
             let (fem, u) = fem_at(settings.refine, FemLaw::Linear)?;
             let umax = u.iter().map(|v| v.norm()).fold(0.0, f64::max);
-            let (lo, hi) = mss_core::constraints::node_bounds(&rest);
+            let hexmesh::Aabb { min: lo, max: hi } = mss_core::constraints::node_bounds(&rest);
             let diag = (0..3).map(|k| (hi[k] - lo[k]).powi(2)).sum::<f64>().sqrt();
             let ratio = umax / diag.max(f64::MIN_POSITIVE);
             let regime = if ratio > AUTO_LARGE_FRACTION {

@@ -30,6 +30,7 @@ use hexmesh::{Lattice, LatticeError};
 use rayon::prelude::*;
 use thiserror::Error;
 
+use mss_core::sparse::DofMap;
 use mss_core::{Material, MaterialError, Vec3};
 
 /// Why a finite-element problem could not be set up or solved.
@@ -475,7 +476,7 @@ impl Fem {
         let mut s = 0.0;
         for (n, fi) in fint.iter().enumerate() {
             for k in 0..3 {
-                if system.dof[3 * n + k] == FIXED {
+                if system.dofs.free_index(3 * n + k).is_none() {
                     s += fi[k] * fi[k];
                 }
             }
@@ -888,9 +889,8 @@ fn residual(system: &System, f: &[Vec3], fint: &[Vec3], load: f64) -> Vec<f64> {
     let mut r = vec![0.0; system.nfree];
     for (n, (fe, fi)) in f.iter().zip(fint).enumerate() {
         for k in 0..3 {
-            let d = system.dof[3 * n + k];
-            if d != FIXED {
-                r[d as usize] = load * fe[k] - fi[k];
+            if let Some(d) = system.dofs.free_index(3 * n + k) {
+                r[d] = load * fe[k] - fi[k];
             }
         }
     }
@@ -901,7 +901,7 @@ fn free_norm_of(system: &System, f: &[Vec3]) -> f64 {
     let mut s = 0.0;
     for (n, fe) in f.iter().enumerate() {
         for k in 0..3 {
-            if system.dof[3 * n + k] != FIXED {
+            if system.dofs.free_index(3 * n + k).is_some() {
                 s += fe[k] * fe[k];
             }
         }
@@ -915,9 +915,11 @@ fn norm(v: &[f64]) -> f64 {
 
 const FIXED: u32 = u32::MAX;
 
-/// Free-dof numbering and the compressed-column pattern of the upper triangle
-/// of the free-free stiffness block.
+/// Free-dof numbering (the core's [`DofMap`]) and the compressed-column
+/// pattern of the upper triangle of the free-free stiffness block.
 struct System {
+    dofs: DofMap,
+    /// Free index of each dof as `u32`, `FIXED` if held (the CSC indices are `u32`).
     dof: Vec<u32>,
     nfree: usize,
     col_ptr: Vec<u32>,
@@ -932,16 +934,12 @@ struct System {
 impl System {
     fn new(lattice: &Lattice, bc: &FemConstraints) -> Result<Self, FemError> {
         let n = lattice.num_nodes();
-        let mut dof = vec![FIXED; 3 * n];
-        let mut nfree = 0u32;
-        for (node, v) in bc.values.iter().enumerate() {
-            for k in 0..3 {
-                if v[k].is_none() {
-                    dof[3 * node + k] = nfree;
-                    nfree += 1;
-                }
-            }
-        }
+        let held: Vec<[bool; 3]> = bc.values.iter().map(|v| v.map(|c| c.is_some())).collect();
+        let dofs = DofMap::new(&held);
+        let nfree = dofs.num_free() as u32;
+        let dof: Vec<u32> = (0..dofs.num_dofs())
+            .map(|d| dofs.free_index(d).map_or(FIXED, |i| i as u32))
+            .collect();
         if nfree == 0 {
             return Err(FemError::NoFreeDofs);
         }
@@ -1006,6 +1004,7 @@ impl System {
             row_idx.clone(),
         );
         Ok(Self {
+            dofs,
             dof,
             nfree: nfree as usize,
             col_ptr,
@@ -1120,9 +1119,8 @@ impl System {
     fn add_free(&self, u: &mut [Vec3], du: &[f64], alpha: f64) {
         for (n, un) in u.iter_mut().enumerate() {
             for k in 0..3 {
-                let d = self.dof[3 * n + k];
-                if d != FIXED {
-                    un[k] += alpha * du[d as usize];
+                if let Some(d) = self.dofs.free_index(3 * n + k) {
+                    un[k] += alpha * du[d];
                 }
             }
         }

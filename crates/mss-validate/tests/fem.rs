@@ -20,7 +20,8 @@ fn affine(p: [f64; 3]) -> Vec3 {
 fn patch_test(law: FemLaw, refinement: u32) {
     let lat = Lattice::block([3, 2, 4], 0.25, [0.1, -0.2, 0.3]).unwrap();
     let fem = Fem::new(&lat, refinement, Material::new(1000.0, 0.3, 1.0).unwrap()).unwrap();
-    let (lo, hi) = fem.lattice().bounding_box();
+    let b = fem.lattice().bounding_box();
+    let (lo, hi) = (b.min, b.max);
     let on_boundary =
         |p: [f64; 3]| (0..3).any(|k| (p[k] - lo[k]).abs() < 1e-12 || (p[k] - hi[k]).abs() < 1e-12);
     let mut bc = FemConstraints::new(fem.num_nodes());
@@ -57,7 +58,7 @@ fn patch_test_nonlinear_reproduces_affine_field() {
 fn uniaxial(nu: f64, law: FemLaw, sigma: f64) -> (f64, f64) {
     let lat = Lattice::block([2, 2, 3], 1.0 / 3.0, [0.0; 3]).unwrap();
     let fem = Fem::new(&lat, 1, Material::new(1000.0, nu, 1.0).unwrap()).unwrap();
-    let (_, hi) = fem.lattice().bounding_box();
+    let hi = fem.lattice().bounding_box().max;
     let mut bc = FemConstraints::new(fem.num_nodes());
     for (n, p) in fem.lattice().nodes().iter().enumerate() {
         for (k, x) in p.iter().enumerate() {

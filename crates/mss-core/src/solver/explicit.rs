@@ -124,7 +124,7 @@ impl Explicit {
         let (dt_sub, substeps) = if dt <= limit || opts.unchecked {
             if dt > limit {
                 log::warn!(
-                    "explicit step {dt:e} s is above the stability limit {limit:e} s (unchecked mode)"
+                    "explicit step {dt:.3e} s is above the stability limit {limit:.3e} s (unchecked mode)"
                 );
             }
             (dt, 1)
@@ -134,7 +134,7 @@ impl Explicit {
                 return Err(SolverError::TimeStepTooLarge { dt, limit });
             }
             log::warn!(
-                "explicit step {dt:e} s is above the stability limit {limit:e} s: taking {n} sub-steps of {:e} s",
+                "explicit step {dt:.3e} s is above the stability limit {limit:.3e} s: taking {n} sub-steps of {:.3e} s",
                 dt / n
             );
             (dt / n, n as u32)

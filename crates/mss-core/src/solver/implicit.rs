@@ -158,7 +158,7 @@ impl Implicit {
             Err(e) if depth >= self.opts.max_halvings => Err(e),
             Err(e) => {
                 log::warn!(
-                    "implicit step of {dt:e} s at t = {:e} s failed ({e}); retrying as two half steps",
+                    "implicit step of {dt:.3e} s at t = {:.3e} s failed ({e}); retrying as two half steps",
                     state.time
                 );
                 let (s1, i1, n1) = self.advance(problem, state, 0.5 * dt, depth + 1)?;

@@ -6,6 +6,7 @@ use faer::prelude::Solve;
 use faer::sparse::linalg::solvers::{Lu, SymbolicLu};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
 
+use crate::sparse::DofMap;
 use crate::{BlockCsr, Vec3};
 
 /// Why a linear solve failed.
@@ -32,8 +33,8 @@ pub(crate) struct LuCache {
     row_offsets: Vec<u32>,
     col_indices: Vec<u32>,
     free: Vec<bool>,
-    /// Free index of each dof, or `usize::MAX` if held.
-    index: Vec<usize>,
+    /// Numbering of the free dofs.
+    dofs: DofMap,
     /// Free dofs.
     m: usize,
     /// Compressed-column structure of the restricted matrix.
@@ -63,7 +64,7 @@ impl LuCache {
             row_offsets: Vec::new(),
             col_indices: Vec::new(),
             free: Vec::new(),
-            index: Vec::new(),
+            dofs: DofMap::from_free(&[]),
             m: 0,
             symbolic: None,
             col_ptr: Vec::new(),
@@ -84,14 +85,8 @@ impl LuCache {
             return Ok(());
         }
         let n = a.num_rows();
-        let mut index = vec![usize::MAX; 3 * n];
-        let mut m = 0;
-        for (i, f) in free.iter().enumerate() {
-            if *f {
-                index[i] = m;
-                m += 1;
-            }
-        }
+        let dofs = DofMap::from_free(free);
+        let m = dofs.num_free();
         // (column, row, source) of every free-free entry, sorted by column
         // then row: the compressed-column order.
         let mut entries: Vec<(usize, usize, u32)> = Vec::with_capacity(a.blocks.len() * 9);
@@ -99,13 +94,11 @@ impl LuCache {
             for k in a.row_offsets[r] as usize..a.row_offsets[r + 1] as usize {
                 let c = a.col_indices[k] as usize;
                 for e in 0..3 {
-                    let ri = index[3 * r + e];
-                    if ri == usize::MAX {
+                    let Some(ri) = dofs.free_index(3 * r + e) else {
                         continue;
-                    }
+                    };
                     for d in 0..3 {
-                        let ci = index[3 * c + d];
-                        if ci != usize::MAX {
+                        if let Some(ci) = dofs.free_index(3 * c + d) {
                             entries.push((ci, ri, (9 * k + 3 * e + d) as u32));
                         }
                     }
@@ -136,7 +129,7 @@ impl LuCache {
         self.row_offsets.clone_from(&a.row_offsets);
         self.col_indices.clone_from(&a.col_indices);
         self.free = free.to_vec();
-        self.index = index;
+        self.dofs = dofs;
         self.m = m;
         self.symbolic = Some(symbolic);
         self.col_ptr = col_ptr;
@@ -162,7 +155,7 @@ pub(crate) fn solve_free(
     let n = a.num_rows();
     cache.prepare(a, free)?;
     let m = cache.m;
-    let index = &cache.index;
+    let dofs = &cache.dofs;
     let mut y = vec![Vec3::zeros(); n];
     if m == 0 {
         return Ok(y);
@@ -182,10 +175,8 @@ pub(crate) fn solve_free(
     };
     let mat = SparseColMatRef::new(pattern.as_ref(), &values);
     let mut rhs = Mat::<f64>::zeros(m, 1);
-    for (i, &k) in index.iter().enumerate() {
-        if k != usize::MAX {
-            rhs[(k, 0)] = b[i / 3][i % 3];
-        }
+    for (i, k) in dofs.free_dofs() {
+        rhs[(k, 0)] = b[i / 3][i % 3];
     }
     crate::sparse::sequential_factorizations();
     let lu = match Lu::try_new_with_symbolic(lu_symbolic.clone(), mat) {
@@ -216,16 +207,14 @@ pub(crate) fn solve_free(
         sol += &corr;
     }
     let mut worst = 0.0f64;
-    for (i, &k) in index.iter().enumerate() {
-        if k != usize::MAX {
-            let v = sol[(k, 0)];
-            y[i / 3][i % 3] = v;
-            worst = if v.is_finite() {
-                worst.max(v.abs())
-            } else {
-                f64::INFINITY
-            };
-        }
+    for (i, k) in dofs.free_dofs() {
+        let v = sol[(k, 0)];
+        y[i / 3][i % 3] = v;
+        worst = if v.is_finite() {
+            worst.max(v.abs())
+        } else {
+            f64::INFINITY
+        };
     }
     // A singular matrix factors with round-off pivots and gives a huge, or
     // inaccurate, solution: check both.

@@ -364,7 +364,7 @@ impl std::fmt::Display for Divergence {
 pub enum SolverError {
     /// The explicit step is above the stability limit.
     #[error(
-        "time step {dt:e} s is above the explicit stability limit {limit:e} s (safety factor times 2/omega_max, reduced by damping); use dt <= {limit:e} s, enable sub-stepping, or use the implicit solver"
+        "time step {dt:.3e} s is above the explicit stability limit {limit:.3e} s (safety factor times 2/omega_max, reduced by damping); use dt <= {limit:.3e} s, enable sub-stepping, or use the implicit solver"
     )]
     TimeStepTooLarge {
         /// Requested step (s).
@@ -400,7 +400,7 @@ pub enum SolverError {
     },
     /// The run diverged; the state was left at the last good step.
     #[error(
-        "the {solver} solver diverged at step {step} (t = {time:e} s): {reason}; the state was kept at the last good time t = {kept_time:e} s. {hint}"
+        "the {solver} solver diverged at step {step} (t = {time:.3e} s): {reason}; the state was kept at the last good time t = {kept_time:.3e} s. {hint}"
     )]
     Diverged {
         /// Which solver.
