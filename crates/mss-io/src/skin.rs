@@ -212,7 +212,7 @@ pub enum SkinFrames {
 /// Contract: the caller calls [`write_skin`](Self::write_skin) with strictly
 /// increasing frame indices, then [`finish`](Self::finish) once. Every file is
 /// complete when `write_skin` returns (write through
-/// [`write_atomic`](crate::atomic::write_atomic)), errors name the file, and
+/// [`write_atomic`]), errors name the file, and
 /// nothing panics on any input.
 ///
 /// ```

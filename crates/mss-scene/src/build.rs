@@ -225,6 +225,7 @@ impl SceneInput {
             substep: s.substep,
             rtol: s.tolerance,
             max_newton: s.max_iterations,
+            linear_solver: s.linear_solver.into(),
         };
         if !registry.integrators.contains(&s.kind) {
             return Err(self.setting(

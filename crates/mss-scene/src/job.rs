@@ -236,10 +236,14 @@ impl Job {
                 // A static solve is the whole computation: do it before creating
                 // any file, so that a failure leaves nothing behind.
                 let rest_state = state.clone();
+                let first = 1.0 / f64::from(s.load_steps);
                 let opts = StaticOptions {
                     rtol: s.tolerance,
                     max_newton: s.max_iterations,
-                    ..StaticOptions::default()
+                    initial_load_increment: first,
+                    min_load_increment: StaticOptions::default().min_load_increment.min(first),
+                    linear_solver: s.linear_solver.into(),
+                    small_strain: s.linear,
                 };
                 state.time = s.duration;
                 progress(Progress::Solving);

@@ -49,7 +49,9 @@ use hexmesh::voxelize::{ComponentPolicy, OccupancyRule, Resolution, VoxelizeOpti
 use mss_core::Material;
 use mss_core::constraints::{ConstraintSpec, Dofs, Keyframe, Motion, NodeSelector};
 use mss_core::loads::{Damping, ForceDistribution, LoadSpec};
-use mss_core::solver::{DEFAULT_MAX_NEWTON, DEFAULT_NEWTON_RTOL, ExplicitOptions};
+use mss_core::solver::{
+    DEFAULT_MAX_NEWTON, DEFAULT_NEWTON_RTOL, ExplicitOptions, LinearSolverKind,
+};
 use serde::Deserialize;
 use serde::de::{self, Deserializer, Visitor};
 use thiserror::Error;
@@ -580,6 +582,48 @@ pub struct SolverSection {
     /// default [`DEFAULT_MAX_NEWTON`]).
     #[serde(default = "default_max_iterations")]
     pub max_iterations: u32,
+    /// Linear solver of the Newton steps (implicit, static): `"auto"`
+    /// (default: direct for small problems, multigrid-preconditioned Krylov
+    /// above [`mss_core::solver::DIRECT_MAX_FREE_DOFS`] free dofs),
+    /// `"direct"` or `"iterative"`.
+    #[serde(default)]
+    pub linear_solver: LinearSolverChoice,
+    /// Static solves: the load is applied in this many equal first
+    /// increments (default 1; the solver halves an increment that fails and
+    /// doubles one that succeeds).
+    #[serde(default = "default_load_steps")]
+    pub load_steps: u32,
+    /// Static solves: solve the small-strain (linearized) problem once
+    /// instead of the nonlinear one (default false).
+    #[serde(default)]
+    pub linear: bool,
+}
+
+/// `[solver] linear_solver`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum LinearSolverChoice {
+    /// Direct for small problems, iterative for large ones.
+    #[default]
+    Auto,
+    /// Sparse LU.
+    Direct,
+    /// Multigrid-preconditioned conjugate gradients or GMRES.
+    Iterative,
+}
+
+impl From<LinearSolverChoice> for LinearSolverKind {
+    fn from(c: LinearSolverChoice) -> Self {
+        match c {
+            LinearSolverChoice::Auto => LinearSolverKind::Auto,
+            LinearSolverChoice::Direct => LinearSolverKind::Direct,
+            LinearSolverChoice::Iterative => LinearSolverKind::Iterative,
+        }
+    }
+}
+
+fn default_load_steps() -> u32 {
+    1
 }
 
 fn default_kind() -> String {
@@ -610,6 +654,9 @@ impl Default for SolverSection {
             duration: default_duration(),
             tolerance: default_tolerance(),
             max_iterations: default_max_iterations(),
+            linear_solver: LinearSolverChoice::default(),
+            load_steps: default_load_steps(),
+            linear: false,
         }
     }
 }
@@ -1015,6 +1062,12 @@ impl Scene {
         }
         if s.max_iterations == 0 {
             return bad("[solver] max_iterations", "= 0; must be at least 1".into());
+        }
+        if s.load_steps == 0 || s.load_steps > 1_000_000 {
+            return bad(
+                "[solver] load_steps",
+                format!("= {}; use 1 to 1000000 increments", s.load_steps),
+            );
         }
         let o = &self.output;
         if o.folder.as_os_str().is_empty() {

@@ -262,3 +262,43 @@ fn a_run_replaces_an_earlier_runs_series_and_nothing_else() {
         b"mine"
     );
 }
+
+#[test]
+fn static_solver_keys_reach_the_solver() {
+    let base = "[solver]\nkind = \"static\"\n[output]\nlast_only = true\n";
+    let run = |extra: &str| {
+        let text = base.replace(
+            "kind = \"static\"\n",
+            &format!("kind = \"static\"\n{extra}"),
+        );
+        let job = Job::prepare(input(&text), Registry::default(), &no_progress).unwrap();
+        let out = tempfile::tempdir().unwrap();
+        job.run(out.path(), &no_progress, &Cancel::new())
+            .unwrap()
+            .max_displacement
+    };
+    let direct = run("linear_solver = \"direct\"\n");
+    let iterative = run("linear_solver = \"iterative\"\nload_steps = 4\n");
+    let small_strain = run("linear = true\n");
+    assert!(
+        (iterative - direct).abs() <= 1e-6 * direct,
+        "{iterative} vs {direct}"
+    );
+    // Soft enough that the small-strain answer differs, close enough to agree roughly.
+    assert!(small_strain != direct);
+    assert!(
+        (small_strain - direct).abs() <= 0.2 * direct,
+        "{small_strain} vs {direct}"
+    );
+    let err = SceneInput::from_toml(
+        &scene("[solver]\nkind = \"static\"\nload_steps = 0\n"),
+        "s.toml",
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("[solver] load_steps"), "{err}");
+    let err = SceneInput::from_toml(&scene("[solver]\nlinear_solver = \"magic\"\n"), "s.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("`iterative`"), "{err}");
+}

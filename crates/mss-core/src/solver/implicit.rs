@@ -13,6 +13,7 @@
 //! frequencies, so use it for large steps and settling, not for energy studies.
 #![allow(clippy::needless_range_loop)] // loops over several per-node arrays at once
 
+use super::linear::LinearSolver;
 use super::{
     Divergence, IMPLICIT_HINT, Integrator, NewtonFailure, NewtonOptions, NonlinearSystem, Problem,
     SolverError, State, StepInfo, check_inverted, newton,
@@ -31,6 +32,8 @@ pub struct ImplicitOptions {
     pub rtol: f64,
     /// How many times a failing step may be halved.
     pub max_halvings: u32,
+    /// The linear solver of the Newton steps (default: chosen by size).
+    pub linear_solver: super::LinearSolverKind,
 }
 
 impl Default for ImplicitOptions {
@@ -40,6 +43,7 @@ impl Default for ImplicitOptions {
             max_newton: super::DEFAULT_MAX_NEWTON,
             rtol: super::DEFAULT_NEWTON_RTOL,
             max_halvings: 4,
+            linear_solver: super::LinearSolverKind::Auto,
         }
     }
 }
@@ -50,8 +54,9 @@ pub struct Implicit {
     opts: ImplicitOptions,
     free: Vec<bool>,
     steps: u64,
-    /// Symbolic LU analysis of the Jacobian, reused over steps.
-    lu: std::cell::RefCell<super::linear::LuCache>,
+    /// The linear solver (symbolic LU analysis or multigrid structure),
+    /// reused over steps; made at the first step.
+    linear: std::cell::RefCell<Option<super::linear::LinearSolver>>,
 }
 
 impl Implicit {
@@ -70,7 +75,7 @@ impl Implicit {
             opts,
             free: problem.free_mask(),
             steps: 0,
-            lu: std::cell::RefCell::new(super::linear::LuCache::new()),
+            linear: std::cell::RefCell::new(None),
         })
     }
 
@@ -123,7 +128,9 @@ impl Implicit {
                 rtol: self.opts.rtol,
                 slope_line_search: false,
             },
-            &mut self.lu.borrow_mut(),
+            self.linear
+                .borrow_mut()
+                .get_or_insert_with(|| LinearSolver::new(model, self.opts.linear_solver)),
         )
         .map_err(|e| match e {
             NewtonFailure::Diverged(d) => d,

@@ -243,3 +243,177 @@ pub(crate) fn solve_free(
     }
     Ok(y)
 }
+
+/// Which linear solver the Newton steps use.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum LinearSolverKind {
+    /// Direct up to [`DIRECT_MAX_FREE_DOFS`] free dofs, multigrid-preconditioned
+    /// Krylov above (default).
+    #[default]
+    Auto,
+    /// Sparse LU, whatever the size (memory and time grow fast in 3D).
+    Direct,
+    /// Multigrid-preconditioned conjugate gradients (symmetric tangent) or
+    /// BiCGStab (non-symmetric), whatever the size.
+    Iterative,
+}
+
+/// Largest number of free dofs that [`LinearSolverKind::Auto`] solves
+/// directly. Measured on the small-load cantilever (paper's model, one
+/// thread, `examples/static_scaling.rs`): the two cost the same at 24x6x6
+/// (1,225 nodes, 0.10 s); at 32x8x8 the LU takes 0.39 s and 150 MiB against
+/// 0.28 s and 35 MiB, at 48x12x12 3.6 s and 879 MiB against 1.0 s and 75 MiB.
+/// The LU's fill-in makes its cost grow as nodes^2 while multigrid stays
+/// near-linear.
+pub const DIRECT_MAX_FREE_DOFS: usize = 4_000;
+
+/// Largest problem (free dofs) that falls back to the direct solver when the
+/// iterative one stalls (about 1 GB of LU factors).
+const FALLBACK_MAX_FREE_DOFS: usize = 30_000;
+
+/// Counts of what a [`LinearSolver`] did.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct LinearStats {
+    /// Linear solves.
+    pub solves: u32,
+    /// Of which iterative.
+    pub iterative_solves: u32,
+    /// Krylov iterations over all iterative solves.
+    pub krylov_iterations: u32,
+}
+
+/// The linear solver of a Newton solve: a sparse LU with its symbolic
+/// analysis cached per pattern, or multigrid-preconditioned Krylov with the
+/// hierarchy's structure cached per free mask.
+pub(crate) struct LinearSolver {
+    kind: LinearSolverKind,
+    lu: LuCache,
+    cells: Vec<[u32; 8]>,
+    coords: Vec<[i64; 3]>,
+    shape: Option<super::multigrid::HierarchyShape>,
+    pub(crate) stats: LinearStats,
+}
+
+impl std::fmt::Debug for LinearSolver {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("LinearSolver")
+            .field("kind", &self.kind)
+            .field("stats", &self.stats)
+            .finish()
+    }
+}
+
+impl LinearSolver {
+    /// A solver for matrices over the nodes of `model`'s lattice.
+    pub(crate) fn new(model: &crate::Model, kind: LinearSolverKind) -> Self {
+        Self::for_lattice(model.cells(), model.rest_positions(), model.h(), kind)
+    }
+
+    /// A solver for matrices over the nodes of a lattice given by its cells,
+    /// rest positions and cell edge.
+    pub(crate) fn for_lattice(
+        cells: &[[u32; 8]],
+        rest: &[Vec3],
+        h: f64,
+        kind: LinearSolverKind,
+    ) -> Self {
+        Self {
+            kind,
+            lu: LuCache::new(),
+            cells: cells.to_vec(),
+            coords: super::multigrid::grid_coords(rest, h),
+            shape: None,
+            stats: LinearStats::default(),
+        }
+    }
+
+    /// Solves `A y = b` on the free dofs to a relative residual `rtol` (the
+    /// direct solve is exact). See [`solve_free`] for `size`.
+    pub(crate) fn solve(
+        &mut self,
+        a: &BlockCsr,
+        b: &[Vec3],
+        free: &[bool],
+        size: f64,
+        rtol: f64,
+    ) -> Result<Vec<Vec3>, LinearFailure> {
+        self.stats.solves += 1;
+        let free_dofs = free.iter().filter(|f| **f).count();
+        let iterative = match self.kind {
+            LinearSolverKind::Direct => false,
+            LinearSolverKind::Iterative => true,
+            LinearSolverKind::Auto => free_dofs > DIRECT_MAX_FREE_DOFS,
+        };
+        if !iterative || free_dofs == 0 {
+            return solve_free(&mut self.lu, a, b, free, size);
+        }
+        self.stats.iterative_solves += 1;
+        if !self.shape.as_ref().is_some_and(|s| s.fits(free)) {
+            self.shape = Some(super::multigrid::HierarchyShape::new(
+                &self.cells,
+                &self.coords,
+                free,
+            ));
+        }
+        let Some(shape) = self.shape.as_ref() else {
+            return Err(LinearFailure::Other("no multigrid hierarchy".into()));
+        };
+        // Newton Jacobians of force residuals are negative definite (they are
+        // minus a stiffness): solve (-A) y = -b, whose matrix CG and the
+        // Chebyshev smoother need positive.
+        let trace: f64 = (0..a.num_rows())
+            .filter_map(|i| a.find(i, i))
+            .map(|k| a.blocks[k].trace())
+            .sum();
+        let a_original = a;
+        let negated;
+        let (a, b_signed): (&BlockCsr, Vec<Vec3>) = if trace < 0.0 {
+            let mut m = a.clone();
+            m.blocks.iter_mut().for_each(|blk| *blk = -*blk);
+            negated = m;
+            (&negated, b.iter().map(|v| -v).collect())
+        } else {
+            (a, b.to_vec())
+        };
+        let mg =
+            super::multigrid::Multigrid::new(a, shape).map_err(|e| LinearFailure::Other(e.0))?;
+        let scale = a.blocks.iter().map(|b| b.abs().max()).fold(0.0, f64::max);
+        let symmetric = a.asymmetry() <= 1e-10 * scale;
+        let mut y = vec![Vec3::zeros(); a.num_rows()];
+        let info = super::multigrid::krylov(a, &mg, &b_signed, &mut y, rtol, 500, symmetric);
+        self.stats.krylov_iterations += info.iterations;
+        log::debug!(
+            "{} with multigrid ({:?} nodes per level): {} iterations, relative residual {:.2e}",
+            if symmetric { "CG" } else { "GMRES" },
+            mg.level_sizes(),
+            info.iterations,
+            info.relative_residual
+        );
+        let worst = y.iter().map(|v| v.amax()).fold(0.0, f64::max);
+        let usable = info.relative_residual.is_finite()
+            && worst.is_finite()
+            && worst <= 1e6 * size
+            && (info.converged || info.relative_residual <= 0.1);
+        if !usable && free_dofs <= FALLBACK_MAX_FREE_DOFS {
+            // Near-mechanisms (the lattice's hourglass modes) can stall the
+            // preconditioned iteration; a problem that still fits a direct
+            // solve gets one, which also tells a singular matrix apart.
+            log::debug!(
+                "iterative solve stalled at relative residual {:.2e}: solving directly",
+                info.relative_residual
+            );
+            return solve_free(&mut self.lu, a_original, b, free, size);
+        }
+        if !usable {
+            let mut order: Vec<u32> = (0..y.len() as u32).collect();
+            let mag = |i: u32| {
+                let v = y[i as usize].norm();
+                if v.is_finite() { v } else { f64::INFINITY }
+            };
+            order.sort_by(|&p, &q| mag(q).total_cmp(&mag(p)));
+            order.truncate(8);
+            return Err(LinearFailure::Singular { nodes: order });
+        }
+        Ok(y)
+    }
+}

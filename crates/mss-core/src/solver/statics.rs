@@ -13,6 +13,7 @@
 //! [`SolverError::Mechanism`].
 #![allow(clippy::needless_range_loop)] // loops over several per-node arrays at once
 
+use super::linear::{LinearSolver, LinearSolverKind, LinearStats};
 use super::{
     Divergence, NewtonFailure, NewtonOptions, NonlinearSystem, Problem, STATIC_HINT, SolverError,
     State, check_inverted, free_norm, newton,
@@ -30,6 +31,11 @@ pub struct StaticOptions {
     pub initial_load_increment: f64,
     /// Smallest load increment before giving up (default 1/1024).
     pub min_load_increment: f64,
+    /// The linear solver of the Newton steps (default: chosen by size).
+    pub linear_solver: LinearSolverKind,
+    /// Solve the small-strain (linearized) problem once instead of the
+    /// nonlinear one: `K0 u = f` with the rest tangent (default false).
+    pub small_strain: bool,
 }
 
 impl Default for StaticOptions {
@@ -39,6 +45,8 @@ impl Default for StaticOptions {
             max_newton: super::DEFAULT_MAX_NEWTON,
             initial_load_increment: 1.0,
             min_load_increment: 1.0 / 1024.0,
+            linear_solver: LinearSolverKind::Auto,
+            small_strain: false,
         }
     }
 }
@@ -55,6 +63,8 @@ pub struct StaticInfo {
     pub rejected_iterations: u32,
     /// Final residual over free dofs relative to the load norm.
     pub relative_residual: f64,
+    /// What the linear solver did.
+    pub linear: LinearStats,
 }
 
 struct StaticSystem<'a> {
@@ -160,7 +170,10 @@ pub fn solve_static(
         rtol: opts.rtol,
         slope_line_search: true,
     };
-    let mut lu = super::linear::LuCache::new();
+    let mut linear = LinearSolver::new(model, opts.linear_solver);
+    if opts.small_strain {
+        return solve_small_strain(&mut sys, state, &x_target, &free, &mut linear, opts);
+    }
     let mut x = x_init.clone();
     let mut lambda = 0.0;
     let mut dl = opts.initial_load_increment;
@@ -199,7 +212,7 @@ pub fn solve_static(
             problem.size(),
             model.h(),
             newton_opts,
-            &mut lu,
+            &mut linear,
         )
         .and_then(|its| match check_inverted(model, &trial) {
             Some(d) => Err(NewtonFailure::Diverged(d)),
@@ -254,5 +267,65 @@ pub fn solve_static(
         load_steps,
         rejected_iterations: rejected,
         relative_residual: if scale > 0.0 { res / scale } else { res },
+        linear: linear.stats,
+    })
+}
+
+/// One solve of the problem linearized at rest: `K0 (x - X) = f` on the free
+/// dofs, with the held dofs at their prescribed values.
+fn solve_small_strain(
+    sys: &mut StaticSystem<'_>,
+    state: &mut State,
+    x_target: &[Vec3],
+    free: &[bool],
+    linear: &mut LinearSolver,
+    opts: &StaticOptions,
+) -> Result<StaticInfo, SolverError> {
+    let problem = sys.problem;
+    let model = problem.model();
+    let n = model.num_nodes();
+    let rest = model.rest_positions();
+    // Held dofs at their targets, free dofs at rest: the residual there is
+    // the load plus what the prescribed motion pulls.
+    let mut x0 = rest.to_vec();
+    for i in 0..n {
+        for d in 0..3 {
+            if !free[3 * i + d] {
+                x0[i][d] = x_target[i][d];
+            }
+        }
+    }
+    sys.lambda = 1.0;
+    let mut r = vec![Vec3::zeros(); n];
+    let scale = sys.residual(&x0, &mut r);
+    let jac = sys.jacobian(rest);
+    let neg_r: Vec<Vec3> = r.iter().map(|v| -v).collect();
+    let du = match linear.solve(&jac, &neg_r, free, problem.size(), opts.rtol) {
+        Ok(d) => d,
+        Err(super::linear::LinearFailure::Singular { nodes }) => {
+            return Err(SolverError::Mechanism {
+                message: "the stiffness matrix is singular: the boundary conditions leave a mechanism free (a rigid motion, or one of the 3 hourglass modes of the lattice); fix a whole face, or more nodes spread over the body".into(),
+                nodes,
+            });
+        }
+        Err(super::linear::LinearFailure::Other(m)) => return Err(SolverError::LinearSolver(m)),
+    };
+    for i in 0..n {
+        state.x[i] = x0[i] + du[i];
+    }
+    state.v.iter_mut().for_each(|v| *v = Vec3::zeros());
+    // The residual of the linear problem (not of the nonlinear forces).
+    let mut kdu = vec![Vec3::zeros(); n];
+    jac.mul_vec(&du, &mut kdu);
+    let res = free_norm(
+        &r.iter().zip(&kdu).map(|(a, b)| a + b).collect::<Vec<_>>(),
+        free,
+    );
+    Ok(StaticInfo {
+        newton_iterations: 1,
+        load_steps: 1,
+        rejected_iterations: 0,
+        relative_residual: if scale > 0.0 { res / scale } else { res },
+        linear: linear.stats,
     })
 }

@@ -1,0 +1,102 @@
+//! Cost of the static solve against lattice size: the small-load cantilever
+//! 0.4 x 0.1 x 0.1 m (E = 1000 Pa, nu = 0.3, rho = 0.01 kg/m^3, gravity,
+//! x = 0 clamped) on 4n x n x n cells, nonlinear static solve:
+//!
+//! `cargo run --release -p mss-core --example static_scaling -- N [MODEL] [auto|direct|iterative]`
+//!
+//! Prints CPU time (user + system, of this process), Newton and Krylov
+//! iterations, peak memory and the tip deflection, one line per run. Run one
+//! size per process so that the peak memory is that size's.
+
+use std::time::Instant;
+
+use hexmesh::Lattice;
+use mss_core::Parameterizations;
+use mss_core::constraints::{ConstraintSpec, Face, NodeSelector};
+use mss_core::loads::{Damping, LoadSpec};
+use mss_core::solver::{LinearSolverKind, Problem, State, StaticOptions, solve_static};
+use mss_core::{Material, Model};
+
+fn cpu_seconds() -> f64 {
+    // utime + stime of this process, in clock ticks (100 per second on Linux).
+    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
+        return f64::NAN;
+    };
+    let fields: Vec<&str> = stat
+        .rsplit_once(')')
+        .map_or(vec![], |(_, r)| r.split_whitespace().collect());
+    let tick = |i: usize| {
+        fields
+            .get(i)
+            .and_then(|s| s.parse::<f64>().ok())
+            .unwrap_or(f64::NAN)
+    };
+    (tick(11) + tick(12)) / 100.0
+}
+
+fn peak_mib() -> f64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmHWM:"))
+                .and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
+        })
+        .map_or(f64::NAN, |kb| kb / 1024.0)
+}
+
+fn main() {
+    let mut args = std::env::args().skip(1);
+    let n: u32 = args.next().and_then(|s| s.parse().ok()).unwrap_or(8);
+    let name = args.next().unwrap_or_else(|| "paper".into());
+    let kind = match args.next().as_deref() {
+        Some("direct") => LinearSolverKind::Direct,
+        Some("iterative") => LinearSolverKind::Iterative,
+        _ => LinearSolverKind::Auto,
+    };
+    let gravity_scale: f64 = args.next().and_then(|s| s.parse().ok()).unwrap_or(1.0);
+    let lattice = Lattice::block([4 * n, n, n], 0.1 / n as f64, [0.0; 3]).unwrap();
+    let param = Parameterizations::default()
+        .get(&name)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let model = Model::new(
+        &lattice,
+        Material::new(1000.0, 0.3, 0.01).unwrap(),
+        param.as_ref(),
+    )
+    .unwrap();
+    let problem = Problem::from_specs(
+        model,
+        &[ConstraintSpec::fixed(NodeSelector::face(Face::XMin))],
+        &[LoadSpec::Gravity {
+            g: [0.0, 0.0, -9.81 * gravity_scale],
+        }],
+        Damping::NONE,
+    )
+    .unwrap();
+    let nodes = problem.model().num_nodes();
+    let mut s = State::at_rest(problem.model());
+    let opts = StaticOptions {
+        linear_solver: kind,
+        ..StaticOptions::default()
+    };
+    let (c0, t0) = (cpu_seconds(), Instant::now());
+    let info = solve_static(&problem, &mut s, &opts).unwrap();
+    let (cpu, wall) = (cpu_seconds() - c0, t0.elapsed().as_secs_f64());
+    let u = s.displacements(problem.model());
+    let tip: f64 = {
+        let tip_nodes: Vec<_> = (0..nodes)
+            .filter(|&i| (problem.model().rest_positions()[i].x - 0.4).abs() < 1e-9)
+            .collect();
+        tip_nodes.iter().map(|&i| u[i].z).sum::<f64>() / tip_nodes.len() as f64
+    };
+    println!(
+        "{name} {}x{n}x{n} ({nodes} nodes, {kind:?}): cpu {cpu:.2} s, wall {wall:.2} s, {} Newton iterations, {} linear solves ({} iterative, {} Krylov iterations), peak {:.0} MiB, tip {tip:.6e} m",
+        4 * n,
+        info.newton_iterations,
+        info.linear.solves,
+        info.linear.iterative_solves,
+        info.linear.krylov_iterations,
+        peak_mib()
+    );
+}

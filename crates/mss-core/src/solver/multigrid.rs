@@ -1,0 +1,769 @@
+//! Geometric multigrid on the voxel lattice, as a preconditioner of Krylov
+//! solves of the Newton systems (static, implicit, the FEM reference).
+//!
+//! The lattice's nodes sit on a regular grid, so the hierarchy is built from
+//! grid coordinates alone (Zhu, Sifakis, Teran and Brandt 2010; McAdams et
+//! al. 2011):
+//!
+//! - **Coarsening**: a coarse cell exists where any of its 2 x 2 x 2 fine
+//!   children does; coarse nodes are the corners of coarse cells. Every fine
+//!   node then lies in a coarse cell, and every corner of that coarse cell
+//!   exists, so trilinear interpolation is always defined.
+//! - **Prolongation** `P`: trilinear weights (1, 1/2, 1/4 or 1/8 per coarse
+//!   node), applied per component and masked by the held dofs (a held fine dof
+//!   receives no correction).
+//! - **Coarse operators**: Galerkin, `A_c = P^T A P`, assembled block by block;
+//!   its pattern is that of the coarse lattice (nodes sharing a coarse cell),
+//!   which contains `P^T A P` because every coarse parent of every corner of a
+//!   fine cell is a corner of that cell's parent. Coarse dofs whose every child
+//!   is held get an identity row.
+//! - **Smoother**: Chebyshev polynomials of the 3 x 3 block-Jacobi iteration,
+//!   on the interval `[rho/30, 1.1 rho]` with `rho` the largest eigenvalue of
+//!   `D^-1 A` estimated by power iterations. Chebyshev needs no inner products
+//!   and updates every node from the previous iterate only, so the result is
+//!   bitwise the same for any thread count (colouring is not needed).
+//! - **Coarsest level**: a sparse direct solve (LU) once it has at most
+//!   [`COARSEST_NODES`] nodes.
+//!
+//! The Krylov methods are preconditioned conjugate gradients for a symmetric
+//! tangent and restarted GMRES for the non-symmetric ones (the correction forces make
+//! the tangent non-symmetric at large strain). Every inner product is summed
+//! in fixed chunks, in order, so the iterates do not depend on the number of
+//! threads either.
+
+use std::collections::HashMap;
+
+use rayon::prelude::*;
+
+use crate::sparse::{BlockCsr, Factorization};
+use crate::{Mat3, Vec3};
+
+/// A level stops being coarsened once it has at most this many nodes; it is
+/// then solved directly.
+pub const COARSEST_NODES: usize = 1000;
+
+/// Factor on the power-iteration estimate of the largest eigenvalue of
+/// `D^-1 A`: twelve power iterations underestimate it by some percent, and a
+/// Chebyshev smoother whose interval misses the top of the spectrum amplifies
+/// those modes (with 1.1, the cantilever at 48x12x12 took 150 iterations per
+/// solve instead of 10).
+const RHO_SAFETY: f64 = 1.5;
+
+/// Chebyshev steps before and after the coarse correction (2 to 4 cost the
+/// same on the cantilever: fewer Krylov iterations pay for the extra sweeps).
+const SMOOTHING_STEPS: usize = 3;
+
+/// Krylov vectors kept by restarted GMRES (the non-symmetric solves).
+const GMRES_RESTART: usize = 40;
+
+/// Rows per chunk of the parallel loops and of the ordered reductions.
+const CHUNK: usize = 2048;
+
+/// Integer grid coordinates of nodes, from rest positions and the cell edge.
+pub(crate) fn grid_coords(rest: &[Vec3], h: f64) -> Vec<[i64; 3]> {
+    let mut lo = [f64::INFINITY; 3];
+    for p in rest {
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k]);
+        }
+    }
+    rest.iter()
+        .map(|p| std::array::from_fn(|k| ((p[k] - lo[k]) / h).round() as i64))
+        .collect()
+}
+
+/// Trilinear prolongation from a coarse level: for each fine node, its coarse
+/// parents and weights (CSR).
+#[derive(Debug, Clone)]
+struct Prolongation {
+    offsets: Vec<u32>,
+    parents: Vec<u32>,
+    weights: Vec<f64>,
+}
+
+/// One level of the hierarchy above the finest (or the finest itself).
+#[derive(Debug, Clone)]
+struct Level {
+    /// The operator, with held dofs decoupled (identity rows and columns).
+    a: BlockCsr,
+    /// Inverses of the 3 x 3 diagonal blocks.
+    inv_diag: Vec<Mat3>,
+    /// Largest eigenvalue estimate of `D^-1 A` (for Chebyshev).
+    rho: f64,
+    /// Free-dof mask of the level, per node.
+    mask: Vec<[bool; 3]>,
+}
+
+/// The structure of a hierarchy: grid coordinates, prolongations and coarse
+/// patterns, which depend only on the lattice and the held dofs and are
+/// reused for every matrix of a Newton solve.
+#[derive(Debug, Clone)]
+pub(crate) struct HierarchyShape {
+    /// Prolongation from level `k + 1` to level `k`.
+    prolongations: Vec<Prolongation>,
+    /// Empty operators with the pattern of each coarse level.
+    coarse_patterns: Vec<BlockCsr>,
+    /// Free-dof mask of the finest level (the key of the cache).
+    fine_free: Vec<bool>,
+}
+
+impl HierarchyShape {
+    /// The hierarchy structure of a lattice given by its cells and node grid
+    /// coordinates, with free dofs `free[3 node + d]`.
+    pub(crate) fn new(cells: &[[u32; 8]], coords: &[[i64; 3]], free: &[bool]) -> Self {
+        let mut prolongations = Vec::new();
+        let mut coarse_patterns = Vec::new();
+        let mut cells_k: Vec<[i64; 3]> = cells
+            .iter()
+            .map(|c| {
+                let p = coords[c[0] as usize];
+                let mut m = p;
+                for &n in c {
+                    for k in 0..3 {
+                        m[k] = m[k].min(coords[n as usize][k]);
+                    }
+                }
+                m
+            })
+            .collect();
+        let mut nodes_k: Vec<[i64; 3]> = coords.to_vec();
+        while nodes_k.len() > COARSEST_NODES {
+            // Coarse cells: parents of the fine cells.
+            let mut coarse_cells: Vec<[i64; 3]> =
+                cells_k.iter().map(|c| c.map(|v| v.div_euclid(2))).collect();
+            coarse_cells.sort_unstable();
+            coarse_cells.dedup();
+            // Coarse nodes: corners of the coarse cells.
+            let mut coarse_nodes: Vec<[i64; 3]> = coarse_cells
+                .iter()
+                .flat_map(|c| {
+                    (0..8).map(move |o| [c[0] + (o & 1), c[1] + ((o >> 1) & 1), c[2] + (o >> 2)])
+                })
+                .collect();
+            coarse_nodes.sort_unstable();
+            coarse_nodes.dedup();
+            if coarse_nodes.len() * 10 > nodes_k.len() * 9 {
+                // Hardly coarser (a flat or thin part): stop here.
+                break;
+            }
+            let index: HashMap<[i64; 3], u32> = coarse_nodes
+                .iter()
+                .enumerate()
+                .map(|(i, &c)| (c, i as u32))
+                .collect();
+            let mut offsets = Vec::with_capacity(nodes_k.len() + 1);
+            let mut parents = Vec::new();
+            let mut weights = Vec::new();
+            offsets.push(0u32);
+            for f in &nodes_k {
+                let axis = |v: i64| -> Vec<(i64, f64)> {
+                    if v.rem_euclid(2) == 0 {
+                        vec![(v / 2, 1.0)]
+                    } else {
+                        vec![(v.div_euclid(2), 0.5), (v.div_euclid(2) + 1, 0.5)]
+                    }
+                };
+                for (z, wz) in axis(f[2]) {
+                    for (y, wy) in axis(f[1]) {
+                        for (x, wx) in axis(f[0]) {
+                            // Every parent exists (see the module docs); a
+                            // missing one would only drop a weight.
+                            if let Some(&p) = index.get(&[x, y, z]) {
+                                parents.push(p);
+                                weights.push(wx * wy * wz);
+                            }
+                        }
+                    }
+                }
+                offsets.push(parents.len() as u32);
+            }
+            let coarse_cell_nodes: Vec<[u32; 8]> = coarse_cells
+                .iter()
+                .map(|c| {
+                    std::array::from_fn(|o| {
+                        let o = o as i64;
+                        index[&[c[0] + (o & 1), c[1] + ((o >> 1) & 1), c[2] + (o >> 2)]]
+                    })
+                })
+                .collect();
+            coarse_patterns.push(BlockCsr::lattice_pattern(
+                coarse_nodes.len(),
+                &coarse_cell_nodes,
+            ));
+            prolongations.push(Prolongation {
+                offsets,
+                parents,
+                weights,
+            });
+            cells_k = coarse_cells;
+            nodes_k = coarse_nodes;
+        }
+        Self {
+            prolongations,
+            coarse_patterns,
+            fine_free: free.to_vec(),
+        }
+    }
+
+    /// Whether this shape was built for the free mask `free`.
+    pub(crate) fn fits(&self, free: &[bool]) -> bool {
+        self.fine_free == free
+    }
+
+    /// Number of levels (the finest included).
+    pub(crate) fn num_levels(&self) -> usize {
+        self.prolongations.len() + 1
+    }
+}
+
+fn masks_of(free: &[bool]) -> Vec<[bool; 3]> {
+    free.chunks(3).map(|c| [c[0], c[1], c[2]]).collect()
+}
+
+/// `M A M + (I - M)` for the free-dof mask `M`: held dofs decoupled.
+fn decoupled(a: &BlockCsr, mask: &[[bool; 3]]) -> BlockCsr {
+    let mut out = a.clone();
+    out.blocks
+        .par_chunks_mut(CHUNK)
+        .enumerate()
+        .for_each(|(ci, chunk)| {
+            // Rows of this chunk of blocks: found from the offsets.
+            let start = ci * CHUNK;
+            let mut row = a.row_offsets.partition_point(|&o| o as usize <= start) - 1;
+            for (k, b) in chunk.iter_mut().enumerate() {
+                let pos = start + k;
+                while a.row_offsets[row + 1] as usize <= pos {
+                    row += 1;
+                }
+                let col = a.col_indices[pos] as usize;
+                for e in 0..3 {
+                    for d in 0..3 {
+                        let keep = mask[row][e] && mask[col][d];
+                        if !keep {
+                            b[(e, d)] = if row == col && e == d { 1.0 } else { 0.0 };
+                        }
+                    }
+                }
+            }
+        });
+    out
+}
+
+fn inverse_diagonal(a: &BlockCsr) -> Vec<Mat3> {
+    (0..a.num_rows())
+        .into_par_iter()
+        .map(|i| {
+            let d = a.find(i, i).map_or(Mat3::identity(), |k| a.blocks[k]);
+            d.try_inverse().unwrap_or_else(|| {
+                // A singular diagonal block: invert what can be inverted.
+                Mat3::from_diagonal(&Vec3::from_fn(|k, _| {
+                    let v = d[(k, k)];
+                    if v.abs() > 0.0 { 1.0 / v } else { 0.0 }
+                }))
+            })
+        })
+        .collect()
+}
+
+/// `y = A x`, rows in parallel (each row is summed in order: deterministic).
+pub(crate) fn mul(a: &BlockCsr, x: &[Vec3], y: &mut [Vec3]) {
+    y.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, yc)| {
+        for (k, yi) in yc.iter_mut().enumerate() {
+            let i = ci * CHUNK + k;
+            let lo = a.row_offsets[i] as usize;
+            let hi = a.row_offsets[i + 1] as usize;
+            let mut acc = Vec3::zeros();
+            for p in lo..hi {
+                acc += a.blocks[p] * x[a.col_indices[p] as usize];
+            }
+            *yi = acc;
+        }
+    });
+}
+
+/// `a . b` summed in fixed chunks, in order: the same bits for any thread count.
+pub(crate) fn dot(a: &[Vec3], b: &[Vec3]) -> f64 {
+    let partial: Vec<f64> = a
+        .par_chunks(CHUNK)
+        .zip(b.par_chunks(CHUNK))
+        .map(|(x, y)| x.iter().zip(y).map(|(p, q)| p.dot(q)).sum::<f64>())
+        .collect();
+    partial.iter().sum()
+}
+
+fn axpy(y: &mut [Vec3], alpha: f64, x: &[Vec3]) {
+    y.par_iter_mut()
+        .zip(x.par_iter())
+        .for_each(|(yi, xi)| *yi += xi * alpha);
+}
+
+/// Largest eigenvalue estimate of `D^-1 A` by power iterations from a fixed
+/// start vector.
+fn spectral_radius(a: &BlockCsr, inv_diag: &[Mat3], mask: &[[bool; 3]]) -> f64 {
+    let n = a.num_rows();
+    let mut v: Vec<Vec3> = (0..n)
+        .map(|i| {
+            // A fixed, non-smooth start vector (a hash of the index).
+            let s =
+                ((i as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15) >> 40) as f64 / (1u64 << 24) as f64;
+            Vec3::from_fn(|k, _| {
+                if mask[i][k] {
+                    s - 0.5 + 0.1 * k as f64
+                } else {
+                    0.0
+                }
+            })
+        })
+        .collect();
+    let mut av = vec![Vec3::zeros(); n];
+    let mut rho = 1.0;
+    for _ in 0..12 {
+        let norm = dot(&v, &v).sqrt();
+        if !(norm > 0.0 && norm.is_finite()) {
+            break;
+        }
+        v.par_iter_mut().for_each(|x| *x /= norm);
+        mul(a, &v, &mut av);
+        av.par_iter_mut()
+            .zip(inv_diag.par_iter())
+            .for_each(|(x, d)| *x = d * *x);
+        rho = dot(&v, &av).abs().max(1e-300);
+        std::mem::swap(&mut v, &mut av);
+    }
+    rho
+}
+
+/// A multigrid V-cycle preconditioner for one matrix.
+pub(crate) struct Multigrid {
+    levels: Vec<Level>,
+    prolongations: Vec<Prolongation>,
+    coarsest: Option<Factorization>,
+}
+
+impl std::fmt::Debug for Multigrid {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Multigrid")
+            .field(
+                "level_nodes",
+                &self
+                    .levels
+                    .iter()
+                    .map(|l| l.a.num_rows())
+                    .collect::<Vec<_>>(),
+            )
+            .finish()
+    }
+}
+
+/// Why the hierarchy could not be set up.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct SetupError(pub String);
+
+impl Multigrid {
+    /// The hierarchy of `a` (free dofs `shape`'s) with the cached `shape`.
+    pub(crate) fn new(a: &BlockCsr, shape: &HierarchyShape) -> Result<Self, SetupError> {
+        let fine_mask = masks_of(&shape.fine_free);
+        let mut levels = Vec::with_capacity(shape.num_levels());
+        let a0 = decoupled(a, &fine_mask);
+        levels.push(level_of(a0, fine_mask));
+        for (p, pattern) in shape.prolongations.iter().zip(&shape.coarse_patterns) {
+            let fine = &levels[levels.len() - 1];
+            let (ac, mask) = galerkin(&fine.a, &fine.mask, p, pattern);
+            levels.push(level_of(ac, mask));
+        }
+        let last = &levels[levels.len() - 1];
+        let coarsest = match last.a.factor_lu(&vec![[false; 3]; last.a.num_rows()]) {
+            Ok(f) => Some(f),
+            Err(e) => return Err(SetupError(format!("coarsest level: {e}"))),
+        };
+        Ok(Self {
+            levels,
+            prolongations: shape.prolongations.clone(),
+            coarsest,
+        })
+    }
+
+    /// Nodes per level, finest first.
+    pub(crate) fn level_sizes(&self) -> Vec<usize> {
+        self.levels.iter().map(|l| l.a.num_rows()).collect()
+    }
+
+    /// `z = M^-1 r`: one V-cycle from zero.
+    pub(crate) fn apply(&self, r: &[Vec3], z: &mut [Vec3]) {
+        self.vcycle(0, r, z);
+    }
+
+    fn vcycle(&self, k: usize, b: &[Vec3], x: &mut [Vec3]) {
+        let level = &self.levels[k];
+        if k + 1 == self.levels.len() {
+            match self.coarsest.as_ref().map(|f| f.solve(b)) {
+                Some(Ok(sol)) => x.copy_from_slice(&sol),
+                _ => {
+                    x.iter_mut().for_each(|v| *v = Vec3::zeros());
+                    chebyshev(level, b, x, 8);
+                }
+            }
+            return;
+        }
+        x.iter_mut().for_each(|v| *v = Vec3::zeros());
+        chebyshev(level, b, x, SMOOTHING_STEPS);
+        // Residual, restricted.
+        let n = level.a.num_rows();
+        let mut r = vec![Vec3::zeros(); n];
+        mul(&level.a, x, &mut r);
+        r.par_iter_mut()
+            .zip(b.par_iter())
+            .for_each(|(ri, bi)| *ri = bi - *ri);
+        let p = &self.prolongations[k];
+        let coarse = &self.levels[k + 1];
+        let mut rc = vec![Vec3::zeros(); coarse.a.num_rows()];
+        restrict(p, &level.mask, &r, &mut rc);
+        let mut ec = vec![Vec3::zeros(); rc.len()];
+        self.vcycle(k + 1, &rc, &mut ec);
+        prolong_add(p, &level.mask, &ec, x);
+        chebyshev(level, b, x, SMOOTHING_STEPS);
+    }
+}
+
+fn level_of(a: BlockCsr, mask: Vec<[bool; 3]>) -> Level {
+    let inv_diag = inverse_diagonal(&a);
+    let rho = spectral_radius(&a, &inv_diag, &mask);
+    Level {
+        a,
+        inv_diag,
+        rho,
+        mask,
+    }
+}
+
+/// `P^T A P` on the coarse pattern; coarse dofs without a free child are
+/// decoupled (identity).
+fn galerkin(
+    a: &BlockCsr,
+    mask: &[[bool; 3]],
+    p: &Prolongation,
+    pattern: &BlockCsr,
+) -> (BlockCsr, Vec<[bool; 3]>) {
+    let nc = pattern.num_rows();
+    // A coarse dof is free if some free fine dof interpolates from it.
+    let mut cmask = vec![[false; 3]; nc];
+    for (i, m) in mask.iter().enumerate() {
+        for q in p.offsets[i] as usize..p.offsets[i + 1] as usize {
+            let c = p.parents[q] as usize;
+            for d in 0..3 {
+                cmask[c][d] |= m[d];
+            }
+        }
+    }
+    // Coarse rows in parallel: each coarse row a collects the fine rows that
+    // interpolate from it (transpose of P), in fine order (deterministic).
+    let mut children: Vec<Vec<(u32, f64)>> = vec![Vec::new(); nc];
+    for i in 0..mask.len() {
+        for q in p.offsets[i] as usize..p.offsets[i + 1] as usize {
+            children[p.parents[q] as usize].push((i as u32, p.weights[q]));
+        }
+    }
+    let rows: Vec<Vec<Mat3>> = (0..nc)
+        .into_par_iter()
+        .map(|ca| {
+            let lo = pattern.row_offsets[ca] as usize;
+            let hi = pattern.row_offsets[ca + 1] as usize;
+            let cols = &pattern.col_indices[lo..hi];
+            let mut row = vec![Mat3::zeros(); hi - lo];
+            for &(i, wa) in &children[ca] {
+                let i = i as usize;
+                for k in a.row_offsets[i] as usize..a.row_offsets[i + 1] as usize {
+                    let j = a.col_indices[k] as usize;
+                    // M A M: a held row or column contributes nothing.
+                    let mut blk = a.blocks[k];
+                    for e in 0..3 {
+                        for d in 0..3 {
+                            if !(mask[i][e] && mask[j][d]) {
+                                blk[(e, d)] = 0.0;
+                            }
+                        }
+                    }
+                    for q in p.offsets[j] as usize..p.offsets[j + 1] as usize {
+                        let cb = p.parents[q];
+                        if let Ok(pos) = cols.binary_search(&cb) {
+                            row[pos] += blk * (wa * p.weights[q]);
+                        }
+                    }
+                }
+            }
+            row
+        })
+        .collect();
+    let mut ac = pattern.clone();
+    for (ca, row) in rows.into_iter().enumerate() {
+        let lo = ac.row_offsets[ca] as usize;
+        ac.blocks[lo..lo + row.len()].copy_from_slice(&row);
+    }
+    // Decouple coarse dofs that no free fine dof reaches.
+    let ac = decoupled(&ac, &cmask);
+    (ac, cmask)
+}
+
+fn restrict(p: &Prolongation, mask: &[[bool; 3]], r: &[Vec3], rc: &mut [Vec3]) {
+    // Sequential scatter in fine order: deterministic.
+    rc.iter_mut().for_each(|v| *v = Vec3::zeros());
+    for (i, ri) in r.iter().enumerate() {
+        let m = mask[i];
+        let masked = Vec3::new(
+            if m[0] { ri.x } else { 0.0 },
+            if m[1] { ri.y } else { 0.0 },
+            if m[2] { ri.z } else { 0.0 },
+        );
+        for q in p.offsets[i] as usize..p.offsets[i + 1] as usize {
+            rc[p.parents[q] as usize] += masked * p.weights[q];
+        }
+    }
+}
+
+fn prolong_add(p: &Prolongation, mask: &[[bool; 3]], ec: &[Vec3], x: &mut [Vec3]) {
+    x.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, xc)| {
+        for (k, xi) in xc.iter_mut().enumerate() {
+            let i = ci * CHUNK + k;
+            let mut e = Vec3::zeros();
+            for q in p.offsets[i] as usize..p.offsets[i + 1] as usize {
+                e += ec[p.parents[q] as usize] * p.weights[q];
+            }
+            for d in 0..3 {
+                if mask[i][d] {
+                    xi[d] += e[d];
+                }
+            }
+        }
+    });
+}
+
+/// `steps` Chebyshev iterations of block Jacobi on `A x = b`, from `x`.
+fn chebyshev(level: &Level, b: &[Vec3], x: &mut [Vec3], steps: usize) {
+    let n = level.a.num_rows();
+    let hi = RHO_SAFETY * level.rho;
+    let lo = hi / 30.0;
+    let theta = 0.5 * (hi + lo);
+    let delta = 0.5 * (hi - lo);
+    let sigma = theta / delta;
+    let mut rho_k = 1.0 / sigma;
+    let mut r = vec![Vec3::zeros(); n];
+    let mut d = vec![Vec3::zeros(); n];
+    let residual = |x: &[Vec3], r: &mut [Vec3]| {
+        mul(&level.a, x, r);
+        r.par_iter_mut()
+            .zip(b.par_iter())
+            .zip(level.inv_diag.par_iter())
+            .for_each(|((ri, bi), di)| *ri = di * (bi - *ri));
+    };
+    residual(x, &mut r);
+    d.par_iter_mut()
+        .zip(r.par_iter())
+        .for_each(|(di, ri)| *di = ri / theta);
+    for step in 0..steps {
+        axpy(x, 1.0, &d);
+        if step + 1 == steps {
+            break;
+        }
+        residual(x, &mut r);
+        let rho_next = 1.0 / (2.0 * sigma - rho_k);
+        let (c1, c2) = (rho_next * rho_k, 2.0 * rho_next / delta);
+        d.par_iter_mut()
+            .zip(r.par_iter())
+            .for_each(|(di, ri)| *di = *di * c1 + ri * c2);
+        rho_k = rho_next;
+    }
+}
+
+/// Outcome of a Krylov solve.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct KrylovInfo {
+    /// Iterations taken.
+    pub iterations: u32,
+    /// Final residual norm relative to the right-hand side's.
+    pub relative_residual: f64,
+    /// Whether the tolerance was reached.
+    pub converged: bool,
+}
+
+/// Solves `A x = b` on the free dofs (`mask`; held components of `b` and `x`
+/// are zero) to a relative residual `rtol`, preconditioned by `mg`: CG when
+/// `symmetric`, BiCGStab otherwise. `x` starts at zero.
+pub(crate) fn krylov(
+    a: &BlockCsr,
+    mg: &Multigrid,
+    b: &[Vec3],
+    x: &mut [Vec3],
+    rtol: f64,
+    max_iterations: u32,
+    symmetric: bool,
+) -> KrylovInfo {
+    let fine = &mg.levels[0];
+    let op = &fine.a;
+    let mask = &fine.mask;
+    let n = a.num_rows();
+    let masked = |v: &mut [Vec3]| {
+        v.par_iter_mut().zip(mask.par_iter()).for_each(|(vi, m)| {
+            for d in 0..3 {
+                if !m[d] {
+                    vi[d] = 0.0;
+                }
+            }
+        })
+    };
+    let mut r: Vec<Vec3> = b.to_vec();
+    masked(&mut r);
+    x.iter_mut().for_each(|v| *v = Vec3::zeros());
+    let bnorm = dot(&r, &r).sqrt();
+    if bnorm == 0.0 {
+        return KrylovInfo {
+            iterations: 0,
+            relative_residual: 0.0,
+            converged: true,
+        };
+    }
+    let target = rtol * bnorm;
+    let mut z = vec![Vec3::zeros(); n];
+    let mut q = vec![Vec3::zeros(); n];
+    if symmetric {
+        mg.apply(&r, &mut z);
+        let mut pdir = z.clone();
+        let mut rz = dot(&r, &z);
+        for it in 1..=max_iterations {
+            mul(op, &pdir, &mut q);
+            let pq = dot(&pdir, &q);
+            if !(pq.is_finite() && pq > 0.0) {
+                return KrylovInfo {
+                    iterations: it,
+                    relative_residual: dot(&r, &r).sqrt() / bnorm,
+                    converged: false,
+                };
+            }
+            let alpha = rz / pq;
+            axpy(x, alpha, &pdir);
+            axpy(&mut r, -alpha, &q);
+            let rn = dot(&r, &r).sqrt();
+            if rn <= target {
+                return KrylovInfo {
+                    iterations: it,
+                    relative_residual: rn / bnorm,
+                    converged: true,
+                };
+            }
+            mg.apply(&r, &mut z);
+            let rz_next = dot(&r, &z);
+            let beta = rz_next / rz;
+            rz = rz_next;
+            pdir.par_iter_mut()
+                .zip(z.par_iter())
+                .for_each(|(pi, zi)| *pi = zi + *pi * beta);
+        }
+    } else {
+        // Right-preconditioned restarted GMRES: x = M^-1 (V y), the residual
+        // norm is known from the Hessenberg least-squares problem.
+        let restart = GMRES_RESTART.min(max_iterations as usize).max(1);
+        let mut total = 0u32;
+        let mut basis: Vec<Vec<Vec3>> = Vec::with_capacity(restart + 1);
+        let mut w = vec![Vec3::zeros(); n];
+        while total < max_iterations {
+            // r = b - A x (masked b, held rows are identity with x = 0 there).
+            mul(op, x, &mut q);
+            r.par_iter_mut()
+                .zip(b.par_iter().zip(q.par_iter().zip(mask.par_iter())))
+                .for_each(|(ri, (bi, (qi, m)))| {
+                    for d in 0..3 {
+                        ri[d] = if m[d] { bi[d] - qi[d] } else { 0.0 };
+                    }
+                });
+            let beta = dot(&r, &r).sqrt();
+            if !beta.is_finite() {
+                break;
+            }
+            if beta <= target {
+                return KrylovInfo {
+                    iterations: total,
+                    relative_residual: beta / bnorm,
+                    converged: true,
+                };
+            }
+            basis.clear();
+            basis.push(r.iter().map(|v| v / beta).collect());
+            let mut hess = vec![vec![0.0f64; restart]; restart + 1];
+            let (mut cs, mut sn) = (vec![0.0f64; restart], vec![0.0f64; restart]);
+            let mut g = vec![0.0f64; restart + 1];
+            g[0] = beta;
+            let mut k_used = 0;
+            let mut res = beta;
+            for k in 0..restart {
+                mg.apply(&basis[k], &mut z);
+                mul(op, &z, &mut w);
+                // Modified Gram-Schmidt with ordered reductions.
+                for (j, vj) in basis.iter().enumerate() {
+                    let hjk = dot(&w, vj);
+                    hess[j][k] = hjk;
+                    axpy(&mut w, -hjk, vj);
+                }
+                let hn = dot(&w, &w).sqrt();
+                hess[k + 1][k] = hn;
+                // Apply the previous rotations, then a new one.
+                for j in 0..k {
+                    let t = cs[j] * hess[j][k] + sn[j] * hess[j + 1][k];
+                    hess[j + 1][k] = -sn[j] * hess[j][k] + cs[j] * hess[j + 1][k];
+                    hess[j][k] = t;
+                }
+                let denom = (hess[k][k].powi(2) + hn * hn).sqrt();
+                if !(denom.is_finite() && denom > 0.0) {
+                    break;
+                }
+                cs[k] = hess[k][k] / denom;
+                sn[k] = hn / denom;
+                hess[k][k] = denom;
+                hess[k + 1][k] = 0.0;
+                g[k + 1] = -sn[k] * g[k];
+                g[k] *= cs[k];
+                k_used = k + 1;
+                total += 1;
+                res = g[k + 1].abs();
+                if res <= target || hn == 0.0 || total >= max_iterations {
+                    break;
+                }
+                basis.push(w.iter().map(|v| v / hn).collect());
+            }
+            if k_used == 0 {
+                break;
+            }
+            // Solve the triangular system and update x = x + M^-1 V y.
+            let mut y = vec![0.0f64; k_used];
+            for i in (0..k_used).rev() {
+                let mut acc = g[i];
+                for j in i + 1..k_used {
+                    acc -= hess[i][j] * y[j];
+                }
+                y[i] = acc / hess[i][i];
+            }
+            let mut vy = vec![Vec3::zeros(); n];
+            for (j, yj) in y.iter().enumerate() {
+                axpy(&mut vy, *yj, &basis[j]);
+            }
+            mg.apply(&vy, &mut z);
+            axpy(x, 1.0, &z);
+            if res <= target {
+                break;
+            }
+        }
+    }
+    // Report the true residual of the iterate.
+    mul(op, x, &mut q);
+    let mut res = b.to_vec();
+    masked(&mut res);
+    let rn = res
+        .iter()
+        .zip(&q)
+        .map(|(bi, qi)| (bi - qi).norm_squared())
+        .sum::<f64>()
+        .sqrt();
+    KrylovInfo {
+        iterations: max_iterations,
+        relative_residual: rn / bnorm,
+        converged: rn <= target,
+    }
+}

@@ -1,0 +1,152 @@
+//! The multigrid-preconditioned Krylov solves against the direct solver:
+//! the same equilibria within the Newton tolerance, for symmetric (springs,
+//! volumetric at rest) and non-symmetric (paper's corrections under load)
+//! tangents, static and implicit; bitwise the same for any thread count.
+
+use hexmesh::Lattice;
+use mss_core::constraints::{ConstraintSpec, Face, NodeSelector};
+use mss_core::loads::{Damping, LoadSpec};
+use mss_core::model::{HourglassControl, PaperModel, SpringsOnly, Volumetric};
+use mss_core::solver::{
+    Implicit, ImplicitOptions, Integrator, LinearSolverKind, Problem, State, StaticOptions,
+    solve_static,
+};
+use mss_core::{Material, Model, Parameterization, Vec3};
+
+/// A cantilever with 4n x n x n cells (large enough for three levels at n = 6),
+/// clamped at x = 0, under gravity and a tip load.
+fn cantilever(param: &dyn Parameterization, n: u32, load: f64) -> Problem {
+    let lattice = Lattice::block([4 * n, n, n], 0.1 / n as f64, [0.0; 3]).unwrap();
+    let model = Model::new(&lattice, Material::new(1000.0, 0.3, 0.5).unwrap(), param).unwrap();
+    Problem::from_specs(
+        model,
+        &[ConstraintSpec::fixed(NodeSelector::face(Face::XMin))],
+        &[
+            LoadSpec::Gravity {
+                g: [0.0, 0.0, -9.81 * load],
+            },
+            LoadSpec::Force {
+                select: NodeSelector::face(Face::XMax),
+                force: [0.0, 2e-3 * load, 0.0],
+                distribution: Default::default(),
+            },
+        ],
+        Damping::NONE,
+    )
+    .unwrap()
+}
+
+fn solve(problem: &Problem, kind: LinearSolverKind) -> (Vec<Vec3>, u32) {
+    let mut s = State::at_rest(problem.model());
+    let info = solve_static(
+        problem,
+        &mut s,
+        &StaticOptions {
+            linear_solver: kind,
+            ..StaticOptions::default()
+        },
+    )
+    .unwrap();
+    if kind == LinearSolverKind::Iterative {
+        assert!(info.linear.iterative_solves > 0);
+        assert!(info.linear.krylov_iterations > 0);
+    } else {
+        assert_eq!(info.linear.iterative_solves, 0);
+    }
+    (s.displacements(problem.model()), info.newton_iterations)
+}
+
+fn max_norm(u: &[Vec3]) -> f64 {
+    u.iter().map(|v| v.norm()).fold(0.0, f64::max)
+}
+
+#[test]
+fn static_equilibria_match_the_direct_solver() {
+    let params: Vec<(Box<dyn Parameterization>, f64)> = vec![
+        (Box::new(SpringsOnly), 1.0),
+        (Box::new(PaperModel), 1.0),
+        (Box::new(Volumetric), 1.0),
+        (
+            Box::new(HourglassControl::new(Box::new(Volumetric), 0.05).unwrap()),
+            1.0,
+        ),
+        // Large deflection: strongly non-symmetric tangents.
+        (Box::new(PaperModel), 6.0),
+    ];
+    for (param, load) in &params {
+        let p = cantilever(param.as_ref(), 6, *load);
+        let (direct, _) = solve(&p, LinearSolverKind::Direct);
+        let (iterative, _) = solve(&p, LinearSolverKind::Iterative);
+        let scale = max_norm(&direct);
+        assert!(scale > 0.0);
+        let diff = direct
+            .iter()
+            .zip(&iterative)
+            .map(|(a, b)| (a - b).norm())
+            .fold(0.0, f64::max);
+        assert!(
+            diff <= 1e-6 * scale,
+            "{} load {load}: max |u_direct - u_iterative| = {diff:e} of {scale:e}",
+            param.name()
+        );
+    }
+}
+
+#[test]
+fn implicit_steps_match_the_direct_solver() {
+    for param in [
+        Box::new(PaperModel) as Box<dyn Parameterization>,
+        Box::new(Volumetric),
+    ] {
+        let p = cantilever(param.as_ref(), 6, 1.0);
+        let run = |kind| {
+            let mut it = Implicit::new(
+                &p,
+                ImplicitOptions {
+                    dt: 0.02,
+                    linear_solver: kind,
+                    ..ImplicitOptions::default()
+                },
+            )
+            .unwrap();
+            let mut s = State::at_rest(p.model());
+            for _ in 0..5 {
+                it.step(&p, &mut s).unwrap();
+            }
+            s.displacements(p.model())
+        };
+        let direct = run(LinearSolverKind::Direct);
+        let iterative = run(LinearSolverKind::Iterative);
+        let scale = max_norm(&direct);
+        let diff = direct
+            .iter()
+            .zip(&iterative)
+            .map(|(a, b)| (a - b).norm())
+            .fold(0.0, f64::max);
+        assert!(
+            diff <= 1e-6 * scale,
+            "{}: {diff:e} of {scale:e}",
+            param.name()
+        );
+    }
+}
+
+#[test]
+fn iterative_results_do_not_depend_on_the_thread_count() {
+    let p = cantilever(&PaperModel, 6, 6.0);
+    let run = |threads| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| solve(&p, LinearSolverKind::Iterative))
+    };
+    let (one, n1) = run(1);
+    let (two, n2) = run(2);
+    let (three, n3) = run(3);
+    assert_eq!((n1, n2), (n2, n3));
+    assert!(
+        one == two && two == three,
+        "results differ between thread counts"
+    );
+}
