@@ -271,7 +271,7 @@ pub const DIRECT_MAX_FREE_DOFS: usize = 4_000;
 /// iterative one stalls (about 1 GB of LU factors).
 const FALLBACK_MAX_FREE_DOFS: usize = 30_000;
 
-/// Counts of what a [`LinearSolver`] did.
+/// Counts of what the linear solver of a Newton solve did.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct LinearStats {
     /// Linear solves.
