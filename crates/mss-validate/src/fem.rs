@@ -5,33 +5,34 @@
 //! that a fine reference solution can be evaluated at the rest positions of a
 //! coarse lattice's nodes. Small-strain isotropic linear elasticity, and two
 //! hyperelastic laws (St. Venant-Kirchhoff and compressible neo-Hookean) solved
-//! by Newton's method with adaptive load stepping and a backtracking line search.
+//! with adaptive load stepping.
 //!
-//! Dirichlet degrees of freedom are eliminated; the stiffness (upper triangle of
-//! the free-free block) is assembled into a faer compressed-column matrix and
-//! factored by faer's supernodal sparse Cholesky with a fill-reducing ordering.
-//! Assembly is sequential in a fixed order (element matrices are computed in
-//! parallel), so results do not depend on the number of threads.
+//! The solves are the simulator's own: the stiffness is assembled into the
+//! core's 3 x 3-block matrix ([`BlockCsr`]), the nonlinear laws go through the
+//! core's Newton solver ([`mss_core::solver::newton`], line search on the
+//! energy's slope), and every linear solve through its
+//! [`LinearSolver`]: a sparse direct solve on small meshes, multigrid-
+//! preconditioned conjugate gradients on the refined references. Dirichlet
+//! degrees of freedom are decoupled. Assembly is sequential in a fixed order
+//! (element matrices are computed in parallel), so results do not depend on
+//! the number of threads.
 //!
 //! Loads are consistent with the shape functions: on a cube, the consistent
 //! nodal load of a uniform body force is `V/8` per corner and that of a uniform
 //! traction `A/4` per face corner, which are also the MSS's lumped values, so
 //! the same loads can be applied to both.
 
-use faer::dyn_stack::{MemBuffer, MemStack};
-use faer::perm::PermRef;
-use faer::sparse::linalg::cholesky::{
-    LltRef, SymbolicCholesky, SymmetricOrdering, factorize_symbolic_cholesky,
-};
-use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
-use faer::{Conj, MatMut, Side};
 use hexmesh::lattice::CORNER_OFFSETS;
 use hexmesh::{Lattice, LatticeError};
+use mss_core::solver::{
+    LinearSolver, LinearSolverKind, NewtonOptions as CoreNewtonOptions, NonlinearSystem, newton,
+};
+use mss_core::{BlockCsr, Mat3, Material, MaterialError, Vec3};
 use rayon::prelude::*;
 use thiserror::Error;
 
-use mss_core::sparse::DofMap;
-use mss_core::{Material, MaterialError, Vec3};
+/// Relative residual of the linear (small-strain) solve when it is iterative.
+const LINEAR_RTOL: f64 = 1e-12;
 
 /// Why a finite-element problem could not be set up or solved.
 #[derive(Debug, Error, Clone, PartialEq)]
@@ -80,9 +81,6 @@ pub enum FemError {
         /// Relative residual at the failure.
         residual: f64,
     },
-    /// The sparse factorization failed for a non-numerical reason.
-    #[error("sparse factorization failed: {0}")]
-    Factorization(String),
     /// Every degree of freedom is fixed: nothing to solve.
     #[error("every degree of freedom is fixed")]
     NoFreeDofs,
@@ -192,6 +190,8 @@ pub struct Fem {
     wdet: f64,
     /// Linear element stiffness, row-major 24 x 24, dof `3 a + i`.
     ke: Vec<f64>,
+    /// The stiffness pattern (nodes sharing a cell), zero.
+    pattern: BlockCsr,
 }
 
 /// Splits every cell of `lattice` into `r^3` cubes of edge `h / r`.
@@ -269,7 +269,9 @@ impl Fem {
                 }
             }
         }
+        let pattern = BlockCsr::lattice_pattern(lattice.num_nodes(), lattice.cells());
         Ok(Self {
+            pattern,
             lattice,
             refinement,
             mu,
@@ -365,10 +367,31 @@ impl Fem {
                 nodes: n,
             });
         }
-        let system = System::new(&self.lattice, bc)?;
+        let free: Vec<bool> = bc
+            .values
+            .iter()
+            .flat_map(|v| v.map(|c| c.is_none()))
+            .collect();
+        if !free.iter().any(|&f| f) {
+            return Err(FemError::NoFreeDofs);
+        }
+        let rest: Vec<Vec3> = self
+            .lattice
+            .nodes()
+            .iter()
+            .map(|&p| Vec3::from(p))
+            .collect();
+        // The core's linear solver: direct for small meshes, multigrid-
+        // preconditioned Krylov for the refined references.
+        let mut linear = LinearSolver::for_lattice(
+            self.lattice.cells(),
+            &rest,
+            self.lattice.h(),
+            LinearSolverKind::Auto,
+        );
         match law {
-            FemLaw::Linear => self.solve_linear(&system, bc, f),
-            _ => self.solve_newton(law, &system, bc, f, opts),
+            FemLaw::Linear => self.solve_linear(bc, f, &free, &mut linear),
+            _ => self.solve_newton(law, bc, f, opts, &free, &mut linear),
         }
     }
 
@@ -381,35 +404,39 @@ impl Fem {
         self.solve(FemLaw::Linear, bc, f, &NewtonOptions::default())
     }
 
+    /// Length scale of the mesh (its bounding box diagonal).
+    fn size(&self) -> f64 {
+        self.lattice.bounding_box().diagonal()
+    }
+
     fn solve_linear(
         &self,
-        system: &System,
         bc: &FemConstraints,
         f: &[Vec3],
+        free: &[bool],
+        linear: &mut LinearSolver,
     ) -> Result<FemSolution, FemError> {
         let mut u = initial_displacement(bc, 1.0, None);
-        let (fint, values) = self.assemble(FemLaw::Linear, system, &u);
-        let mut r = residual(system, f, &fint, 1.0);
-        let fnorm = free_norm_of(system, f).max(norm(&r)).max(f64::MIN_POSITIVE);
-        let llt = system.factor(&values)?;
-        let r0 = r.clone();
-        system.solve(&llt, &mut r);
-        // A (numerically) singular matrix can factor with tiny positive pivots:
-        // check the residual of the solve.
-        let check = system.sym_mul(&values, &r);
-        let err = check
-            .iter()
-            .zip(&r0)
-            .map(|(a, b)| (a - b).powi(2))
-            .sum::<f64>()
-            .sqrt();
-        let rel = err / fnorm;
+        let (fint, k) = self.assemble(FemLaw::Linear, &u);
+        let r: Vec<Vec3> = f.iter().zip(&fint).map(|(a, b)| a - b).collect();
+        let fnorm = free_norm(&r, free).max(f64::MIN_POSITIVE);
+        let du = linear
+            .solve_dofs(&k, &r, free, self.size(), LINEAR_RTOL)
+            .map_err(|e| FemError::NotPositiveDefinite(e.to_string()))?;
+        // Check the solve: a (numerically) singular matrix can give a
+        // solution that does not satisfy the system.
+        let mut kdu = vec![Vec3::zeros(); u.len()];
+        k.mul_vec(&du, &mut kdu);
+        let res: Vec<Vec3> = r.iter().zip(&kdu).map(|(a, b)| a - b).collect();
+        let rel = free_norm(&res, free) / fnorm;
         if rel.is_nan() || rel >= 1e-6 {
             return Err(FemError::NotPositiveDefinite(format!(
                 "linear solve residual {rel:e}"
             )));
         }
-        system.add_free(&mut u, &r, 1.0);
+        for (ui, di) in u.iter_mut().zip(&du) {
+            *ui += di;
+        }
         Ok(FemSolution {
             displacement: u,
             iterations: 1,
@@ -421,10 +448,11 @@ impl Fem {
     fn solve_newton(
         &self,
         law: FemLaw,
-        system: &System,
         bc: &FemConstraints,
         f: &[Vec3],
         opts: &NewtonOptions,
+        free: &[bool],
+        linear: &mut LinearSolver,
     ) -> Result<FemSolution, FemError> {
         let steps = opts.load_steps.max(1);
         let mut u = initial_displacement(bc, 0.0, None);
@@ -433,31 +461,58 @@ impl Fem {
         let min_dlam = dlam / 1024.0;
         let mut iterations = 0u32;
         let mut increments = 0u32;
-        let fnorm_total = free_norm_of(system, f);
+        let fnorm_total = free_norm(f, free);
         let mut last_rel = 0.0;
+        let newton_opts = CoreNewtonOptions {
+            max_iterations: opts.max_iterations,
+            rtol: opts.tolerance,
+            // Hyperelastic: the residual is minus the energy's gradient.
+            slope_line_search: true,
+        };
         while lam < 1.0 {
             let target = (lam + dlam).min(1.0);
             let mut trial = initial_displacement(bc, target, Some(&u));
-            let scale = (fnorm_total * target).max(self.reaction_scale(law, system, &trial));
-            match self.newton_increment(law, system, f, target, &mut trial, scale, opts) {
-                Ok((its, rel)) => {
+            let scale = (fnorm_total * target).max(self.reaction_scale(law, free, &trial));
+            let mut sys = FemSystem {
+                fem: self,
+                law,
+                f,
+                load: target,
+                scale,
+            };
+            match newton(
+                &mut sys,
+                &mut trial,
+                free,
+                self.size(),
+                self.lattice.h(),
+                newton_opts,
+                linear,
+            ) {
+                Ok(its) => {
                     iterations += its;
                     increments += 1;
-                    last_rel = rel;
+                    let mut r = vec![Vec3::zeros(); trial.len()];
+                    sys.residual(&trial, &mut r);
+                    last_rel = free_norm(&r, free) / scale;
                     u = trial;
                     lam = target;
                     log::debug!("FEM load factor {lam:.4}: {its} Newton iterations");
                 }
-                Err(rel) => {
+                Err(failure) => {
                     iterations += opts.max_iterations;
                     dlam *= 0.5;
                     if dlam < min_dlam {
+                        let mut r = vec![Vec3::zeros(); trial.len()];
+                        sys.residual(&trial, &mut r);
                         return Err(FemError::NoConvergence {
                             load_factor: lam,
-                            residual: rel,
+                            residual: free_norm(&r, free) / scale,
                         });
                     }
-                    log::debug!("FEM increment failed at {target:.4}, halving to {dlam:e}");
+                    log::debug!(
+                        "FEM increment failed at {target:.4} ({failure:?}), halving to {dlam:e}"
+                    );
                 }
             }
         }
@@ -469,121 +524,19 @@ impl Fem {
         })
     }
 
-    /// Norm of the internal forces on the free dofs: a force scale for problems
-    /// loaded only by prescribed displacements.
-    fn reaction_scale(&self, law: FemLaw, system: &System, u: &[Vec3]) -> f64 {
+    /// Norm of the internal forces on the held dofs: a force scale for
+    /// problems loaded only by prescribed displacements.
+    fn reaction_scale(&self, law: FemLaw, free: &[bool], u: &[Vec3]) -> f64 {
         let fint = self.internal_forces_only(law, u);
         let mut s = 0.0;
         for (n, fi) in fint.iter().enumerate() {
             for k in 0..3 {
-                if system.dofs.free_index(3 * n + k).is_none() {
+                if !free[3 * n + k] {
                     s += fi[k] * fi[k];
                 }
             }
         }
         s.sqrt().max(f64::MIN_POSITIVE)
-    }
-
-    /// Newton iterations for one load increment; `Err(relative residual)` on failure.
-    #[allow(clippy::too_many_arguments)]
-    fn newton_increment(
-        &self,
-        law: FemLaw,
-        system: &System,
-        f: &[Vec3],
-        load: f64,
-        u: &mut Vec<Vec3>,
-        scale: f64,
-        opts: &NewtonOptions,
-    ) -> Result<(u32, f64), f64> {
-        let (mut fint, mut values) = self.assemble(law, system, u);
-        let mut r = residual(system, f, &fint, load);
-        let mut rnorm = norm(&r);
-        // Round-off floor of the residual: nodal forces are sums of element
-        // stresses of order (2 mu + lambda) h^2, so at tiny loads the relative
-        // tolerance alone can be out of reach.
-        let h = self.lattice.h();
-        let floor = 8.0
-            * f64::EPSILON
-            * (2.0 * self.mu + self.lambda)
-            * h
-            * h
-            * (system.nfree as f64).sqrt();
-        let scale = scale.max(floor / opts.tolerance);
-        for it in 0..opts.max_iterations {
-            log::trace!(
-                "FEM Newton load {load:.4} iteration {it}: residual {:e}",
-                rnorm / scale
-            );
-            if rnorm <= opts.tolerance * scale {
-                return Ok((it, rnorm / scale));
-            }
-            let Ok(llt) = system.factor(&values) else {
-                return Err(rnorm / scale);
-            };
-            let mut du = r.clone();
-            system.solve(&llt, &mut du);
-            if du.iter().any(|v| !v.is_finite()) {
-                return Err(rnorm / scale);
-            }
-            // Line search on the slope of the potential energy along du,
-            // g(alpha) = du . r(u + alpha du) (r = -grad energy): the residual
-            // norm is a poor merit function in bending (full Newton steps raise
-            // it while lowering the energy). Take the full step unless it
-            // overshoots the energy minimum along du by much, then regula falsi.
-            let g0: f64 = du.iter().zip(&r).map(|(a, b)| a * b).sum();
-            let eval = |alpha: f64| {
-                let mut trial = u.clone();
-                system.add_free(&mut trial, &du, alpha);
-                let ft = self.internal_forces_only(law, &trial);
-                let rt = residual(system, f, &ft, load);
-                let g: f64 = du.iter().zip(&rt).map(|(a, b)| a * b).sum();
-                (trial, g)
-            };
-            let (mut next, g1) = eval(1.0);
-            if g0.is_nan() || g0 <= 0.0 {
-                return Err(rnorm / scale);
-            }
-            if !g1.is_finite() || g1 < -0.5 * g0 {
-                let (mut lo, mut glo, mut hi, mut ghi) = (0.0f64, g0, 1.0f64, g1);
-                let mut found = false;
-                for _ in 0..12 {
-                    let alpha = if ghi.is_finite() {
-                        (lo + (hi - lo) * glo / (glo - ghi))
-                            .clamp(lo + 0.1 * (hi - lo), hi - 0.1 * (hi - lo))
-                    } else {
-                        0.5 * (lo + hi)
-                    };
-                    let (t, g) = eval(alpha);
-                    if g.is_finite() && g.abs() <= 0.5 * g0 {
-                        next = t;
-                        found = true;
-                        break;
-                    }
-                    if g.is_finite() && g > 0.0 {
-                        (lo, glo) = (alpha, g);
-                    } else {
-                        (hi, ghi) = (alpha, g);
-                    }
-                }
-                if !found {
-                    // No acceptable step: at the round-off floor this is convergence.
-                    if rnorm <= 1e3 * opts.tolerance * scale {
-                        return Ok((it + 1, rnorm / scale));
-                    }
-                    return Err(rnorm / scale);
-                }
-            }
-            *u = next;
-            (fint, values) = self.assemble(law, system, u);
-            r = residual(system, f, &fint, load);
-            rnorm = norm(&r);
-        }
-        if rnorm <= opts.tolerance * scale {
-            Ok((opts.max_iterations, rnorm / scale))
-        } else {
-            Err(rnorm / scale)
-        }
     }
 
     /// Internal (resisting) nodal forces of the displacement `u` under `law` (N).
@@ -686,11 +639,11 @@ impl Fem {
         }
     }
 
-    /// Internal forces and the free-free upper-triangle stiffness values.
-    fn assemble(&self, law: FemLaw, system: &System, u: &[Vec3]) -> (Vec<Vec3>, Vec<f64>) {
+    /// Internal forces and the stiffness matrix (3 x 3 blocks over the nodes).
+    fn assemble(&self, law: FemLaw, u: &[Vec3]) -> (Vec<Vec3>, BlockCsr) {
         let cells = self.lattice.cells();
         let mut fint = vec![Vec3::zeros(); u.len()];
-        let mut values = vec![0.0; system.row_idx.len()];
+        let mut k = self.pattern.clone();
         const CHUNK: usize = 2048;
         for chunk in cells.chunks(CHUNK) {
             let elems: Vec<([f64; 24], Vec<f64>)> = chunk
@@ -703,16 +656,20 @@ impl Fem {
                     (fe, ke)
                 })
                 .collect();
+            // Scattered in cell order: the sums do not depend on the threads.
             for (cell, (fe, ke)) in chunk.iter().zip(&elems) {
                 for (a, &na) in cell.iter().enumerate() {
                     for i in 0..3 {
                         fint[na as usize][i] += fe[3 * a + i];
                     }
+                    for (b, &nb) in cell.iter().enumerate() {
+                        let block = Mat3::from_fn(|i, j| ke[(3 * a + i) * 24 + 3 * b + j]);
+                        k.add(na as usize, nb as usize, &block);
+                    }
                 }
-                system.scatter(cell, ke, &mut values);
             }
         }
-        (fint, values)
+        (fint, k)
     }
 
     /// Displacement at point `p` (m) interpolated in the cell containing it, or
@@ -884,246 +841,43 @@ fn initial_displacement(bc: &FemConstraints, load: f64, prev: Option<&[Vec3]>) -
         .collect()
 }
 
-/// `load * f - fint` on the free dofs.
-fn residual(system: &System, f: &[Vec3], fint: &[Vec3], load: f64) -> Vec<f64> {
-    let mut r = vec![0.0; system.nfree];
-    for (n, (fe, fi)) in f.iter().zip(fint).enumerate() {
-        for k in 0..3 {
-            if let Some(d) = system.dofs.free_index(3 * n + k) {
-                r[d] = load * fe[k] - fi[k];
-            }
-        }
-    }
-    r
-}
-
-fn free_norm_of(system: &System, f: &[Vec3]) -> f64 {
-    let mut s = 0.0;
-    for (n, fe) in f.iter().enumerate() {
-        for k in 0..3 {
-            if system.dofs.free_index(3 * n + k).is_some() {
-                s += fe[k] * fe[k];
-            }
-        }
-    }
-    s.sqrt()
-}
-
-fn norm(v: &[f64]) -> f64 {
-    v.iter().map(|x| x * x).sum::<f64>().sqrt()
-}
-
-const FIXED: u32 = u32::MAX;
-
-/// Free-dof numbering (the core's [`DofMap`]) and the compressed-column
-/// pattern of the upper triangle of the free-free stiffness block.
-struct System {
-    dofs: DofMap,
-    /// Free index of each dof as `u32`, `FIXED` if held (the CSC indices are `u32`).
-    dof: Vec<u32>,
-    nfree: usize,
-    col_ptr: Vec<u32>,
-    row_idx: Vec<u32>,
-    symbolic: SymbolicSparseColMat<u32>,
-    /// Fill-reducing ordering of the free dofs (new -> old, old -> new).
-    perm_fwd: Vec<u32>,
-    perm_inv: Vec<u32>,
-    llt_symbolic: std::sync::OnceLock<Result<SymbolicCholesky<u32>, String>>,
-}
-
-impl System {
-    fn new(lattice: &Lattice, bc: &FemConstraints) -> Result<Self, FemError> {
-        let n = lattice.num_nodes();
-        let held: Vec<[bool; 3]> = bc.values.iter().map(|v| v.map(|c| c.is_some())).collect();
-        let dofs = DofMap::new(&held);
-        let nfree = dofs.num_free() as u32;
-        let dof: Vec<u32> = (0..dofs.num_dofs())
-            .map(|d| dofs.free_index(d).map_or(FIXED, |i| i as u32))
-            .collect();
-        if nfree == 0 {
-            return Err(FemError::NoFreeDofs);
-        }
-        // Node pairs (a <= b) sharing a cell, grouped by the column node b.
-        let mut pairs: Vec<(u32, u32)> = Vec::with_capacity(lattice.num_cells() * 36);
-        for cell in lattice.cells() {
-            for &a in cell {
-                for &b in cell {
-                    if a <= b {
-                        pairs.push((b, a));
-                    }
-                }
-            }
-        }
-        pairs.sort_unstable();
-        pairs.dedup();
-        let mut col_ptr = Vec::with_capacity(nfree as usize + 1);
-        let mut row_idx = Vec::new();
-        col_ptr.push(0u32);
-        let mut start = 0;
-        for b in 0..n as u32 {
-            let mut end = start;
-            while end < pairs.len() && pairs[end].0 == b {
-                end += 1;
-            }
-            for k in 0..3 {
-                let col = dof[3 * b as usize + k];
-                if col == FIXED {
-                    continue;
-                }
-                for &(_, a) in &pairs[start..end] {
-                    for i in 0..3 {
-                        let row = dof[3 * a as usize + i];
-                        if row != FIXED && row <= col {
-                            row_idx.push(row);
-                        }
-                    }
-                }
-                col_ptr.push(row_idx.len() as u32);
-            }
-            start = end;
-        }
-        let node_order = nested_dissection(lattice.node_coords());
-        let mut perm_fwd = Vec::with_capacity(nfree as usize);
-        for &node in &node_order {
-            for k in 0..3 {
-                let d = dof[3 * node as usize + k];
-                if d != FIXED {
-                    perm_fwd.push(d);
-                }
-            }
-        }
-        let mut perm_inv = vec![0u32; nfree as usize];
-        for (new, &old) in perm_fwd.iter().enumerate() {
-            perm_inv[old as usize] = new as u32;
-        }
-        let symbolic = SymbolicSparseColMat::new_checked(
-            nfree as usize,
-            nfree as usize,
-            col_ptr.clone(),
-            None,
-            row_idx.clone(),
-        );
-        Ok(Self {
-            dofs,
-            dof,
-            nfree: nfree as usize,
-            col_ptr,
-            row_idx,
-            symbolic,
-            perm_fwd,
-            perm_inv,
-            llt_symbolic: std::sync::OnceLock::new(),
+/// Norm of `v` over the free dofs.
+fn free_norm(v: &[Vec3], free: &[bool]) -> f64 {
+    v.iter()
+        .enumerate()
+        .map(|(n, vi)| {
+            (0..3)
+                .filter(|&k| free[3 * n + k])
+                .map(|k| vi[k] * vi[k])
+                .sum::<f64>()
         })
-    }
+        .sum::<f64>()
+        .sqrt()
+}
 
-    /// Adds the free-free upper-triangle entries of an element matrix.
-    fn scatter(&self, cell: &[u32; 8], ke: &[f64], values: &mut [f64]) {
-        for (a, &na) in cell.iter().enumerate() {
-            for i in 0..3 {
-                let row = self.dof[3 * na as usize + i];
-                if row == FIXED {
-                    continue;
-                }
-                for (b, &nb) in cell.iter().enumerate() {
-                    for k in 0..3 {
-                        let col = self.dof[3 * nb as usize + k];
-                        if col == FIXED || row > col {
-                            continue;
-                        }
-                        let lo = self.col_ptr[col as usize] as usize;
-                        let hi = self.col_ptr[col as usize + 1] as usize;
-                        if let Ok(pos) = self.row_idx[lo..hi].binary_search(&row) {
-                            values[lo + pos] += ke[(3 * a + i) * 24 + 3 * b + k];
-                        }
-                    }
-                }
-            }
+/// The equilibrium `load f - f_int(u) = 0` as a system for the core's Newton
+/// solver (`u` the displacement).
+struct FemSystem<'a> {
+    fem: &'a Fem,
+    law: FemLaw,
+    f: &'a [Vec3],
+    load: f64,
+    scale: f64,
+}
+
+impl NonlinearSystem for FemSystem<'_> {
+    fn residual(&mut self, u: &[Vec3], r: &mut [Vec3]) -> f64 {
+        let fint = self.fem.internal_forces_only(self.law, u);
+        for ((ri, fi), ei) in r.iter_mut().zip(&fint).zip(self.f) {
+            *ri = ei * self.load - fi;
         }
+        self.scale
     }
 
-    /// Cholesky factor values of the matrix with upper triangle `values`.
-    fn factor(&self, values: &[f64]) -> Result<Vec<f64>, FemError> {
-        let sym = self.symbolic_factor()?;
-        mss_core::sparse::sequential_factorizations();
-        let par = faer::get_global_parallelism();
-        let mat = SparseColMatRef::new(self.symbolic.as_ref(), values);
-        let mut l = vec![0.0; sym.len_val()];
-        let mut buf =
-            MemBuffer::try_new(sym.factorize_numeric_llt_scratch::<f64>(par, Default::default()))
-                .map_err(|e| FemError::Factorization(format!("{e:?}")))?;
-        sym.factorize_numeric_llt::<f64>(
-            &mut l,
-            mat,
-            Side::Upper,
-            Default::default(),
-            par,
-            MemStack::new(&mut buf),
-            Default::default(),
-        )
-        .map_err(|e| FemError::NotPositiveDefinite(format!("{e:?}")))?;
-        Ok(l)
-    }
-
-    fn symbolic_factor(&self) -> Result<&SymbolicCholesky<u32>, FemError> {
-        self.llt_symbolic
-            .get_or_init(|| {
-                let perm = PermRef::new_checked(&self.perm_fwd, &self.perm_inv, self.nfree);
-                factorize_symbolic_cholesky(
-                    self.symbolic.as_ref(),
-                    Side::Upper,
-                    SymmetricOrdering::Custom(perm),
-                    Default::default(),
-                )
-                .map_err(|e| format!("{e:?}"))
-            })
-            .as_ref()
-            .map_err(|e| FemError::Factorization(e.clone()))
-    }
-
-    /// Solves `K x = rhs` in place with the factor values `l` of [`System::factor`].
-    fn solve(&self, l: &[f64], rhs: &mut [f64]) {
-        // The factor exists, so the symbolic part was computed successfully.
-        let Ok(sym) = self.symbolic_factor() else {
-            return;
-        };
-        mss_core::sparse::sequential_factorizations();
-        let par = faer::get_global_parallelism();
-        let mut buf = MemBuffer::new(sym.solve_in_place_scratch::<f64>(1, par));
-        LltRef::<u32, f64>::new(sym, l).solve_in_place_with_conj(
-            Conj::No,
-            MatMut::from_column_major_slice_mut(rhs, self.nfree, 1),
-            par,
-            MemStack::new(&mut buf),
-        );
-    }
-
-    /// `K x` for the symmetric matrix stored as its upper triangle.
-    #[allow(clippy::needless_range_loop)]
-    fn sym_mul(&self, values: &[f64], x: &[f64]) -> Vec<f64> {
-        let mut y = vec![0.0; self.nfree];
-        for col in 0..self.nfree {
-            let lo = self.col_ptr[col] as usize;
-            let hi = self.col_ptr[col + 1] as usize;
-            for p in lo..hi {
-                let row = self.row_idx[p] as usize;
-                let v = values[p];
-                y[row] += v * x[col];
-                if row != col {
-                    y[col] += v * x[row];
-                }
-            }
-        }
-        y
-    }
-
-    fn add_free(&self, u: &mut [Vec3], du: &[f64], alpha: f64) {
-        for (n, un) in u.iter_mut().enumerate() {
-            for k in 0..3 {
-                if let Some(d) = self.dofs.free_index(3 * n + k) {
-                    un[k] += alpha * du[d];
-                }
-            }
-        }
+    fn jacobian(&mut self, u: &[Vec3]) -> BlockCsr {
+        let (_, mut k) = self.fem.assemble(self.law, u);
+        k.blocks.iter_mut().for_each(|b| *b = -*b);
+        k
     }
 }
 
@@ -1131,51 +885,4 @@ impl System {
 /// positions of `lattice`'s own nodes (they are nodes of the refined mesh).
 pub fn displacement_at_coarse_nodes(fem: &Fem, lattice: &Lattice, u: &[Vec3]) -> Option<Vec<Vec3>> {
     fem.interpolate_all(u, lattice.nodes())
-}
-
-/// Geometric nested-dissection order of lattice nodes (by grid coordinates):
-/// split along the longest extent at a grid plane; the plane's nodes separate
-/// the two halves for the 27-node stencil of hexahedra, so they go last.
-fn nested_dissection(coords: &[[u32; 3]]) -> Vec<u32> {
-    let mut out = Vec::with_capacity(coords.len());
-    let mut stack: Vec<(Vec<u32>, bool)> = vec![((0..coords.len() as u32).collect(), false)];
-    // Iterative post-order: a set is split into (left, right, separator);
-    // emitted order is left, right, separator.
-    while let Some((set, is_leaf)) = stack.pop() {
-        if is_leaf || set.len() <= 48 {
-            out.extend_from_slice(&set);
-            continue;
-        }
-        let mut lo = [u32::MAX; 3];
-        let mut hi = [0u32; 3];
-        for &n in &set {
-            let c = coords[n as usize];
-            for k in 0..3 {
-                lo[k] = lo[k].min(c[k]);
-                hi[k] = hi[k].max(c[k]);
-            }
-        }
-        let axis = (0..3).max_by_key(|&k| (hi[k] - lo[k], 3 - k)).unwrap_or(0);
-        if hi[axis] - lo[axis] < 2 {
-            out.extend_from_slice(&set);
-            continue;
-        }
-        let mid = lo[axis] + (hi[axis] - lo[axis]) / 2;
-        let (mut left, mut sep, mut right) = (Vec::new(), Vec::new(), Vec::new());
-        for &n in &set {
-            let c = coords[n as usize][axis];
-            if c < mid {
-                left.push(n);
-            } else if c == mid {
-                sep.push(n);
-            } else {
-                right.push(n);
-            }
-        }
-        // Pushed in reverse: popped as left, right, then the separator.
-        stack.push((sep, true));
-        stack.push((right, false));
-        stack.push((left, false));
-    }
-    out
 }

@@ -280,18 +280,20 @@ pub struct LinearStats {
     pub iterative_solves: u32,
     /// Krylov iterations over all iterative solves.
     pub krylov_iterations: u32,
+    /// Multigrid hierarchies built.
+    pub hierarchy_builds: u32,
 }
 
-/// The linear solver of a Newton solve: a sparse LU with its symbolic
-/// analysis cached per pattern, or multigrid-preconditioned Krylov with the
-/// hierarchy's structure cached per free mask.
-pub(crate) struct LinearSolver {
+/// The linear solver of a Newton solve ([`newton`](super::newton)): a sparse
+/// LU with its symbolic analysis cached per pattern, or multigrid-
+/// preconditioned Krylov with the hierarchy's structure cached per free mask.
+pub struct LinearSolver {
     kind: LinearSolverKind,
     lu: LuCache,
     cells: Vec<[u32; 8]>,
     coords: Vec<[i64; 3]>,
     shape: Option<super::multigrid::HierarchyShape>,
-    pub(crate) stats: LinearStats,
+    stats: LinearStats,
 }
 
 impl std::fmt::Debug for LinearSolver {
@@ -305,18 +307,13 @@ impl std::fmt::Debug for LinearSolver {
 
 impl LinearSolver {
     /// A solver for matrices over the nodes of `model`'s lattice.
-    pub(crate) fn new(model: &crate::Model, kind: LinearSolverKind) -> Self {
+    pub fn new(model: &crate::Model, kind: LinearSolverKind) -> Self {
         Self::for_lattice(model.cells(), model.rest_positions(), model.h(), kind)
     }
 
     /// A solver for matrices over the nodes of a lattice given by its cells,
     /// rest positions and cell edge.
-    pub(crate) fn for_lattice(
-        cells: &[[u32; 8]],
-        rest: &[Vec3],
-        h: f64,
-        kind: LinearSolverKind,
-    ) -> Self {
+    pub fn for_lattice(cells: &[[u32; 8]], rest: &[Vec3], h: f64, kind: LinearSolverKind) -> Self {
         Self {
             kind,
             lu: LuCache::new(),
@@ -327,8 +324,34 @@ impl LinearSolver {
         }
     }
 
+    /// What the solver did so far.
+    pub fn stats(&self) -> LinearStats {
+        self.stats
+    }
+
+    /// Solves `A y = b` on the free dofs (`free[3 node + d]`; held components
+    /// of `y` are zero) to a relative residual `rtol` (direct solves are
+    /// exact). `size` is a length scale of the body: a solution above
+    /// `1e6 size` is taken for a singular matrix.
+    pub fn solve_dofs(
+        &mut self,
+        a: &BlockCsr,
+        b: &[Vec3],
+        free: &[bool],
+        size: f64,
+        rtol: f64,
+    ) -> Result<Vec<Vec3>, crate::sparse::LinearSolveError> {
+        self.solve(a, b, free, size, rtol).map_err(|e| match e {
+            LinearFailure::Singular { nodes } => crate::sparse::LinearSolveError::Singular {
+                detail: format!("the solution grows without bound at nodes {nodes:?}"),
+            },
+            LinearFailure::Other(m) => crate::sparse::LinearSolveError::Library(m),
+        })
+    }
+
     /// Solves `A y = b` on the free dofs to a relative residual `rtol` (the
-    /// direct solve is exact). See [`solve_free`] for `size`.
+    /// direct solve is exact). `size` is a length scale of the body: a
+    /// solution above `1e6 size` means a singular matrix.
     pub(crate) fn solve(
         &mut self,
         a: &BlockCsr,
@@ -365,22 +388,25 @@ impl LinearSolver {
             .filter_map(|i| a.find(i, i))
             .map(|k| a.blocks[k].trace())
             .sum();
-        let a_original = a;
-        let negated;
-        let (a, b_signed): (&BlockCsr, Vec<Vec3>) = if trace < 0.0 {
-            let mut m = a.clone();
-            m.blocks.iter_mut().for_each(|blk| *blk = -*blk);
-            negated = m;
-            (&negated, b.iter().map(|v| -v).collect())
-        } else {
-            (a, b.to_vec())
-        };
-        let mg =
-            super::multigrid::Multigrid::new(a, shape).map_err(|e| LinearFailure::Other(e.0))?;
-        let scale = a.blocks.iter().map(|b| b.abs().max()).fold(0.0, f64::max);
-        let symmetric = a.asymmetry() <= 1e-10 * scale;
+        let sign = if trace < 0.0 { -1.0 } else { 1.0 };
+        let b_signed: Vec<Vec3> = b.iter().map(|v| v * sign).collect();
+        let op = super::multigrid::Operator::new(a, free, sign);
+        let scale = op
+            .matrix()
+            .blocks
+            .iter()
+            .map(|b| b.abs().max())
+            .fold(0.0, f64::max);
+        let symmetric = op.matrix().asymmetry() <= 1e-10 * scale;
         let mut y = vec![Vec3::zeros(); a.num_rows()];
-        let info = super::multigrid::krylov(a, &mg, &b_signed, &mut y, rtol, 500, symmetric);
+        // A hierarchy is built for every matrix: reusing the previous one
+        // (Newton iterations change the tangent little) was tried and lost,
+        // since a stale hierarchy takes more Krylov iterations than a new
+        // set-up costs, most of all once the tangent turns non-symmetric.
+        let mg =
+            super::multigrid::Multigrid::new(op, shape).map_err(|e| LinearFailure::Other(e.0))?;
+        let info = super::multigrid::krylov(&mg, &b_signed, &mut y, rtol, 500, symmetric);
+        self.stats.hierarchy_builds += 1;
         self.stats.krylov_iterations += info.iterations;
         log::debug!(
             "{} with multigrid ({:?} nodes per level): {} iterations, relative residual {:.2e}",
@@ -402,7 +428,7 @@ impl LinearSolver {
                 "iterative solve stalled at relative residual {:.2e}: solving directly",
                 info.relative_residual
             );
-            return solve_free(&mut self.lu, a_original, b, free, size);
+            return solve_free(&mut self.lu, a, b, free, size);
         }
         if !usable {
             let mut order: Vec<u32> = (0..y.len() as u32).collect();

@@ -44,7 +44,7 @@ use thiserror::Error;
 
 pub use explicit::{Explicit, ExplicitOptions, ExplicitScheme, explicit_time_step_limit};
 pub use implicit::{Implicit, ImplicitOptions};
-pub use linear::{DIRECT_MAX_FREE_DOFS, LinearSolverKind, LinearStats};
+pub use linear::{DIRECT_MAX_FREE_DOFS, LinearSolver, LinearSolverKind, LinearStats};
 pub use statics::{StaticInfo, StaticOptions, solve_static};
 
 use crate::constraints::{ConstraintError, ConstraintSpec, Constraints};
@@ -678,15 +678,19 @@ impl Integrators {
     }
 }
 
-/// Options of the Newton iterations shared by the implicit and static solvers.
-#[derive(Debug, Clone, Copy)]
-struct NewtonOptions {
-    max_iterations: u32,
-    rtol: f64,
+/// Options of [`newton`], the Newton solver shared by the implicit and static
+/// solvers and the FEM reference.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NewtonOptions {
+    /// Iteration limit.
+    pub max_iterations: u32,
+    /// Target: residual norm over the free dofs at most `rtol` times the
+    /// scale [`NonlinearSystem::residual`] returns.
+    pub rtol: f64,
     /// Choose the step length from the slope `g(alpha) = delta . R(x + alpha delta)`
     /// (the energy's directional derivative for conservative forces) instead of
     /// backtracking on `|R|`; `|R|` backtracking remains the fallback.
-    slope_line_search: bool,
+    pub slope_line_search: bool,
 }
 
 /// Relative accuracy of the first linear solve of a Newton solve (iterative
@@ -704,8 +708,11 @@ const INITIAL_FORCING: f64 = 1e-8;
 /// 4 Newton iterations instead of 2.
 const MAX_FORCING: f64 = 1e-3;
 
-/// A nonlinear system `R(x) = 0` on the free dofs, `J = dR/dx`.
-trait NonlinearSystem {
+/// A nonlinear system `R(x) = 0` on the free dofs, `J = dR/dx`, solved by
+/// [`newton`]. `x` holds three components per node (positions, or
+/// displacements for the FEM); held components are set by the caller and
+/// never changed.
+pub trait NonlinearSystem {
     /// Writes `R(x)` to `r` and returns the force scale the residual is
     /// measured against (N).
     fn residual(&mut self, x: &[Vec3], r: &mut [Vec3]) -> f64;
@@ -713,9 +720,14 @@ trait NonlinearSystem {
     fn jacobian(&mut self, x: &[Vec3]) -> BlockCsr;
 }
 
-enum NewtonFailure {
+/// Why [`newton`] stopped without converging.
+#[derive(Debug, Clone, PartialEq)]
+pub enum NewtonFailure {
+    /// The iteration diverged or did not reach the target.
     Diverged(Divergence),
+    /// The Jacobian is singular; the nodes a mechanism moves most.
     Singular(Vec<u32>),
+    /// The linear solver failed otherwise.
     Linear(String),
 }
 
@@ -729,11 +741,14 @@ fn free_norm(r: &[Vec3], free: &[bool]) -> f64 {
     s.sqrt()
 }
 
-/// Newton's method with backtracking line search on `|R|` over the free dofs.
-/// `x` is updated in place (also on failure: callers keep their own copy).
-/// `lu` keeps the symbolic LU analysis of the Jacobian's pattern across
-/// iterations and calls.
-fn newton(
+/// Newton's method on the free dofs (`free[3 node + d]`): inexact linear
+/// solves with `linear` (direct, or multigrid-preconditioned Krylov with
+/// Eisenstat-Walker forcing terms), a line search on the energy's slope when
+/// `opts.slope_line_search` (conservative problems) and backtracking on the
+/// residual norm otherwise. `size` is a length scale of the body and `h` the
+/// cell edge (for the round-off floor of the target). `x` is updated in place
+/// (also on failure: callers keep their own copy). Returns the iterations.
+pub fn newton(
     sys: &mut dyn NonlinearSystem,
     x: &mut [Vec3],
     free: &[bool],

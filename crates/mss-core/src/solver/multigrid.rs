@@ -338,6 +338,33 @@ pub(crate) struct Multigrid {
     levels: Vec<Level>,
     prolongations: Vec<Prolongation>,
     coarsest: Option<Factorization>,
+    /// Work vectors per level (residual, Chebyshev direction, restricted
+    /// residual, coarse correction), allocated once: a V-cycle allocates
+    /// nothing.
+    scratch: std::cell::RefCell<Vec<Scratch>>,
+}
+
+/// Work vectors of one level.
+#[derive(Debug, Clone)]
+struct Scratch {
+    r: Vec<Vec3>,
+    d: Vec<Vec3>,
+    t: Vec<Vec3>,
+    /// This level's right-hand side and solution when it is the coarse one.
+    b: Vec<Vec3>,
+    x: Vec<Vec3>,
+}
+
+impl Scratch {
+    fn new(n: usize) -> Self {
+        Self {
+            r: vec![Vec3::zeros(); n],
+            d: vec![Vec3::zeros(); n],
+            t: vec![Vec3::zeros(); n],
+            b: vec![Vec3::zeros(); n],
+            x: vec![Vec3::zeros(); n],
+        }
+    }
 }
 
 impl std::fmt::Debug for Multigrid {
@@ -360,12 +387,11 @@ impl std::fmt::Debug for Multigrid {
 pub(crate) struct SetupError(pub String);
 
 impl Multigrid {
-    /// The hierarchy of `a` (free dofs `shape`'s) with the cached `shape`.
-    pub(crate) fn new(a: &BlockCsr, shape: &HierarchyShape) -> Result<Self, SetupError> {
-        let fine_mask = masks_of(&shape.fine_free);
+    /// The hierarchy of the operator `a` (free dofs `shape`'s) with the
+    /// cached `shape`.
+    pub(crate) fn new(a: Operator, shape: &HierarchyShape) -> Result<Self, SetupError> {
         let mut levels = Vec::with_capacity(shape.num_levels());
-        let a0 = decoupled(a, &fine_mask);
-        levels.push(level_of(a0, fine_mask));
+        levels.push(level_of(a.a, a.mask));
         for (p, pattern) in shape.prolongations.iter().zip(&shape.coarse_patterns) {
             let fine = &levels[levels.len() - 1];
             let (ac, mask) = galerkin(&fine.a, &fine.mask, p, pattern);
@@ -376,10 +402,15 @@ impl Multigrid {
             Ok(f) => Some(f),
             Err(e) => return Err(SetupError(format!("coarsest level: {e}"))),
         };
+        let scratch = levels
+            .iter()
+            .map(|l| Scratch::new(l.a.num_rows()))
+            .collect();
         Ok(Self {
             levels,
             prolongations: shape.prolongations.clone(),
             coarsest,
+            scratch: std::cell::RefCell::new(scratch),
         })
     }
 
@@ -388,40 +419,53 @@ impl Multigrid {
         self.levels.iter().map(|l| l.a.num_rows()).collect()
     }
 
-    /// `z = M^-1 r`: one V-cycle from zero.
-    pub(crate) fn apply(&self, r: &[Vec3], z: &mut [Vec3]) {
-        self.vcycle(0, r, z);
+    /// The operator of the finest level (held dofs decoupled).
+    pub(crate) fn operator(&self) -> (&BlockCsr, &[[bool; 3]]) {
+        (&self.levels[0].a, &self.levels[0].mask)
     }
 
-    fn vcycle(&self, k: usize, b: &[Vec3], x: &mut [Vec3]) {
+    /// `z = M^-1 r`: one V-cycle from zero.
+    pub(crate) fn apply(&self, r: &[Vec3], z: &mut [Vec3]) {
+        let mut scratch = self.scratch.borrow_mut();
+        self.vcycle(0, r, z, &mut scratch[..]);
+    }
+
+    /// One V-cycle from zero on level `k`; `scratch` holds the work
+    /// vectors of levels `k` and below.
+    fn vcycle(&self, k: usize, b: &[Vec3], x: &mut [Vec3], scratch: &mut [Scratch]) {
         let level = &self.levels[k];
+        let Some((s, below)) = scratch.split_first_mut() else {
+            return;
+        };
         if k + 1 == self.levels.len() {
             match self.coarsest.as_ref().map(|f| f.solve(b)) {
                 Some(Ok(sol)) => x.copy_from_slice(&sol),
                 _ => {
                     x.iter_mut().for_each(|v| *v = Vec3::zeros());
-                    chebyshev(level, b, x, 8);
+                    chebyshev(level, b, x, 8, &mut s.r, &mut s.d);
                 }
             }
             return;
         }
         x.iter_mut().for_each(|v| *v = Vec3::zeros());
-        chebyshev(level, b, x, SMOOTHING_STEPS);
-        // Residual, restricted.
-        let n = level.a.num_rows();
-        let mut r = vec![Vec3::zeros(); n];
-        mul(&level.a, x, &mut r);
-        r.par_iter_mut()
+        chebyshev(level, b, x, SMOOTHING_STEPS, &mut s.r, &mut s.d);
+        // Residual, restricted into the coarse level's right-hand side.
+        mul(&level.a, x, &mut s.t);
+        s.t.par_iter_mut()
             .zip(b.par_iter())
             .for_each(|(ri, bi)| *ri = bi - *ri);
         let p = &self.prolongations[k];
-        let coarse = &self.levels[k + 1];
-        let mut rc = vec![Vec3::zeros(); coarse.a.num_rows()];
-        restrict(p, &level.mask, &r, &mut rc);
-        let mut ec = vec![Vec3::zeros(); rc.len()];
-        self.vcycle(k + 1, &rc, &mut ec);
+        let Some(c) = below.first_mut() else {
+            return;
+        };
+        let (mut rc, mut ec) = (std::mem::take(&mut c.b), std::mem::take(&mut c.x));
+        restrict(p, &level.mask, &s.t, &mut rc);
+        self.vcycle(k + 1, &rc, &mut ec, below);
         prolong_add(p, &level.mask, &ec, x);
-        chebyshev(level, b, x, SMOOTHING_STEPS);
+        if let Some(c) = below.first_mut() {
+            (c.b, c.x) = (rc, ec);
+        }
+        chebyshev(level, b, x, SMOOTHING_STEPS, &mut s.r, &mut s.d);
     }
 }
 
@@ -537,17 +581,22 @@ fn prolong_add(p: &Prolongation, mask: &[[bool; 3]], ec: &[Vec3], x: &mut [Vec3]
     });
 }
 
-/// `steps` Chebyshev iterations of block Jacobi on `A x = b`, from `x`.
-fn chebyshev(level: &Level, b: &[Vec3], x: &mut [Vec3], steps: usize) {
-    let n = level.a.num_rows();
+/// `steps` Chebyshev iterations of block Jacobi on `A x = b`, from `x`, with
+/// work vectors `r` and `d` (one entry per node).
+fn chebyshev(
+    level: &Level,
+    b: &[Vec3],
+    x: &mut [Vec3],
+    steps: usize,
+    r: &mut [Vec3],
+    d: &mut [Vec3],
+) {
     let hi = RHO_SAFETY * level.rho;
     let lo = hi / 30.0;
     let theta = 0.5 * (hi + lo);
     let delta = 0.5 * (hi - lo);
     let sigma = theta / delta;
     let mut rho_k = 1.0 / sigma;
-    let mut r = vec![Vec3::zeros(); n];
-    let mut d = vec![Vec3::zeros(); n];
     let residual = |x: &[Vec3], r: &mut [Vec3]| {
         mul(&level.a, x, r);
         r.par_iter_mut()
@@ -555,22 +604,56 @@ fn chebyshev(level: &Level, b: &[Vec3], x: &mut [Vec3], steps: usize) {
             .zip(level.inv_diag.par_iter())
             .for_each(|((ri, bi), di)| *ri = di * (bi - *ri));
     };
-    residual(x, &mut r);
+    residual(x, r);
     d.par_iter_mut()
         .zip(r.par_iter())
         .for_each(|(di, ri)| *di = ri / theta);
     for step in 0..steps {
-        axpy(x, 1.0, &d);
+        axpy(x, 1.0, d);
         if step + 1 == steps {
             break;
         }
-        residual(x, &mut r);
+        residual(x, r);
         let rho_next = 1.0 / (2.0 * sigma - rho_k);
         let (c1, c2) = (rho_next * rho_k, 2.0 * rho_next / delta);
         d.par_iter_mut()
             .zip(r.par_iter())
             .for_each(|(di, ri)| *di = *di * c1 + ri * c2);
         rho_k = rho_next;
+    }
+}
+
+/// A matrix with its held dofs decoupled (identity rows and columns), the
+/// operator of a Krylov solve.
+pub(crate) struct Operator {
+    a: BlockCsr,
+    mask: Vec<[bool; 3]>,
+}
+
+impl Operator {
+    /// `sign * a` with the dofs not in `free` decoupled (one copy of `a`).
+    pub(crate) fn new(a: &BlockCsr, free: &[bool], sign: f64) -> Self {
+        let mask = masks_of(free);
+        let mut a = decoupled(a, &mask);
+        if sign != 1.0 {
+            a.blocks.par_iter_mut().for_each(|blk| *blk *= sign);
+            // The decoupled rows stay identity.
+            for (i, m) in mask.iter().enumerate() {
+                if let Some(k) = a.find(i, i) {
+                    for (d, free) in m.iter().enumerate() {
+                        if !free {
+                            a.blocks[k][(d, d)] = 1.0;
+                        }
+                    }
+                }
+            }
+        }
+        Self { a, mask }
+    }
+
+    /// The matrix (with held dofs decoupled).
+    pub(crate) fn matrix(&self) -> &BlockCsr {
+        &self.a
     }
 }
 
@@ -589,7 +672,6 @@ pub(crate) struct KrylovInfo {
 /// are zero) to a relative residual `rtol`, preconditioned by `mg`: CG when
 /// `symmetric`, BiCGStab otherwise. `x` starts at zero.
 pub(crate) fn krylov(
-    a: &BlockCsr,
     mg: &Multigrid,
     b: &[Vec3],
     x: &mut [Vec3],
@@ -597,10 +679,8 @@ pub(crate) fn krylov(
     max_iterations: u32,
     symmetric: bool,
 ) -> KrylovInfo {
-    let fine = &mg.levels[0];
-    let op = &fine.a;
-    let mask = &fine.mask;
-    let n = a.num_rows();
+    let (op, mask) = mg.operator();
+    let n = op.num_rows();
     let masked = |v: &mut [Vec3]| {
         v.par_iter_mut().zip(mask.par_iter()).for_each(|(vi, m)| {
             for d in 0..3 {
@@ -622,6 +702,7 @@ pub(crate) fn krylov(
         };
     }
     let target = rtol * bnorm;
+    let mut iterations = max_iterations;
     let mut z = vec![Vec3::zeros(); n];
     let mut q = vec![Vec3::zeros(); n];
     if symmetric {
@@ -750,6 +831,7 @@ pub(crate) fn krylov(
                 break;
             }
         }
+        iterations = total;
     }
     // Report the true residual of the iterate.
     mul(op, x, &mut q);
@@ -762,7 +844,7 @@ pub(crate) fn krylov(
         .sum::<f64>()
         .sqrt();
     KrylovInfo {
-        iterations: max_iterations,
+        iterations,
         relative_residual: rn / bnorm,
         converged: rn <= target,
     }

@@ -267,7 +267,7 @@ pub fn solve_static(
         load_steps,
         rejected_iterations: rejected,
         relative_residual: if scale > 0.0 { res / scale } else { res },
-        linear: linear.stats,
+        linear: linear.stats(),
     })
 }
 
@@ -326,6 +326,6 @@ fn solve_small_strain(
         load_steps: 1,
         rejected_iterations: 0,
         relative_residual: if scale > 0.0 { res / scale } else { res },
-        linear: linear.stats,
+        linear: linear.stats(),
     })
 }
