@@ -150,3 +150,26 @@ fn iterative_results_do_not_depend_on_the_thread_count() {
         "results differ between thread counts"
     );
 }
+
+/// A load far beyond what the body carries is a failure to find equilibrium
+/// under that load, not a mechanism of the boundary conditions (which the same
+/// body under a small load shows it has not).
+#[test]
+fn a_huge_load_is_not_reported_as_a_mechanism() {
+    for load in [1.0, 1e7] {
+        let p = cantilever(&PaperModel, 2, load);
+        let mut s = State::at_rest(p.model());
+        let r = solve_static(&p, &mut s, &StaticOptions::default());
+        if load == 1.0 {
+            assert!(r.is_ok(), "{r:?}");
+        } else {
+            match r {
+                Err(mss_core::SolverError::Mechanism { .. }) => {
+                    panic!("a huge load was reported as a mechanism")
+                }
+                Err(e) => assert!(!e.to_string().contains("mechanism free"), "{e}"),
+                Ok(_) => {}
+            }
+        }
+    }
+}

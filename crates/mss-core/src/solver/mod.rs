@@ -332,6 +332,15 @@ pub enum Divergence {
         /// Residual needed (N).
         target: f64,
     },
+    /// The tangent stiffness became singular in a deformed state, while it
+    /// is regular at rest: the structure buckles, snaps through or collapses
+    /// under the load (not a mechanism of the boundary conditions).
+    SingularUnderLoad {
+        /// Load factor (0..1) of the last equilibrium found.
+        load_factor: f64,
+        /// Nodes that move most in the singular direction.
+        nodes: Vec<u32>,
+    },
 }
 
 impl std::fmt::Display for Divergence {
@@ -356,6 +365,11 @@ impl std::fmt::Display for Divergence {
             } => write!(
                 f,
                 "Newton's method did not converge in {iterations} iterations (residual {residual:.3e} N, needed {target:.3e} N)"
+            ),
+            Divergence::SingularUnderLoad { load_factor, nodes } => write!(
+                f,
+                "the stiffness became singular under load beyond {:.1}% of it (the body buckles or collapses there; at rest it is held well, so this is not a mechanism of the boundary conditions; nodes that move most: {nodes:?})",
+                100.0 * load_factor
             ),
         }
     }

@@ -227,11 +227,35 @@ pub fn solve_static(
                 lambda = lt;
                 dl = (2.0 * dl).min(1.0);
             }
-            Err(NewtonFailure::Singular(nodes)) => {
+            Err(NewtonFailure::Singular(nodes))
+                if singular_at_rest(&mut sys, &x_init, &free, &mut linear) =>
+            {
                 return Err(SolverError::Mechanism {
                     message: "the stiffness matrix is singular: the boundary conditions leave a mechanism free (a rigid motion, or one of the 3 hourglass modes of the lattice); fix a whole face, or more nodes spread over the body".into(),
                     nodes,
                 });
+            }
+            Err(NewtonFailure::Singular(nodes)) => {
+                // Singular in a deformed state only: a smaller increment may
+                // pass it (a limit point) or not (collapse); say which.
+                dl *= 0.5;
+                if dl < opts.min_load_increment {
+                    return Err(SolverError::Diverged {
+                        solver: "static",
+                        step: load_steps as u64 + 1,
+                        time: state.time,
+                        reason: Divergence::SingularUnderLoad {
+                            load_factor: lambda,
+                            nodes,
+                        },
+                        kept_time: state.time,
+                        hint: STATIC_HINT,
+                    });
+                }
+                log::debug!(
+                    "static: singular tangent on the way to load factor {lt}; trying {}",
+                    lambda + dl
+                );
             }
             Err(NewtonFailure::Linear(m)) => return Err(SolverError::LinearSolver(m)),
             Err(NewtonFailure::Diverged(reason)) => {
@@ -269,6 +293,26 @@ pub fn solve_static(
         relative_residual: if scale > 0.0 { res / scale } else { res },
         linear: linear.stats(),
     })
+}
+
+/// Whether the tangent at the start configuration `x0` is singular on the
+/// free dofs: a mechanism of the boundary conditions, as opposed to a
+/// singularity that the load brings about.
+fn singular_at_rest(
+    sys: &mut StaticSystem<'_>,
+    x0: &[Vec3],
+    free: &[bool],
+    linear: &mut LinearSolver,
+) -> bool {
+    let jac = sys.jacobian(x0);
+    // A right-hand side that excites every free dof.
+    let b: Vec<Vec3> = (0..x0.len())
+        .map(|i| Vec3::new(1.0, -0.5, 0.25) * (1.0 + (i % 7) as f64))
+        .collect();
+    matches!(
+        linear.solve(&jac, &b, free, sys.problem.size(), 1e-8),
+        Err(super::linear::LinearFailure::Singular { .. })
+    )
 }
 
 /// One solve of the problem linearized at rest: `K0 (x - X) = f` on the free
