@@ -10,40 +10,15 @@
 
 use std::time::Instant;
 
+mod common;
+use common::{cpu_seconds, peak_mib};
+
 use hexmesh::Lattice;
 use mss_core::Parameterizations;
 use mss_core::constraints::{ConstraintSpec, Face, NodeSelector};
 use mss_core::loads::{Damping, LoadSpec};
 use mss_core::solver::{LinearSolverKind, Problem, State, StaticOptions, solve_static};
 use mss_core::{Material, Model};
-
-fn cpu_seconds() -> f64 {
-    // utime + stime of this process, in clock ticks (100 per second on Linux).
-    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
-        return f64::NAN;
-    };
-    let fields: Vec<&str> = stat
-        .rsplit_once(')')
-        .map_or(vec![], |(_, r)| r.split_whitespace().collect());
-    let tick = |i: usize| {
-        fields
-            .get(i)
-            .and_then(|s| s.parse::<f64>().ok())
-            .unwrap_or(f64::NAN)
-    };
-    (tick(11) + tick(12)) / 100.0
-}
-
-fn peak_mib() -> f64 {
-    std::fs::read_to_string("/proc/self/status")
-        .ok()
-        .and_then(|s| {
-            s.lines()
-                .find(|l| l.starts_with("VmHWM:"))
-                .and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
-        })
-        .map_or(f64::NAN, |kb| kb / 1024.0)
-}
 
 fn main() {
     let mut args = std::env::args().skip(1);

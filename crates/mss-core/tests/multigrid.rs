@@ -60,6 +60,14 @@ fn max_norm(u: &[Vec3]) -> f64 {
     u.iter().map(|v| v.norm()).fold(0.0, f64::max)
 }
 
+/// Largest node-wise distance between two displacement fields.
+fn max_diff(a: &[Vec3], b: &[Vec3]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(p, q)| (p - q).norm())
+        .fold(0.0, f64::max)
+}
+
 #[test]
 fn static_equilibria_match_the_direct_solver() {
     let params: Vec<(Box<dyn Parameterization>, f64)> = vec![
@@ -79,11 +87,7 @@ fn static_equilibria_match_the_direct_solver() {
         let (iterative, _) = solve(&p, LinearSolverKind::Iterative);
         let scale = max_norm(&direct);
         assert!(scale > 0.0);
-        let diff = direct
-            .iter()
-            .zip(&iterative)
-            .map(|(a, b)| (a - b).norm())
-            .fold(0.0, f64::max);
+        let diff = max_diff(&direct, &iterative);
         assert!(
             diff <= 1e-6 * scale,
             "{} load {load}: max |u_direct - u_iterative| = {diff:e} of {scale:e}",
@@ -118,11 +122,7 @@ fn implicit_steps_match_the_direct_solver() {
         let direct = run(LinearSolverKind::Direct);
         let iterative = run(LinearSolverKind::Iterative);
         let scale = max_norm(&direct);
-        let diff = direct
-            .iter()
-            .zip(&iterative)
-            .map(|(a, b)| (a - b).norm())
-            .fold(0.0, f64::max);
+        let diff = max_diff(&direct, &iterative);
         assert!(
             diff <= 1e-6 * scale,
             "{}: {diff:e} of {scale:e}",

@@ -20,6 +20,9 @@ use super::{
 };
 use crate::{BlockCsr, Vec3};
 
+/// The error text of a static problem that is singular at rest.
+const MECHANISM_MESSAGE: &str = "the stiffness matrix is singular: the boundary conditions leave a mechanism free (a rigid motion, or one of the 3 hourglass modes of the lattice); fix a whole face, or more nodes spread over the body";
+
 /// Options of [`solve_static`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StaticOptions {
@@ -231,7 +234,7 @@ pub fn solve_static(
                 if singular_at_rest(&mut sys, &x_init, &free, &mut linear) =>
             {
                 return Err(SolverError::Mechanism {
-                    message: "the stiffness matrix is singular: the boundary conditions leave a mechanism free (a rigid motion, or one of the 3 hourglass modes of the lattice); fix a whole face, or more nodes spread over the body".into(),
+                    message: MECHANISM_MESSAGE.into(),
                     nodes,
                 });
             }
@@ -348,7 +351,7 @@ fn solve_small_strain(
         Ok(d) => d,
         Err(super::linear::LinearFailure::Singular { nodes }) => {
             return Err(SolverError::Mechanism {
-                message: "the stiffness matrix is singular: the boundary conditions leave a mechanism free (a rigid motion, or one of the 3 hourglass modes of the lattice); fix a whole face, or more nodes spread over the body".into(),
+                message: MECHANISM_MESSAGE.into(),
                 nodes,
             });
         }
