@@ -35,6 +35,38 @@ pub enum LoadError {
         /// The file.
         file: PathBuf,
     },
+    /// Coordinates so large that the body's volume and cell counts overflow.
+    #[error(
+        "mesh {file} spans {} .. {}: coordinates beyond {limit:e} (m) are not a physical body; scale the mesh",
+        fmt3(min),
+        fmt3(max)
+    )]
+    HugeCoordinates {
+        /// The file.
+        file: PathBuf,
+        /// Bounding box minimum.
+        min: [f64; 3],
+        /// Bounding box maximum.
+        max: [f64; 3],
+        /// The largest coordinate accepted.
+        limit: f64,
+    },
+    /// The path is not a regular file (a folder, a device, a FIFO, ...).
+    #[error("mesh path {file} is not a regular file (a folder, device or pipe); give a mesh file")]
+    NotAFile {
+        /// The path.
+        file: PathBuf,
+    },
+    /// The file is larger than the loaders' limit.
+    #[error("mesh file {file} is {size} bytes, more than the limit of {limit} bytes")]
+    TooLarge {
+        /// The file.
+        file: PathBuf,
+        /// Its size (bytes).
+        size: u64,
+        /// The limit (bytes).
+        limit: u64,
+    },
     /// No loader is registered for the file's extension.
     #[error("mesh file {file}: unknown format (extension {extension:?}); known: {known}")]
     UnknownFormat {
@@ -202,6 +234,18 @@ impl MeshLoader for ObjLoader {
     }
 
     fn load(&self, bytes: &[u8], name: &str) -> Result<TriMesh, LoadError> {
+        // OBJ is text: tobj skips a line it cannot read, so a NUL byte (a
+        // binary or corrupted file) would silently drop vertices or faces.
+        if let Some(at) = bytes.iter().position(|&b| b == 0) {
+            let line = bytes[..at].iter().filter(|&&b| b == b'\n').count() + 1;
+            return Err(LoadError::Parse {
+                file: file(name),
+                line: Some(line),
+                message: format!(
+                    "NUL byte at offset {at}: an OBJ file is text (is this a binary or corrupted file?)"
+                ),
+            });
+        }
         // tobj's option fields depend on its features: keep the struct update.
         #[allow(clippy::needless_update)]
         let options = tobj::LoadOptions {
@@ -458,12 +502,27 @@ impl MeshLoader for StlLoader {
 #[derive(Clone)]
 pub struct Loaders {
     loaders: Vec<Arc<dyn MeshLoader>>,
+    /// Largest mesh file read (bytes; default [`MAX_MESH_BYTES`]).
+    pub max_bytes: u64,
 }
+
+/// A point as `[x, y, z]` with 4 significant digits.
+fn fmt3(p: &[f64; 3]) -> String {
+    format!("[{:.3e}, {:.3e}, {:.3e}]", p[0], p[1], p[2])
+}
+
+/// Largest coordinate magnitude accepted (m).
+pub const MAX_COORDINATE: f64 = 1e9;
+
+/// Default largest mesh file [`Loaders::load`] reads (bytes): a triangle
+/// surface of a few million triangles.
+pub const MAX_MESH_BYTES: u64 = 1 << 30;
 
 impl Default for Loaders {
     fn default() -> Self {
         Self {
             loaders: vec![Arc::new(ObjLoader), Arc::new(StlLoader)],
+            max_bytes: MAX_MESH_BYTES,
         }
     }
 }
@@ -518,10 +577,39 @@ impl Loaders {
                 extension: ext.clone(),
                 known: self.known_extensions(),
             })?;
-        let bytes = std::fs::read(path).map_err(|source| LoadError::Io {
+        let io = |source| LoadError::Io {
             file: path.to_path_buf(),
             source,
-        })?;
+        };
+        // Only regular files: a device (`/dev/zero`) would be read until
+        // memory runs out, a FIFO would block forever.
+        let meta = std::fs::metadata(path).map_err(io)?;
+        if !meta.is_file() {
+            return Err(LoadError::NotAFile {
+                file: path.to_path_buf(),
+            });
+        }
+        if meta.len() > self.max_bytes {
+            return Err(LoadError::TooLarge {
+                file: path.to_path_buf(),
+                size: meta.len(),
+                limit: self.max_bytes,
+            });
+        }
+        // Read at most the limit (plus one byte to notice a file that grew).
+        let mut bytes = Vec::with_capacity(meta.len() as usize);
+        std::io::Read::read_to_end(
+            &mut std::io::Read::take(std::fs::File::open(path).map_err(io)?, self.max_bytes + 1),
+            &mut bytes,
+        )
+        .map_err(io)?;
+        if bytes.len() as u64 > self.max_bytes {
+            return Err(LoadError::TooLarge {
+                file: path.to_path_buf(),
+                size: bytes.len() as u64,
+                limit: self.max_bytes,
+            });
+        }
         load_with(loader, &bytes, &name)
     }
 }
@@ -676,6 +764,16 @@ pub fn clean_mesh(raw: TriMesh, weld_tolerance: f64, name: &str) -> Result<Loade
         min: [0.0; 3],
         max: [0.0; 3],
     });
+    // Beyond this, volumes and cell counts overflow or lose all precision:
+    // not a body in metres (the mesh needs scaling).
+    if lo.iter().chain(&hi).any(|c| c.abs() > MAX_COORDINATE) {
+        return Err(LoadError::HugeCoordinates {
+            file: file(name),
+            min: lo,
+            max: hi,
+            limit: MAX_COORDINATE,
+        });
+    }
     if let Some(k) = (0..3).find(|&k| hi[k] <= lo[k]) {
         return Err(LoadError::ZeroExtent {
             file: file(name),

@@ -86,6 +86,12 @@ pub struct UsageError(pub String);
 
 static VERBOSITY: AtomicU8 = AtomicU8::new(0);
 
+/// Most `--threads` per core: beyond a few, threads only contend.
+const MAX_THREADS_PER_CORE: usize = 4;
+
+/// Stack of the worker threads the command runs on.
+const WORKER_STACK_BYTES: usize = 64 << 20;
+
 /// Runs `mss` with the process's command line.
 pub fn run() -> anyhow::Result<()> {
     run_with_args(std::env::args_os())
@@ -114,16 +120,32 @@ where
     VERBOSITY.store(cli.global.verbose, Ordering::Relaxed);
     init_logger(&cli.global);
     let threads = cli.global.threads.unwrap_or(0);
-    if cli.global.threads == Some(0) {
-        return Err(UsageError(
-            "--threads 0: give at least 1 thread (or leave --threads out for one per core)".into(),
-        )
-        .into());
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    match cli.global.threads {
+        Some(0) => {
+            return Err(UsageError(
+                "--threads 0: give at least 1 thread (or leave --threads out for one per core)"
+                    .into(),
+            )
+            .into());
+        }
+        Some(n) if n > MAX_THREADS_PER_CORE * cores => {
+            return Err(UsageError(format!(
+                "--threads {n}: this machine has {cores} cores; more than {} threads only \
+                 slow the run down (leave --threads out for one per core)",
+                MAX_THREADS_PER_CORE * cores
+            ))
+            .into());
+        }
+        _ => {}
     }
     // A local pool (not the global one) so that several runs in one process,
-    // as in tests, can each choose their thread count.
+    // as in tests, can each choose their thread count. The whole command runs
+    // on it, scene parsing included: a deeply nested (hostile) scene file
+    // must meet the parser's own limit, not a 2 MiB worker stack.
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
+        .stack_size(WORKER_STACK_BYTES)
         .build()
         .context("cannot start the worker threads")?;
     pool.install(|| commands::dispatch(&cli))

@@ -258,6 +258,34 @@ fn cases() -> Vec<Case> {
             &["[solver] kind", "rk4", "implicit", "static"],
         ),
         scene_case(
+            "deeply nested inline tables",
+            "[f]\nx={\n".repeat(2000),
+            &["scene.toml:"],
+        ),
+        Case {
+            code: 2,
+            ..case(
+                "threads beyond reason",
+                vec![],
+                &["--threads", "100000", "check"],
+                &["--threads 100000", "cores"],
+            )
+        },
+        mesh_case(
+            "NUL bytes in an OBJ line",
+            "nul.obj",
+            b"v 0 0 0\nv 1 0 0\n\0\0v 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n"
+                .to_vec(),
+            &["nul.obj", "line 3", "NUL byte"],
+        ),
+        mesh_case(
+            "coordinates of 1e300",
+            "huge.obj",
+            b"v 0 0 0\nv 1e300 0 0\nv 0 1e300 0\nv 0 0 1e300\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n"
+                .to_vec(),
+            &["huge.obj", "scale the mesh"],
+        ),
+        scene_case(
             "static solver, gravity, nothing fixed",
             scene(
                 MATERIAL,
@@ -422,6 +450,76 @@ fn files_under(dir: &Path) -> Vec<PathBuf> {
         }
     }
     out
+}
+
+/// Paths that are not regular files are refused at once, not read forever.
+#[test]
+fn device_and_pipe_paths_are_refused_without_hanging() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::os::unix::fs::symlink("/dev/zero", d.join("zero.obj")).unwrap();
+    let fifo = d.join("pipe.obj");
+    let made = Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .is_ok_and(|s| s.success());
+    let mut meshes = vec!["zero.obj"];
+    if made {
+        meshes.push("pipe.obj");
+    }
+    for mesh in meshes {
+        std::fs::write(
+            d.join("scene.toml"),
+            format!("[mesh]\npath = \"{mesh}\"\n[material]\n{MATERIAL}\n"),
+        )
+        .unwrap();
+        let out = Command::new(MSS)
+            .args(["check", "scene.toml"])
+            .current_dir(d)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{mesh}: {stderr}");
+        assert!(stderr.contains("not a regular file"), "{mesh}: {stderr}");
+    }
+    if made {
+        let out = Command::new(MSS)
+            .args(["check", "pipe.obj"])
+            .current_dir(d)
+            .output()
+            .unwrap();
+        assert!(String::from_utf8_lossy(&out.stderr).contains("not a regular file"));
+    }
+}
+
+/// Holding every node is a scene without motion, not a crash.
+#[test]
+fn every_node_held_runs() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("mesh.obj"), box_obj([0.0; 3], [0.1, 0.05, 0.05])).unwrap();
+    std::fs::write(
+        d.join("scene.toml"),
+        scene(
+            MATERIAL,
+            "[[fixed]]\nkind = \"box\"\nmin = [-1, -1, -1]\nmax = [1, 1, 1]\n\
+             [loads]\ngravity = [0, 0, -9.81]\n[solver]\nduration = 0.001\n",
+        ),
+    )
+    .unwrap();
+    for args in [
+        vec!["check", "scene.toml"],
+        vec!["-q", "run", "scene.toml", "--out", "out"],
+    ] {
+        let out = Command::new(MSS)
+            .args(&args)
+            .current_dir(d)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(0), "{args:?}: {stderr}");
+        assert!(!stderr.contains("panicked"), "{stderr}");
+    }
 }
 
 #[test]

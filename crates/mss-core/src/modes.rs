@@ -125,6 +125,15 @@ pub fn zero_energy_modes_dense(
             .collect()
     };
     let free = index.iter().flatten().count();
+    if free == 0 {
+        // Every dof held: nothing can move, so nothing is a mechanism.
+        return Ok(ZeroModes {
+            count: 0,
+            exact: true,
+            method: "dense",
+            smallest_relative: Vec::new(),
+        });
+    }
     let mut dense = DMatrix::<f64>::zeros(free, free);
     for i in 0..k.num_rows() {
         for kk in k.row_offsets[i] as usize..k.row_offsets[i + 1] as usize {

@@ -845,6 +845,13 @@ impl Scene {
                 source: std::io::Error::other("it is a folder, not a scene file"),
             });
         }
+        if !meta.is_file() {
+            // A device or a pipe would be read forever or block.
+            return Err(SceneError::Io {
+                path: name.clone(),
+                source: std::io::Error::other("it is not a regular file (a device or pipe)"),
+            });
+        }
         if meta.len() > MAX_SCENE_BYTES {
             return Err(SceneError::TooLarge {
                 path: name,
