@@ -705,3 +705,55 @@ fn check_warns_about_mechanisms() {
     let face = run_check("[[fixed]]\nkind = \"face\"\nface = \"x-\"\n");
     assert!(face.contains("mechanisms       none expected"), "{face}");
 }
+
+/// SIGINT stops a run after the step under way: the frames so far, the state
+/// reached and a summary marked interrupted are written, no temporary file is
+/// left, and the exit code is 1.
+#[test]
+fn sigint_finishes_the_frame_and_writes_an_interrupted_summary() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(
+        d.join("scene.toml"),
+        "[mesh]\npath = \"builtin:critter\"\n[voxelize]\ncells = 20\n[material]\n\
+         young = 1.0e5\npoisson = 0.3\ndensity = 1000.0\n[[fixed]]\nkind = \"lowest_layer\"\n\
+         [loads]\ngravity = [0, 0, -9.81]\n[solver]\nduration = 1000.0\ndamping = 5.0\n\
+         [output]\nevery_steps = 200\n",
+    )
+    .unwrap();
+    let mut child = Command::new(MSS)
+        .args(["-q", "run", "scene.toml", "--out", "out"])
+        .current_dir(d)
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let out = d.join("out");
+    let start = std::time::Instant::now();
+    while !out.join("lattice_0002.vtu").exists() {
+        assert!(
+            start.elapsed().as_secs() < 120,
+            "the run did not write frames"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let killed = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(killed.success());
+    let status = child.wait().unwrap();
+    let mut stderr = String::new();
+    std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut stderr).unwrap();
+    assert_eq!(status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("interrupted"), "{stderr}");
+    let summary = std::fs::read_to_string(out.join("summary.json")).unwrap();
+    assert!(summary.contains("\"interrupted\": true"), "{summary}");
+    let pvd = std::fs::read_to_string(out.join("lattice.pvd")).unwrap();
+    assert!(pvd.trim_end().ends_with("</VTKFile>"), "{pvd}");
+    let leftovers: Vec<_> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .filter(|n| n.starts_with('.'))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+}

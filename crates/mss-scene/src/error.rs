@@ -77,14 +77,4 @@ pub enum JobError {
     /// Writing an output file failed.
     #[error(transparent)]
     Output(#[from] mss_io::IoError),
-    /// The job was cancelled through its [`Cancel`](crate::Cancel) flag.
-    #[error("{scene}: interrupted at t = {time:.3e} s after {steps} steps")]
-    Cancelled {
-        /// Scene name.
-        scene: String,
-        /// Steps completed.
-        steps: u64,
-        /// Simulated time reached (s).
-        time: f64,
-    },
 }

@@ -49,7 +49,8 @@ pub fn no_progress(_: Progress) {}
 
 /// A flag that asks a running job to stop after the current step (set it from
 /// another thread or a signal handler). The job then finishes the frame being
-/// written, writes the last state reached and returns [`JobError::Cancelled`].
+/// written, writes the last state reached as a frame and returns its summary
+/// with [`RunSummary::interrupted`] set.
 #[derive(Debug, Clone, Default)]
 pub struct Cancel(Arc<AtomicBool>);
 
@@ -65,6 +66,12 @@ impl Cancel {
     /// Whether [`cancel`](Self::cancel) was called.
     pub fn is_cancelled(&self) -> bool {
         self.0.load(Ordering::Relaxed)
+    }
+
+    /// The underlying flag, for a signal handler to set (it only stores
+    /// `true`, which is async-signal-safe).
+    pub fn flag(&self) -> Arc<AtomicBool> {
+        Arc::clone(&self.0)
     }
 }
 
@@ -148,6 +155,9 @@ pub struct RunSummary {
     pub peak_memory_bytes: Option<u64>,
     /// Output folder.
     pub output_folder: String,
+    /// Whether the run was stopped through its [`Cancel`] flag before the
+    /// end (the frames written stop at `simulated_time`).
+    pub interrupted: bool,
 }
 
 impl Job {
@@ -208,12 +218,14 @@ impl Job {
     }
 
     /// Time-steps (or statically solves) the job, writing frames into
-    /// `out_dir` (created if missing). The files of an earlier run in that
+    /// `out_dir` (created if missing). A set `cancel` flag stops the time loop
+    /// between steps: the state reached is written as the last frame and the
+    /// summary says `interrupted`. The files of an earlier run in that
     /// folder are removed first (and only those:
     /// [`previous_run_files`](crate::output::previous_run_files)), so a
-    /// shorter run does not leave stale frames beside its own. On a solver failure the last good
-    /// state is written as the final frame before the error is returned; on
-    /// cancellation likewise, with [`JobError::Cancelled`].
+    /// shorter run does not leave stale frames beside its own. On a solver
+    /// failure the last good state is written as the final frame before the
+    /// error is returned.
     pub fn run(
         &self,
         out_dir: &Path,
@@ -230,6 +242,7 @@ impl Job {
         let mut state = State::at_rest(problem.model());
         problem.apply_constraints(&mut state);
         let mut steps_done = 0;
+        let mut interrupted = false;
         let mut writer;
         match integrator {
             None => {
@@ -279,17 +292,16 @@ impl Job {
                 }
                 for k in 1..=plan.steps {
                     if cancel.is_cancelled() {
-                        progress(Progress::StageDone);
                         // Keep what was simulated: the state reached is a frame.
                         if steps_done > 0 && !plan.frame_after(steps_done) {
                             writer.write(problem, &state)?;
                         }
-                        writer.finish()?;
-                        return Err(JobError::Cancelled {
-                            scene: name,
-                            steps: steps_done,
-                            time: state.time,
-                        });
+                        interrupted = true;
+                        log::warn!(
+                            "{name}: interrupted at t = {:.3e} s after {steps_done} steps",
+                            state.time
+                        );
+                        break;
                     }
                     if let Err(source) = integrator.step(problem, &mut state) {
                         progress(Progress::StageDone);
@@ -349,6 +361,7 @@ impl Job {
             wall_seconds: self.voxelize_seconds + start.elapsed().as_secs_f64(),
             peak_memory_bytes: peak_memory_bytes(),
             output_folder: out_dir.display().to_string(),
+            interrupted,
         })
     }
 

@@ -63,12 +63,40 @@ pub fn run(args: &RunArgs, global: &GlobalArgs) -> anyhow::Result<()> {
     {
         log::warn!("{warning}");
     }
-    let result = job.run(&out_dir, &|p| bars.report(p), &Cancel::new());
+    let cancel = Cancel::new();
+    interrupt_on_signals(&cancel)?;
+    let result = job.run(&out_dir, &|p| bars.report(p), &cancel);
     bars.clear();
     let summary = result?;
     write_summary(&out_dir, &summary)?;
     if show {
         print_summary(&summary);
+    }
+    if summary.interrupted {
+        bail!(
+            "{}: interrupted at t = {:.3e} s after {} steps; the {} frames written so far and \
+             summary.json (\"interrupted\": true) are in {}",
+            summary.scene,
+            summary.simulated_time,
+            summary.steps,
+            summary.frames,
+            summary.output_folder
+        );
+    }
+    Ok(())
+}
+
+/// SIGINT and SIGTERM set `cancel`: the run stops after the step under way,
+/// writes the state reached and its summary, and `mss` exits with 1. A second
+/// SIGINT or SIGTERM while it winds down ends the process at once (exit 130).
+fn interrupt_on_signals(cancel: &Cancel) -> anyhow::Result<()> {
+    use signal_hook::consts::{SIGINT, SIGTERM};
+    let flag = cancel.flag();
+    for signal in [SIGINT, SIGTERM] {
+        signal_hook::flag::register_conditional_shutdown(signal, 130, std::sync::Arc::clone(&flag))
+            .map_err(|e| anyhow::anyhow!("cannot install the signal handler: {e}"))?;
+        signal_hook::flag::register(signal, std::sync::Arc::clone(&flag))
+            .map_err(|e| anyhow::anyhow!("cannot install the signal handler: {e}"))?;
     }
     Ok(())
 }
