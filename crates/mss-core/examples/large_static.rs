@@ -5,12 +5,9 @@
 
 use std::time::Instant;
 
-use hexmesh::Lattice;
-use mss_core::Parameterizations;
-use mss_core::constraints::{ConstraintSpec, Face, NodeSelector};
-use mss_core::loads::{Damping, LoadSpec};
-use mss_core::solver::{Problem, State, StaticOptions, solve_static};
-use mss_core::{Material, Model};
+mod common;
+
+use mss_core::solver::{State, StaticOptions, solve_static};
 
 /// Prints the solver's debug messages when `MSS_LOG` is set.
 struct Logger;
@@ -39,25 +36,7 @@ fn main() {
     let mut args = std::env::args().skip(1);
     let n: u32 = args.next().and_then(|s| s.parse().ok()).unwrap_or(4);
     let name = args.next().unwrap_or_else(|| "paper".into());
-    let lattice = Lattice::block([4 * n, n, n], 0.1 / n as f64, [0.0; 3]).unwrap();
-    let param = Parameterizations::default()
-        .get(&name)
-        .unwrap_or_else(|e| panic!("{e}"));
-    let model = Model::new(
-        &lattice,
-        Material::new(1000.0, 0.3, 3.125).unwrap(),
-        param.as_ref(),
-    )
-    .unwrap();
-    let problem = Problem::from_specs(
-        model,
-        &[ConstraintSpec::fixed(NodeSelector::face(Face::XMin))],
-        &[LoadSpec::Gravity {
-            g: [0.0, 0.0, -9.81],
-        }],
-        Damping::NONE,
-    )
-    .unwrap();
+    let problem = common::cantilever(n, &name, 3.125, 1.0);
     let mut s = State::at_rest(problem.model());
     let opts = StaticOptions {
         rtol: 1e-10,

@@ -13,12 +13,7 @@ use std::time::Instant;
 mod common;
 use common::{cpu_seconds, peak_mib};
 
-use hexmesh::Lattice;
-use mss_core::Parameterizations;
-use mss_core::constraints::{ConstraintSpec, Face, NodeSelector};
-use mss_core::loads::{Damping, LoadSpec};
-use mss_core::solver::{LinearSolverKind, Problem, State, StaticOptions, solve_static};
-use mss_core::{Material, Model};
+use mss_core::solver::{LinearSolverKind, State, StaticOptions, solve_static};
 
 fn main() {
     let mut args = std::env::args().skip(1);
@@ -30,25 +25,7 @@ fn main() {
         _ => LinearSolverKind::Auto,
     };
     let gravity_scale: f64 = args.next().and_then(|s| s.parse().ok()).unwrap_or(1.0);
-    let lattice = Lattice::block([4 * n, n, n], 0.1 / n as f64, [0.0; 3]).unwrap();
-    let param = Parameterizations::default()
-        .get(&name)
-        .unwrap_or_else(|e| panic!("{e}"));
-    let model = Model::new(
-        &lattice,
-        Material::new(1000.0, 0.3, 0.01).unwrap(),
-        param.as_ref(),
-    )
-    .unwrap();
-    let problem = Problem::from_specs(
-        model,
-        &[ConstraintSpec::fixed(NodeSelector::face(Face::XMin))],
-        &[LoadSpec::Gravity {
-            g: [0.0, 0.0, -9.81 * gravity_scale],
-        }],
-        Damping::NONE,
-    )
-    .unwrap();
+    let problem = common::cantilever(n, &name, 0.01, gravity_scale);
     let nodes = problem.model().num_nodes();
     let mut s = State::at_rest(problem.model());
     let opts = StaticOptions {

@@ -230,38 +230,25 @@ pub fn solve_static(
                 lambda = lt;
                 dl = (2.0 * dl).min(1.0);
             }
-            Err(NewtonFailure::Singular(nodes))
-                if singular_at_rest(&mut sys, &x_init, &free, &mut linear) =>
-            {
-                return Err(SolverError::Mechanism {
-                    message: MECHANISM_MESSAGE.into(),
-                    nodes,
-                });
-            }
-            Err(NewtonFailure::Singular(nodes)) => {
-                // Singular in a deformed state only: a smaller increment may
-                // pass it (a limit point) or not (collapse); say which.
-                dl *= 0.5;
-                if dl < opts.min_load_increment {
-                    return Err(SolverError::Diverged {
-                        solver: "static",
-                        step: load_steps as u64 + 1,
-                        time: state.time,
-                        reason: Divergence::SingularUnderLoad {
-                            load_factor: lambda,
+            Err(failure) => {
+                let reason = match failure {
+                    NewtonFailure::Singular(nodes)
+                        if singular_at_rest(&mut sys, &x_init, &free, &mut linear) =>
+                    {
+                        return Err(SolverError::Mechanism {
+                            message: MECHANISM_MESSAGE.into(),
                             nodes,
-                        },
-                        kept_time: state.time,
-                        hint: STATIC_HINT,
-                    });
-                }
-                log::debug!(
-                    "static: singular tangent on the way to load factor {lt}; trying {}",
-                    lambda + dl
-                );
-            }
-            Err(NewtonFailure::Linear(m)) => return Err(SolverError::LinearSolver(m)),
-            Err(NewtonFailure::Diverged(reason)) => {
+                        });
+                    }
+                    // Singular in a deformed state only: a smaller increment
+                    // may pass it (a limit point) or not (collapse); say which.
+                    NewtonFailure::Singular(nodes) => Divergence::SingularUnderLoad {
+                        load_factor: lambda,
+                        nodes,
+                    },
+                    NewtonFailure::Linear(m) => return Err(SolverError::LinearSolver(m)),
+                    NewtonFailure::Diverged(reason) => reason,
+                };
                 if let Divergence::NewtonFailed { iterations, .. } = &reason {
                     rejected += iterations;
                 }
