@@ -24,7 +24,7 @@ pub use material::{Material, MaterialError};
 pub use model::{
     CellCoefficients, CellDiagnostics, ForceWorkspace, HourglassControl, HourglassError, Model,
     ModelError, PaperModel, Parameterization, ParameterizationError, Parameterizations,
-    SpringsOnly, UnknownParameterization, Volumetric,
+    SpringsOnly, UnknownParameterization, Volumetric, VolumetricBarrier,
 };
 pub use solver::{
     Integrator, Integrators, Problem, SolverError, State, StaticOptions, solve_static,

@@ -81,8 +81,12 @@ pub struct CellCoefficients {
     /// `None` for no correction forces.
     pub correction: Option<f64>,
     /// Lame lambda (Pa) of the one-point volumetric energy
-    /// `lambda h^3 (J - 1)^2 / 2` (0 for none).
+    /// `lambda h^3 phi(J)` (0 for none).
     pub volumetric_lambda: f64,
+    /// `phi` of the volumetric energy: `(J - 1)^2 / 2` when false, the
+    /// barrier `(ln J)^2 / 2` when true (the same at small strain; the
+    /// barrier resists collapse to `J = 0`, docs/model.md).
+    pub volumetric_barrier: bool,
     /// Stiffness (N/m) of the hourglass control on the lattice's three
     /// zero-energy mechanisms per cell (0 for none; see [`HourglassControl`]).
     pub hourglass: f64,
@@ -130,6 +134,7 @@ impl Parameterization for PaperModel {
             k_diag,
             correction: Some((4.0 * material.poisson - 1.0) / 2.0),
             volumetric_lambda: 0.0,
+            volumetric_barrier: false,
             hourglass: 0.0,
         }
     }
@@ -149,6 +154,7 @@ impl Parameterization for SpringsOnly {
             k_diag,
             correction: None,
             volumetric_lambda: 0.0,
+            volumetric_barrier: false,
             hourglass: 0.0,
         }
     }
@@ -187,7 +193,33 @@ impl Parameterization for Volumetric {
             k_diag: 3.0 * material.young * h / (8.0 * (1.0 + nu)),
             correction: Some(-0.5),
             volumetric_lambda: material.lambda(),
+            volumetric_barrier: false,
             hourglass: 0.0,
+        }
+    }
+}
+
+/// [`Volumetric`] with the volumetric energy `lambda h^3 (ln J)^2 / 2` (the
+/// volumetric part of the compressible neo-Hookean law) instead of
+/// `lambda h^3 (J - 1)^2 / 2`: identical at small strain (same E and nu, same
+/// stiffness at rest), but the energy grows without bound as a cell's volume
+/// goes to zero, where the quadratic law costs only `lambda h^3 / 2`. Below
+/// `J = 0.1` it continues with constant curvature so that forces stay finite
+/// (docs/model.md, section 4; docs/robustness.md).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct VolumetricBarrier;
+
+impl Parameterization for VolumetricBarrier {
+    fn name(&self) -> String {
+        "volumetric-barrier".into()
+    }
+    fn validate(&self, material: &Material) -> Result<(), MaterialError> {
+        Volumetric.validate(material)
+    }
+    fn coefficients(&self, material: &Material, h: f64) -> CellCoefficients {
+        CellCoefficients {
+            volumetric_barrier: true,
+            ..Volumetric.coefficients(material, h)
         }
     }
 }
@@ -269,8 +301,8 @@ pub type ParameterizationFactory = Arc<dyn Fn() -> Box<dyn Parameterization> + S
 /// builds, extends with its own and passes where names are resolved (scenes,
 /// experiments). No global state.
 ///
-/// [`Parameterizations::default`] holds the built-ins `"paper"`, `"springs"`
-/// and `"volumetric"`. Every registered name `NAME` also resolves as
+/// [`Parameterizations::default`] holds the built-ins `"paper"`, `"springs"`,
+/// `"volumetric"` and `"volumetric-barrier"`. Every registered name `NAME` also resolves as
 /// `"NAME+hg"`: the same with [`HourglassControl`] at its default factor.
 ///
 /// ```
@@ -294,6 +326,7 @@ pub type ParameterizationFactory = Arc<dyn Fn() -> Box<dyn Parameterization> + S
 ///             k_diag: 3.0 * m.young * h / (8.0 * 1.25),
 ///             correction: None,
 ///             volumetric_lambda: 0.0,
+///             volumetric_barrier: false,
 ///             hourglass: 0.0,
 ///         }
 ///     }
@@ -304,7 +337,7 @@ pub type ParameterizationFactory = Arc<dyn Fn() -> Box<dyn Parameterization> + S
 /// assert_eq!(known.get("quarter").unwrap().name(), "quarter");
 /// assert_eq!(known.get("quarter+hg").unwrap().name(), "quarter+hg");
 /// let err = known.get("fancy").unwrap_err().to_string();
-/// assert!(err.contains("paper, springs, volumetric, quarter"), "{err}");
+/// assert!(err.contains("paper, springs, volumetric, volumetric-barrier, quarter"), "{err}");
 /// ```
 #[derive(Clone)]
 pub struct Parameterizations {
@@ -319,6 +352,10 @@ impl Default for Parameterizations {
         p.register("paper", Arc::new(|| Box::new(PaperModel)));
         p.register("springs", Arc::new(|| Box::new(SpringsOnly)));
         p.register("volumetric", Arc::new(|| Box::new(Volumetric)));
+        p.register(
+            "volumetric-barrier",
+            Arc::new(|| Box::new(VolumetricBarrier)),
+        );
         p
     }
 }
@@ -544,6 +581,7 @@ impl Model {
                 rest_diag: 3f64.sqrt() * h,
                 correction,
                 vol_lambda_h3: co.volumetric_lambda * h * h * h,
+                vol_barrier: co.volumetric_barrier,
                 grad_scale: 0.25 / h,
                 k_hourglass: co.hourglass,
             });
@@ -917,6 +955,44 @@ impl Model {
                     shear_strain: shear,
                     correction_force,
                 }
+            })
+            .collect()
+    }
+
+    /// Per cell, how far its corners are from the best affine map of the
+    /// cell (least squares over the 8 corners), as the largest corner
+    /// distance divided by `h`. Zero for any affine deformation; the
+    /// lattice's hourglass zigzag shows up here (docs/robustness.md).
+    pub fn affine_deviation(&self, x: &[Vec3]) -> Vec<f64> {
+        assert_eq!(x.len(), self.num_nodes(), "positions: one per node");
+        (0..self.cells.len())
+            .into_par_iter()
+            .map(|c| {
+                let xc = self.corners(x, c);
+                // The corner sign vectors are orthogonal, so the least-squares
+                // gradient is the centre gradient and the offset the mean.
+                let (cols, _) = kernel::deformation_gradient(&xc, 1.0 / (4.0 * self.h));
+                let mean = xc
+                    .iter()
+                    .fold([0.0; 3], |a, p| [a[0] + p[0], a[1] + p[1], a[2] + p[2]]);
+                let mut worst = 0.0f64;
+                for (n, p) in xc.iter().enumerate() {
+                    let mut r2 = 0.0;
+                    for d in 0..3 {
+                        let mut fit = mean[d] / 8.0;
+                        for (j, col) in cols.iter().enumerate() {
+                            let s = if hexmesh::CORNER_OFFSETS[n][j] == 1 {
+                                1.0
+                            } else {
+                                -1.0
+                            };
+                            fit += col[d] * s * 0.5 * self.h;
+                        }
+                        r2 += (p[d] - fit).powi(2);
+                    }
+                    worst = worst.max(r2);
+                }
+                worst.sqrt() / self.h
             })
             .collect()
     }

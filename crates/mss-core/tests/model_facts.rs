@@ -355,6 +355,7 @@ impl Parameterization for Conservative {
             k_diag: m.young * h * 0.2,
             correction: None,
             volumetric_lambda: m.young * 2.0,
+            volumetric_barrier: false,
             hourglass: m.young * h * 0.1,
         }
     }
@@ -481,7 +482,10 @@ fn multi_material_and_errors() {
     assert!(err.contains("-0.3"), "{err}");
     assert!(Model::new(&l, bad, &Volumetric).is_ok());
     let known = mss_core::Parameterizations::default();
-    assert_eq!(known.names(), ["paper", "springs", "volumetric"]);
+    assert_eq!(
+        known.names(),
+        ["paper", "springs", "volumetric", "volumetric-barrier"]
+    );
     for base in known.names() {
         for name in [base.clone(), format!("{base}+hg")] {
             let p = known.get(&name).unwrap();

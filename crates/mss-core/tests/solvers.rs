@@ -574,8 +574,12 @@ fn large_deflection_static_solve_takes_few_newton_iterations() {
     )
     .unwrap();
     let mut s = State::at_rest(p.model());
+    // The paper's model has no hourglass control, and this equilibrium fails
+    // the stability test (docs/robustness.md); the iteration count is what
+    // is tested here.
     let opts = StaticOptions {
         rtol: 1e-10,
+        accept_unstable: true,
         ..StaticOptions::default()
     };
     let info = solve_static(&p, &mut s, &opts).unwrap();

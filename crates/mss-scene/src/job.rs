@@ -257,6 +257,7 @@ impl Job {
                     min_load_increment: StaticOptions::default().min_load_increment.min(first),
                     linear_solver: s.linear_solver.into(),
                     small_strain: s.linear,
+                    accept_unstable: s.accept_unstable,
                 };
                 state.time = s.duration;
                 progress(Progress::Solving);

@@ -597,6 +597,10 @@ pub struct SolverSection {
     /// instead of the nonlinear one (default false).
     #[serde(default)]
     pub linear: bool,
+    /// Static solves: keep an equilibrium that the stability test finds
+    /// unstable instead of failing (default false).
+    #[serde(default)]
+    pub accept_unstable: bool,
 }
 
 /// `[solver] linear_solver`.
@@ -657,6 +661,7 @@ impl Default for SolverSection {
             linear_solver: LinearSolverChoice::default(),
             load_steps: default_load_steps(),
             linear: false,
+            accept_unstable: false,
         }
     }
 }

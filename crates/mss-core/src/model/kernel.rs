@@ -19,6 +19,8 @@ pub(crate) trait Scalar:
     fn cst(v: f64) -> Self;
     fn scale(self, k: f64) -> Self;
     fn sqrt(self) -> Self;
+    /// `f(self)`, given `f` and its derivative at a value: `(f(v), f'(v))`.
+    fn apply(self, f: fn(f64) -> (f64, f64)) -> Self;
 }
 
 impl Scalar for f64 {
@@ -33,6 +35,10 @@ impl Scalar for f64 {
     #[inline(always)]
     fn sqrt(self) -> Self {
         f64::sqrt(self)
+    }
+    #[inline(always)]
+    fn apply(self, f: fn(f64) -> (f64, f64)) -> Self {
+        f(self).0
     }
 }
 
@@ -139,6 +145,14 @@ impl<const N: usize> Scalar for Dual<N> {
             g: self.g.map(|x| x * d),
         }
     }
+    #[inline(always)]
+    fn apply(self, f: fn(f64) -> (f64, f64)) -> Self {
+        let (v, d) = f(self.v);
+        Self {
+            v,
+            g: self.g.map(|x| x * d),
+        }
+    }
 }
 
 /// Correction-force constants of one cell (docs/model.md steps 4-5).
@@ -176,6 +190,9 @@ pub(crate) struct CellParams {
     pub correction: Option<Correction>,
     /// `lambda h^3` of the volumetric energy (0 for none).
     pub vol_lambda_h3: f64,
+    /// The volumetric energy's law: `(ln J)^2 / 2` (a barrier) instead of
+    /// `(J - 1)^2 / 2`.
+    pub vol_barrier: bool,
     /// `1 / (4 h)`: magnitude of the shape-function gradients at the centre.
     pub grad_scale: f64,
     /// Stiffness of the hourglass control on the lattice's three mechanisms
@@ -278,7 +295,12 @@ fn finish_cell<T: Scalar>(
             cross(fcols[2], fcols[0]),
             cross(fcols[0], fcols[1]),
         ];
-        let coef = (jac - T::cst(1.0)).scale(-p.vol_lambda_h3 * p.grad_scale);
+        let slope = if p.vol_barrier {
+            jac.apply(barrier_slope)
+        } else {
+            jac - T::cst(1.0)
+        };
+        let coef = slope.scale(-p.vol_lambda_h3 * p.grad_scale);
         let cs = cof.map(|c| mul_s(c, coef));
         for (n, fn_) in f.iter_mut().enumerate() {
             for (j, c) in cs.iter().enumerate() {
@@ -292,6 +314,37 @@ fn finish_cell<T: Scalar>(
     }
     if let (true, Some((axes, inv_len))) = (p.k_hourglass != 0.0, &axes) {
         add_hourglass_forces(p.k_hourglass, x, axes, inv_len, f);
+    }
+}
+
+/// Below this volume ratio the barrier law continues with a constant
+/// curvature instead of `(ln J)^2 / 2`, so that the energy, its forces and
+/// their derivatives stay finite through `J <= 0` (an explicit step may still
+/// land there: the force that pushes the cell back is then very large instead
+/// of undefined).
+pub(crate) const BARRIER_KNEE: f64 = 0.1;
+
+/// The barrier law `phi(J) = (ln J)^2 / 2` (docs/model.md, the volumetric
+/// variants), with the quadratic continuation below [`BARRIER_KNEE`].
+pub(crate) fn barrier_energy(j: f64) -> f64 {
+    if j >= BARRIER_KNEE {
+        0.5 * j.ln().powi(2)
+    } else {
+        let (s, c) = barrier_slope(BARRIER_KNEE);
+        let d = j - BARRIER_KNEE;
+        0.5 * BARRIER_KNEE.ln().powi(2) + s * d + 0.5 * c * d * d
+    }
+}
+
+/// `phi'(J)` and `phi''(J)` of [`barrier_energy`].
+fn barrier_slope(j: f64) -> (f64, f64) {
+    if j >= BARRIER_KNEE {
+        let l = j.ln();
+        (l / j, (1.0 - l) / (j * j))
+    } else {
+        let l = BARRIER_KNEE.ln();
+        let c = (1.0 - l) / (BARRIER_KNEE * BARRIER_KNEE);
+        (l / BARRIER_KNEE + c * (j - BARRIER_KNEE), c)
     }
 }
 
@@ -423,7 +476,12 @@ pub(crate) fn cell_energy(p: &CellParams, x: &[V3<f64>; 8]) -> f64 {
     }
     if p.vol_lambda_h3 != 0.0 {
         let (_, jac) = deformation_gradient(x, p.grad_scale);
-        e += 0.5 * p.vol_lambda_h3 * (jac - 1.0).powi(2);
+        e += p.vol_lambda_h3
+            * if p.vol_barrier {
+                barrier_energy(jac)
+            } else {
+                0.5 * (jac - 1.0).powi(2)
+            };
     }
     if p.k_hourglass != 0.0 {
         let mut axis_sum = [[0.0; 3]; 3];
@@ -501,6 +559,10 @@ impl<const L: usize> Scalar for Lanes<L> {
     #[inline(always)]
     fn sqrt(self) -> Self {
         Self(self.0.map(f64::sqrt))
+    }
+    #[inline(always)]
+    fn apply(self, f: fn(f64) -> (f64, f64)) -> Self {
+        Self(self.0.map(|v| f(v).0))
     }
 }
 

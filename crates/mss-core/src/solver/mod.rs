@@ -45,7 +45,9 @@ use thiserror::Error;
 pub use explicit::{Explicit, ExplicitOptions, ExplicitScheme, explicit_time_step_limit};
 pub use implicit::{Implicit, ImplicitOptions};
 pub use linear::{DIRECT_MAX_FREE_DOFS, LinearSolver, LinearSolverKind, LinearStats};
-pub use statics::{StaticInfo, StaticOptions, solve_static};
+pub use statics::{
+    STABILITY_TEST_MAX_FACTOR_BYTES, Stability, StaticInfo, StaticOptions, solve_static,
+};
 
 use crate::constraints::{ConstraintError, ConstraintSpec, Constraints};
 use crate::loads::{Damping, Load, LoadError, LoadSpec};
@@ -440,6 +442,26 @@ pub enum SolverError {
         message: String,
         /// Nodes the mechanism moves most.
         nodes: Vec<u32>,
+    },
+    /// The static solve found an equilibrium whose stiffness is not positive
+    /// definite: a small disturbance leads away from it (the body buckles,
+    /// or the lattice folds), so a dynamic run ends elsewhere.
+    #[error(
+        "the static equilibrium found is unstable: its stiffness (symmetric part, on the free dofs) is not positive definite; a dynamic run would leave it. The lattice may fold (try hourglass control, e.g. [model] parameterization = \"volumetric-barrier+hg\"), or the body buckles under these loads; set [solver] accept_unstable = true (StaticOptions::accept_unstable) to keep it anyway"
+    )]
+    UnstableEquilibrium,
+    /// The static solve carried part of the loads and no more: the
+    /// equilibrium path has a limit point (the body buckles or folds under
+    /// more load), so there is no static answer near it for the full load.
+    #[error(
+        "the static solve carried {:.1} % of the loads and no more ({reason}): the equilibrium path ends there (a limit point: the body buckles or folds under more load, and a dynamic run would collapse rather than settle). Lower the loads or stiffen the body (E); if the lattice folds rather than the body, use hourglass control",
+        100.0 * load_factor
+    )]
+    LoadLimit {
+        /// The largest load factor reached (0..1).
+        load_factor: f64,
+        /// Why the next increment failed.
+        reason: Divergence,
     },
     /// The sparse linear solver failed for another reason.
     #[error("linear solver failed: {0}")]

@@ -39,6 +39,9 @@ pub struct StaticOptions {
     /// Solve the small-strain (linearized) problem once instead of the
     /// nonlinear one: `K0 u = f` with the rest tangent (default false).
     pub small_strain: bool,
+    /// Keep an equilibrium whose stiffness is not positive definite instead
+    /// of returning [`SolverError::UnstableEquilibrium`] (default false).
+    pub accept_unstable: bool,
 }
 
 impl Default for StaticOptions {
@@ -50,13 +53,16 @@ impl Default for StaticOptions {
             min_load_increment: 1.0 / 1024.0,
             linear_solver: LinearSolverKind::Auto,
             small_strain: false,
+            accept_unstable: false,
         }
     }
 }
 
 /// What [`solve_static`] did.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct StaticInfo {
+    /// Whether the equilibrium found is stable (see [`Stability`]).
+    pub stability: Stability,
     /// Newton iterations over all load increments.
     pub newton_iterations: u32,
     /// Load increments that converged.
@@ -253,6 +259,12 @@ pub fn solve_static(
                     rejected += iterations;
                 }
                 dl *= 0.5;
+                if dl < opts.min_load_increment && lambda > 0.0 {
+                    return Err(SolverError::LoadLimit {
+                        load_factor: lambda,
+                        reason,
+                    });
+                }
                 if dl < opts.min_load_increment {
                     return Err(SolverError::Diverged {
                         solver: "static",
@@ -272,6 +284,16 @@ pub fn solve_static(
     }
     let mut r = vec![Vec3::zeros(); n];
     sys.lambda = 1.0;
+    let stability = equilibrium_stability(&mut sys, &x, &free);
+    if stability == Stability::Unstable {
+        if opts.accept_unstable {
+            log::warn!("static: the equilibrium is unstable (kept, as asked)");
+        } else {
+            state.x = x;
+            state.v.iter_mut().for_each(|v| *v = Vec3::zeros());
+            return Err(SolverError::UnstableEquilibrium);
+        }
+    }
     let scale = sys.residual(&x, &mut r);
     let res = free_norm(&r, &free);
     state.x = x;
@@ -282,7 +304,71 @@ pub fn solve_static(
         rejected_iterations: rejected,
         relative_residual: if scale > 0.0 { res / scale } else { res },
         linear: linear.stats(),
+        stability,
     })
+}
+
+/// Largest Cholesky factor (bytes) that the stability test of a static
+/// equilibrium builds; larger problems are not tested (logged).
+pub const STABILITY_TEST_MAX_FACTOR_BYTES: usize = 1 << 30;
+
+/// Whether a static equilibrium is stable.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Stability {
+    /// The stiffness is positive definite on the free dofs.
+    Stable,
+    /// It is not.
+    Unstable,
+    /// The test was skipped: the factor would exceed
+    /// [`STABILITY_TEST_MAX_FACTOR_BYTES`], or the linear algebra failed.
+    NotTested,
+}
+
+/// Tests the stability of the equilibrium `x`: a Cholesky factorization of
+/// the symmetric part of the stiffness `K = -d(residual)/dx` on the free dofs.
+/// For a conservative model `K` is the energy's Hessian and this is the
+/// second-order test of a minimum; with the correction forces `K` is not
+/// symmetric, and a positive definite symmetric part is a sufficient
+/// condition (`v . K v > 0` for every `v`: no static direction releases
+/// energy), so the test errs on the side of refusing.
+fn equilibrium_stability(sys: &mut StaticSystem<'_>, x: &[Vec3], free: &[bool]) -> Stability {
+    let jac = sys.jacobian(x);
+    let mut k = jac.clone();
+    for row in 0..jac.num_rows() {
+        for idx in jac.row_offsets[row] as usize..jac.row_offsets[row + 1] as usize {
+            let col = jac.col_indices[idx] as usize;
+            let t = jac.find(col, row).map(|i| jac.blocks[i].transpose());
+            let t = t.unwrap_or(jac.blocks[idx]);
+            k.blocks[idx] = -(jac.blocks[idx] + t) * 0.5;
+        }
+    }
+    // A relative shift below round-off of the Newton solution, so that a
+    // positive definite matrix is not refused for its last digits.
+    let shift = 1e-10 * k.max_diagonal();
+    k.add_diagonal(-shift);
+    let fixed: Vec<[bool; 3]> = free.chunks(3).map(|f| [!f[0], !f[1], !f[2]]).collect();
+    match k.cholesky_factor_bytes(&fixed) {
+        Ok(bytes) if bytes <= STABILITY_TEST_MAX_FACTOR_BYTES => {}
+        Ok(bytes) => {
+            log::info!(
+                "static: stability of the equilibrium not tested (the factor would take {} MiB)",
+                bytes >> 20
+            );
+            return Stability::NotTested;
+        }
+        Err(e) => {
+            log::info!("static: stability of the equilibrium not tested: {e}");
+            return Stability::NotTested;
+        }
+    }
+    match k.factor_cholesky(&fixed) {
+        Ok(_) => Stability::Stable,
+        Err(crate::LinearSolveError::NotPositiveDefinite { .. }) => Stability::Unstable,
+        Err(e) => {
+            log::info!("static: stability of the equilibrium not tested: {e}");
+            Stability::NotTested
+        }
+    }
 }
 
 /// Whether the tangent at the start configuration `x0` is singular on the
@@ -361,5 +447,8 @@ fn solve_small_strain(
         rejected_iterations: 0,
         relative_residual: if scale > 0.0 { res / scale } else { res },
         linear: linear.stats(),
+        // The rest stiffness is positive semi-definite, and the solve above
+        // refused it singular: small-strain equilibria are stable.
+        stability: Stability::Stable,
     })
 }

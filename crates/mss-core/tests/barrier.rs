@@ -1,0 +1,121 @@
+//! The barrier volumetric law of `volumetric-barrier` (docs/model.md,
+//! section 4): the same as `volumetric` at small strain, `lambda h^3 (ln J)^2
+//! / 2` beyond, with exact tangents.
+
+use hexmesh::Lattice;
+use mss_core::model::{Volumetric, VolumetricBarrier};
+use mss_core::{Mat3, Material, Model, Vec3};
+
+fn material() -> Material {
+    Material::new(1000.0, 0.3, 1.0).unwrap()
+}
+
+fn deformed(model: &Model, f: Mat3) -> Vec<Vec3> {
+    model.rest_positions().iter().map(|p| f * p).collect()
+}
+
+fn forces(model: &Model, x: &[Vec3]) -> Vec<Vec3> {
+    let mut f = vec![Vec3::zeros(); x.len()];
+    model.internal_forces(x, &mut f);
+    f
+}
+
+#[test]
+fn same_stiffness_at_rest_as_the_quadratic_law() {
+    let l = Lattice::block([3, 2, 2], 0.1, [0.0; 3]).unwrap();
+    let a = Model::new(&l, material(), &Volumetric).unwrap();
+    let b = Model::new(&l, material(), &VolumetricBarrier).unwrap();
+    let (ka, kb) = (a.rest_stiffness(), b.rest_stiffness());
+    let scale = ka.max_diagonal();
+    for (x, y) in ka.blocks.iter().zip(&kb.blocks) {
+        assert!((x - y).abs().max() <= 1e-12 * scale);
+    }
+    assert_eq!(a.critical_time_step(), b.critical_time_step());
+}
+
+#[test]
+fn energy_of_a_uniform_compression_is_the_barrier_law() {
+    let h = 0.1;
+    let l = Lattice::block([1, 1, 1], h, [0.0; 3]).unwrap();
+    let m = material();
+    let a = Model::new(&l, m, &Volumetric).unwrap();
+    let b = Model::new(&l, m, &VolumetricBarrier).unwrap();
+    let lambda_h3 = m.lambda() * h * h * h;
+    for j in [1.3f64, 0.9, 0.5, 0.2, 0.1] {
+        // A uniform compression along z only: J = j, springs identical in both.
+        let x = deformed(&a, Mat3::from_diagonal(&Vec3::new(1.0, 1.0, j)));
+        let expected = lambda_h3 * (0.5 * j.ln().powi(2) - 0.5 * (j - 1.0).powi(2));
+        let got = b.energy(&x) - a.energy(&x);
+        assert!(
+            (got - expected).abs() <= 1e-12 * lambda_h3,
+            "J = {j}: {got} vs {expected}"
+        );
+    }
+    // Near collapse the barrier costs many times what the quadratic law does.
+    let x = deformed(&a, Mat3::from_diagonal(&Vec3::new(1.0, 1.0, 0.15)));
+    let springs = a.energy(&x) - 0.5 * lambda_h3 * 0.85f64.powi(2);
+    assert!(b.energy(&x) - springs > 4.0 * (a.energy(&x) - springs));
+}
+
+#[test]
+fn energy_and_forces_are_continuous_through_the_knee_and_beyond_collapse() {
+    let h = 0.1;
+    let l = Lattice::block([1, 1, 1], h, [0.0; 3]).unwrap();
+    let b = Model::new(&l, material(), &VolumetricBarrier).unwrap();
+    let at = |j: f64| {
+        let x = deformed(&b, Mat3::from_diagonal(&Vec3::new(1.0, 1.0, j)));
+        (b.energy(&x), forces(&b, &x))
+    };
+    for j0 in [0.1, 0.3] {
+        let (e1, f1) = at(j0 - 1e-9);
+        let (e2, f2) = at(j0 + 1e-9);
+        assert!((e1 - e2).abs() < 1e-6 * e1.abs().max(1e-12));
+        for (p, q) in f1.iter().zip(&f2) {
+            assert!((p - q).norm() < 1e-6 * p.norm().max(1e-12));
+        }
+    }
+    // Inverted cells are pushed back (finite forces, pointing out).
+    let (_, f) = at(-0.05);
+    assert!(f.iter().all(|v| v.iter().all(|c| c.is_finite())));
+    let top: f64 = f
+        .iter()
+        .zip(b.rest_positions())
+        .filter(|(_, p)| p.z > 0.5 * h)
+        .map(|(v, _)| v.z)
+        .sum();
+    assert!(top > 0.0, "the top face is pushed up: {top}");
+}
+
+#[test]
+fn the_tangent_is_exact_at_large_compression() {
+    let l = Lattice::block([2, 1, 1], 0.1, [0.0; 3]).unwrap();
+    let b = Model::new(&l, material(), &VolumetricBarrier).unwrap();
+    for jz in [0.6, 0.08] {
+        let f = Mat3::new(1.05, 0.1, 0.0, -0.05, 0.97, 0.02, 0.03, 0.0, jz);
+        let mut x = deformed(&b, f);
+        x[3].x += 0.004;
+        let tangent = b.tangent(&x);
+        let eps = 1e-7;
+        for node in [0usize, 4, 7] {
+            for d in 0..3 {
+                let mut xp = x.clone();
+                let mut xm = x.clone();
+                xp[node][d] += eps;
+                xm[node][d] -= eps;
+                let (fp, fm) = (forces(&b, &xp), forces(&b, &xm));
+                for row in 0..x.len() {
+                    let fd = (fp[row] - fm[row]) / (2.0 * eps);
+                    let exact = tangent
+                        .find(row, node)
+                        .map(|k| tangent.blocks[k].column(d).into_owned())
+                        .unwrap_or_else(Vec3::zeros);
+                    let scale = tangent.max_diagonal();
+                    assert!(
+                        (fd - exact).norm() <= 1e-5 * scale,
+                        "J_z {jz}, node {node}, dof {d}, row {row}: {fd:?} vs {exact:?}"
+                    );
+                }
+            }
+        }
+    }
+}
