@@ -454,7 +454,7 @@ pub enum SolverError {
     /// equilibrium path has a limit point (the body buckles or folds under
     /// more load), so there is no static answer near it for the full load.
     #[error(
-        "the static solve carried {:.1} % of the loads and no more ({reason}): the equilibrium path ends there (a limit point: the body buckles or folds under more load, and a dynamic run would collapse rather than settle). Lower the loads or stiffen the body (E); if the lattice folds rather than the body, use hourglass control",
+        "the static solve carried {:.1} % of the loads and no more ({reason}): most likely the equilibrium path ends there (a limit point: the body buckles or folds under more load, and a dynamic run collapses rather than settles; the refined FEM of docs/robustness.md tells the two apart). Lower the loads or stiffen the body (E); if the lattice folds rather than the body, use hourglass control",
         100.0 * load_factor
     )]
     LoadLimit {
