@@ -11,12 +11,11 @@ const TEMPLATE_SCENE: &str = include_str!("../../data/scenes/template.toml");
 
 /// The default scene with the bundled mesh and another Young's modulus.
 fn critter(young: f64) -> String {
+    let (mesh, modulus) = ("path = \"../meshes/critter.obj\"", "young = 1.0e5");
+    assert!(DEFAULT_SCENE.contains(mesh) && DEFAULT_SCENE.contains(modulus));
     DEFAULT_SCENE
-        .replace(
-            "path = \"../meshes/critter.obj\"",
-            "path = \"builtin:critter\"",
-        )
-        .replace("young = 1.0e5", &format!("young = {young:e}"))
+        .replace(mesh, "path = \"builtin:critter\"")
+        .replace(modulus, &format!("young = {young:e}"))
 }
 
 /// Steps a scene to its end; the final state, or the solver's message.

@@ -975,24 +975,19 @@ impl Model {
                 let mean = xc
                     .iter()
                     .fold([0.0; 3], |a, p| [a[0] + p[0], a[1] + p[1], a[2] + p[2]]);
-                let mut worst = 0.0f64;
-                for (n, p) in xc.iter().enumerate() {
-                    let mut r2 = 0.0;
-                    for d in 0..3 {
-                        let mut fit = mean[d] / 8.0;
-                        for (j, col) in cols.iter().enumerate() {
-                            let s = if hexmesh::CORNER_OFFSETS[n][j] == 1 {
-                                1.0
-                            } else {
-                                -1.0
-                            };
-                            fit += col[d] * s * 0.5 * self.h;
-                        }
-                        r2 += (p[d] - fit).powi(2);
-                    }
-                    worst = worst.max(r2);
-                }
-                worst.sqrt() / self.h
+                // Corner n sits at (h/2) s_n from the centre.
+                let residual2 = |n: usize| {
+                    (0..3)
+                        .map(|d| {
+                            let fit = mean[d] / 8.0
+                                + (0..3)
+                                    .map(|j| cols[j][d] * kernel::corner_sign(n, j) * 0.5 * self.h)
+                                    .sum::<f64>();
+                            (xc[n][d] - fit).powi(2)
+                        })
+                        .sum::<f64>()
+                };
+                (0..8).map(residual2).fold(0.0, f64::max).sqrt() / self.h
             })
             .collect()
     }

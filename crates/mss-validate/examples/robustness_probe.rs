@@ -145,7 +145,6 @@ fn main() {
         let zmin = fl.nodes().iter().map(|p| p[2]).fold(f64::MAX, f64::min);
         let bc = f.clamp_where(|p| p[2] <= zmin + 1e-9 * h);
         let load = f.gravity_load(Vec3::new(0.0, 0.0, -9.81));
-        let hr = fl.h();
         match f.solve(FemLaw::NeoHookean, &bc, &load, &NewtonOptions::default()) {
             Ok(s) => {
                 let x: Vec<Vec3> = fl
@@ -154,24 +153,17 @@ fn main() {
                     .zip(&s.displacement)
                     .map(|(r, u)| Vec3::from(*r) + u)
                     .collect();
-                let minj = fl
-                    .cells()
-                    .iter()
-                    .map(|c| {
-                        let mut m = mss_core::Mat3::zeros();
-                        for (n, &node) in c.iter().enumerate() {
-                            let o = hexmesh::CORNER_OFFSETS[n];
-                            let sgn = Vec3::new(
-                                2.0 * o[0] as f64 - 1.0,
-                                2.0 * o[1] as f64 - 1.0,
-                                2.0 * o[2] as f64 - 1.0,
-                            );
-                            m += x[node as usize] * sgn.transpose() / (4.0 * hr);
-                        }
-                        m.determinant()
-                    })
+                // A model on the refined lattice measures its cells the same way.
+                let fine = mss_core::Model::new(
+                    fl,
+                    *model.materials().first().unwrap(),
+                    &mss_core::SpringsOnly,
+                )
+                .expect("model of the refined lattice");
+                let minj = centre_jacobians(&fine, &x)
+                    .into_iter()
                     .fold(f64::MAX, f64::min);
-                let umax = s.displacement.iter().map(|u| u.norm()).fold(0.0, f64::max);
+                let umax = largest(&s.displacement);
                 println!(
                     "FEM r={r} NeoHookean: {} load steps, minJ {minj:.3} umax {umax:.4e}",
                     s.load_steps

@@ -425,6 +425,42 @@ fn mss_solve(
     }
 }
 
+/// Every model on every lattice, against the reference sampled on each.
+fn run_models(
+    models: &[SharedParameterization],
+    lattices: &[Lattice],
+    refs: &[Vec<Vec3>],
+    case: &Case,
+    regime: Regime,
+) -> Result<Vec<RunResult>, ExperimentError> {
+    let mut runs = Vec::new();
+    for model in models {
+        for (l, u_ref) in lattices.iter().zip(refs) {
+            runs.push(run_case(l, case, model.as_ref(), regime, u_ref.clone())?);
+        }
+    }
+    Ok(runs)
+}
+
+/// Refuses lattice resolutions that the reference resolution does not
+/// refine exactly (its nodes must include theirs).
+fn check_resolutions(
+    what: &str,
+    resolutions: &[u32],
+    reference: u32,
+) -> Result<(), ExperimentError> {
+    if resolutions.is_empty()
+        || resolutions
+            .iter()
+            .any(|&r| r == 0 || !reference.is_multiple_of(r))
+    {
+        return Err(ExperimentError::Setting(format!(
+            "{what} resolutions {resolutions:?} must be positive divisors of the reference resolution {reference}"
+        )));
+    }
+    Ok(())
+}
+
 fn run_case(
     lattice: &Lattice,
     case: &Case,
@@ -463,17 +499,7 @@ fn section_curve(lattice: &Lattice, u: &[Vec3]) -> Vec<(f64, f64)> {
 
 /// Runs the cantilever experiment: x = 0 clamped, gravity along -z.
 pub fn beam(settings: &BeamSettings) -> Result<BeamResult, ExperimentError> {
-    if settings.resolutions.is_empty()
-        || settings
-            .resolutions
-            .iter()
-            .any(|&r| r == 0 || !settings.reference.is_multiple_of(r))
-    {
-        return Err(ExperimentError::Setting(format!(
-            "beam resolutions {:?} must be positive divisors of the reference resolution {}",
-            settings.resolutions, settings.reference
-        )));
-    }
+    check_resolutions("beam", &settings.resolutions, settings.reference)?;
     let material = Material::new(BEAM_YOUNG, settings.poisson, settings.density)?;
     let lattice_for = |n: u32| Lattice::block([4 * n, n, n], BEAM_SIDE / n as f64, [0.0; 3]);
     let clamp = |p: [f64; 3]| p[0].abs() < 1e-9;
@@ -503,18 +529,7 @@ pub fn beam(settings: &BeamSettings) -> Result<BeamResult, ExperimentError> {
     };
     let (mut refs, info) = reference(&base, &case, settings.reference, law, &targets)?;
     let ref_fine = refs.pop().unwrap_or_default();
-    let mut runs = Vec::new();
-    for model in &settings.models {
-        for (l, u_ref) in lattices.iter().zip(&refs) {
-            runs.push(run_case(
-                l,
-                &case,
-                model.as_ref(),
-                settings.regime,
-                u_ref.clone(),
-            )?);
-        }
-    }
+    let runs = run_models(&settings.models, &lattices, &refs, &case, settings.regime)?;
     let q = settings.density * GRAVITY * BEAM_SIDE * BEAM_SIDE;
     let mut curves = vec![Curve {
         label: format!(
@@ -635,17 +650,7 @@ pub const L_UNIT: f64 = 2.0;
 /// Runs the L-shape experiment (linear regime, mass neglected, E = 1 kPa,
 /// nu = 0.3, base z = 0 clamped).
 pub fn lshape(settings: &LShapeSettings) -> Result<LShapeResult, ExperimentError> {
-    if settings.resolutions.is_empty()
-        || settings
-            .resolutions
-            .iter()
-            .any(|&r| r == 0 || !settings.reference.is_multiple_of(r))
-    {
-        return Err(ExperimentError::Setting(format!(
-            "L-shape resolutions {:?} must be positive divisors of the reference resolution {}",
-            settings.resolutions, settings.reference
-        )));
-    }
+    check_resolutions("L-shape", &settings.resolutions, settings.reference)?;
     let material = Material::new(1000.0, 0.3, 1.0)?;
     let top = 2.0 * L_UNIT;
     let load = settings.load;
@@ -699,18 +704,7 @@ pub fn lshape(settings: &LShapeSettings) -> Result<LShapeResult, ExperimentError
         .collect::<Result<_, _>>()?;
     let targets: Vec<&Lattice> = lattices.iter().collect();
     let (refs, info) = reference(&base, &case, settings.reference, FemLaw::Linear, &targets)?;
-    let mut runs = Vec::new();
-    for model in &settings.models {
-        for (l, u_ref) in lattices.iter().zip(&refs) {
-            runs.push(run_case(
-                l,
-                &case,
-                model.as_ref(),
-                Regime::Linear,
-                u_ref.clone(),
-            )?);
-        }
-    }
+    let runs = run_models(&settings.models, &lattices, &refs, &case, Regime::Linear)?;
     Ok(LShapeResult {
         settings: settings.clone(),
         reference: info,

@@ -350,7 +350,7 @@ fn barrier_slope(j: f64) -> (f64, f64) {
 
 /// Sign `+1` / `-1` of corner `n` along axis `j`.
 #[inline(always)]
-fn corner_sign(n: usize, j: usize) -> f64 {
+pub(crate) fn corner_sign(n: usize, j: usize) -> f64 {
     if CORNER_OFFSETS[n][j] == 1 { 1.0 } else { -1.0 }
 }
 

@@ -445,7 +445,8 @@ pub enum SolverError {
     },
     /// The static solve found an equilibrium whose stiffness is not positive
     /// definite: a small disturbance leads away from it (the body buckles,
-    /// or the lattice folds), so a dynamic run ends elsewhere.
+    /// or the lattice folds), so a dynamic run ends elsewhere. The state is
+    /// left at that equilibrium, for inspection.
     #[error(
         "the static equilibrium found is unstable: its stiffness (symmetric part, on the free dofs) is not positive definite; a dynamic run would leave it. The lattice may fold (try hourglass control, e.g. [model] parameterization = \"volumetric-barrier+hg\"), or the body buckles under these loads; set [solver] accept_unstable = true (StaticOptions::accept_unstable) to keep it anyway"
     )]

@@ -259,13 +259,14 @@ pub fn solve_static(
                     rejected += iterations;
                 }
                 dl *= 0.5;
-                if dl < opts.min_load_increment && lambda > 0.0 {
-                    return Err(SolverError::LoadLimit {
-                        load_factor: lambda,
-                        reason,
-                    });
-                }
                 if dl < opts.min_load_increment {
+                    // Some load carried and no more: a limit point, most likely.
+                    if lambda > 0.0 {
+                        return Err(SolverError::LoadLimit {
+                            load_factor: lambda,
+                            reason,
+                        });
+                    }
                     return Err(SolverError::Diverged {
                         solver: "static",
                         step: load_steps as u64 + 1,
@@ -337,9 +338,10 @@ fn equilibrium_stability(sys: &mut StaticSystem<'_>, x: &[Vec3], free: &[bool]) 
     for row in 0..jac.num_rows() {
         for idx in jac.row_offsets[row] as usize..jac.row_offsets[row + 1] as usize {
             let col = jac.col_indices[idx] as usize;
-            let t = jac.find(col, row).map(|i| jac.blocks[i].transpose());
-            let t = t.unwrap_or(jac.blocks[idx]);
-            k.blocks[idx] = -(jac.blocks[idx] + t) * 0.5;
+            let mirror = jac
+                .find(col, row)
+                .expect("the lattice pattern is symmetric");
+            k.blocks[idx] = -(jac.blocks[idx] + jac.blocks[mirror].transpose()) * 0.5;
         }
     }
     // A relative shift below round-off of the Newton solution, so that a
