@@ -118,3 +118,76 @@ fn the_papers_model_is_refused_statically_where_its_lattice_folds() {
     job.run(out.path(), &no_progress, &mss_scene::Cancel::new())
         .unwrap();
 }
+
+#[test]
+fn a_critter_twice_past_its_buckling_load_folds_without_blowing_up() {
+    // E = 10 kPa: the body cannot carry its weight (docs/robustness.md) and
+    // collapses; the explicit step's control follows its stiffening.
+    let (job, state) = run_to_end(&critter(1.0e4)).unwrap();
+    assert!(job.problem.model().inverted_cells(&state.x).is_empty());
+}
+
+/// The committed Stanford bunny, Y up and 10 units tall, turned Z up and
+/// scaled to `height` metres: the OBJ text.
+fn bunny_z_up(height: f64) -> String {
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../data/meshes/bunny.obj"
+    ))
+    .unwrap();
+    let parse = |l: &str| -> [f64; 3] {
+        let v: Vec<f64> = l
+            .split_whitespace()
+            .skip(1)
+            .map(|c| c.parse().unwrap())
+            .collect();
+        [v[0], v[1], v[2]]
+    };
+    let ys: Vec<f64> = text
+        .lines()
+        .filter(|l| l.starts_with("v "))
+        .map(|l| parse(l)[1])
+        .collect();
+    let span =
+        ys.iter().cloned().fold(f64::MIN, f64::max) - ys.iter().cloned().fold(f64::MAX, f64::min);
+    let s = height / span;
+    text.lines()
+        .map(|l| {
+            if l.starts_with("v ") {
+                let [x, y, z] = parse(l);
+                format!("v {} {} {}", x * s, -z * s, y * s)
+            } else {
+                l.to_owned()
+            }
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+#[test]
+fn the_soft_stanford_bunny_runs_to_the_end() {
+    // 0.15 m, 32 cells, E = 10 kPa, nu = 0.45, the lowest layer held (a few
+    // cells carry the whole weight, compressed hard): the barrier stiffens
+    // them and the explicit step follows.
+    let dir = tempfile::tempdir().unwrap();
+    let mesh = dir.path().join("bunny.obj");
+    std::fs::write(&mesh, bunny_z_up(0.15)).unwrap();
+    let toml = critter(1.0e4)
+        .replace(
+            "path = \"builtin:critter\"",
+            &format!("path = {:?}", mesh.display().to_string()),
+        )
+        .replace("cells = 24", "cells = 32")
+        .replace("poisson = 0.3", "poisson = 0.45")
+        .replace("duration = 1.0", "duration = 0.5");
+    for key in [
+        "cells = 32",
+        "poisson = 0.45",
+        "duration = 0.5",
+        "bunny.obj",
+    ] {
+        assert!(toml.contains(key), "{key}");
+    }
+    let (job, state) = run_to_end(&toml).unwrap();
+    assert!(job.problem.model().inverted_cells(&state.x).is_empty());
+}

@@ -485,6 +485,9 @@ pub struct Model {
     masses: Vec<f64>,
     /// Kernel constants per material.
     params: Vec<CellParams>,
+    /// Per entry of `params`: the volumetric term's share of the cell's
+    /// stiffness at rest (Gershgorin bounds), for [`Model::stiffness_growth`].
+    volumetric_share: Vec<f64>,
     /// Parameterization output per material.
     coefficients: Vec<CellCoefficients>,
     materials: Vec<Material>,
@@ -587,6 +590,26 @@ impl Model {
             });
             coefficients.push(co);
         }
+        let cube: [[f64; 3]; 8] =
+            std::array::from_fn(|k| hexmesh::CORNER_OFFSETS[k].map(|o| f64::from(o) * h));
+        let volumetric_share = params
+            .iter()
+            .map(|p| {
+                if p.vol_lambda_h3 == 0.0 {
+                    return 0.0;
+                }
+                let whole = kernel::gershgorin(&kernel::cell_jacobian(p, &cube));
+                let volumetric_only = CellParams {
+                    k_edge: 0.0,
+                    k_diag: 0.0,
+                    correction: None,
+                    k_hourglass: 0.0,
+                    ..*p
+                };
+                let part = kernel::gershgorin(&kernel::cell_jacobian(&volumetric_only, &cube));
+                (part / whole).min(1.0)
+            })
+            .collect();
         let rest: Vec<Vec3> = lattice
             .nodes()
             .iter()
@@ -655,6 +678,7 @@ impl Model {
             h,
             masses,
             params,
+            volumetric_share,
             coefficients,
             materials: materials.to_vec(),
             cell_material,
@@ -719,18 +743,20 @@ impl Model {
         self.rest.capacity() * 24
             + self.cells.capacity() * 32
             + self.masses.capacity() * 8
+            + self.volumetric_share.capacity() * 8
             + self.cell_material.capacity() * 4
             + self.adj_offsets.capacity() * 4
             + self.adj.capacity() * 4
     }
 
     #[inline(always)]
+    fn param_index(&self, cell: usize) -> usize {
+        self.cell_material.get(cell).map_or(0, |&m| m as usize)
+    }
+
+    #[inline(always)]
     fn params_of(&self, cell: usize) -> &CellParams {
-        if self.cell_material.is_empty() {
-            &self.params[0]
-        } else {
-            &self.params[self.cell_material[cell] as usize]
-        }
+        &self.params[self.param_index(cell)]
     }
 
     #[inline(always)]
@@ -992,6 +1018,56 @@ impl Model {
             .collect()
     }
 
+    /// How much the bound of the highest vibration frequency squared has
+    /// grown since rest, at `x` (>= 1; `omega_max_bound()^2` times this
+    /// bounds omega_max^2 at `x`). The volumetric term stiffens as cells are
+    /// compressed (steeply with the barrier law), so cells are ranked by a
+    /// cheap estimate of that growth (the term's share of the cell's
+    /// stiffness at rest times the growth of its Hessian
+    /// `phi''(J) b b^T + phi'(J) db/dx`), and the eight worst are
+    /// bounded exactly, element by element: omega^2 <= the Gershgorin bound
+    /// of the cell's exact Jacobian over its corner mass. The explicit step
+    /// divides its sub-step by the square root of this (docs/robustness.md).
+    /// Models without a volumetric term report 1: springs do not stiffen
+    /// along their length, and their transverse stiffening when folded is
+    /// left to the step control's retries.
+    pub fn stiffness_growth(&self, x: &[Vec3]) -> f64 {
+        assert_eq!(x.len(), self.num_nodes(), "positions: one per node");
+        if self.volumetric_share.iter().all(|&w| w == 0.0) {
+            return 1.0;
+        }
+        // The cheap estimate over every cell; the worst cells by it are then
+        // measured exactly (their Jacobians' Gershgorin bounds against rest).
+        let worst = (0..self.cells.len())
+            .into_par_iter()
+            .with_min_len(CHUNK)
+            .fold(Worst::default, |mut worst, c| {
+                let w = self.volumetric_share[self.param_index(c)];
+                if w != 0.0 {
+                    let g = kernel::volumetric_growth(self.params_of(c), &self.corners(x, c));
+                    worst.offer(1.0 - w + w * g, c as u32);
+                }
+                worst
+            })
+            .reduce(Worst::default, Worst::merge);
+        // Element by element: omega^2 <= max over cells of the cell's
+        // stiffness bound over its corner mass (the cell's share of its
+        // nodes' lumped masses), here for the cells most likely to set it.
+        let h3 = self.h * self.h * self.h;
+        let worst_cell_omega_sq = worst
+            .entries
+            .iter()
+            .filter(|&&(_, c)| c != u32::MAX)
+            .map(|&(_, c)| {
+                let c = c as usize;
+                let jac = kernel::cell_jacobian(self.params_of(c), &self.corners(x, c));
+                let corner_mass = self.materials[self.cell_material(c) as usize].density * h3 / 8.0;
+                kernel::gershgorin(&jac) / corner_mass
+            })
+            .fold(0.0, f64::max);
+        (worst_cell_omega_sq / self.omega_max_sq).max(1.0)
+    }
+
     /// Cells whose Jacobian `J = det F` at the centre is `<= 0` (inverted).
     pub fn inverted_cells(&self, x: &[Vec3]) -> Vec<u32> {
         assert_eq!(x.len(), self.num_nodes(), "positions: one per node");
@@ -1002,6 +1078,49 @@ impl Model {
             })
             .map(|c| c as u32)
             .collect()
+    }
+}
+
+/// Cells examined exactly by [`Model::stiffness_growth`].
+const WORST_CELLS: usize = 8;
+
+/// The [`WORST_CELLS`] largest `(value, cell)` pairs seen, largest first; ties
+/// go to the lower cell index, so that the result does not depend on how the
+/// cells were split among threads.
+#[derive(Clone, Copy)]
+struct Worst {
+    entries: [(f64, u32); WORST_CELLS],
+}
+
+impl Default for Worst {
+    fn default() -> Self {
+        Self {
+            entries: [(f64::NEG_INFINITY, u32::MAX); WORST_CELLS],
+        }
+    }
+}
+
+impl Worst {
+    fn ahead(a: (f64, u32), b: (f64, u32)) -> bool {
+        a.0 > b.0 || (a.0 == b.0 && a.1 < b.1)
+    }
+
+    fn offer(&mut self, value: f64, cell: u32) {
+        let mut item = (value, cell);
+        for slot in &mut self.entries {
+            if Self::ahead(item, *slot) {
+                std::mem::swap(slot, &mut item);
+            }
+        }
+    }
+
+    fn merge(mut self, other: Self) -> Self {
+        for (value, cell) in other.entries {
+            if cell != u32::MAX {
+                self.offer(value, cell);
+            }
+        }
+        self
     }
 }
 

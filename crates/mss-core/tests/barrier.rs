@@ -119,3 +119,64 @@ fn the_tangent_is_exact_at_large_compression() {
         }
     }
 }
+
+/// Largest eigenvalue of `M^-1/2 K_s M^-1/2`, `K_s` the symmetric part of
+/// the stiffness at `x`: omega_max^2 of small vibrations about `x`.
+fn omega_sq(model: &Model, x: &[Vec3]) -> f64 {
+    let k = model.stiffness(x);
+    let n = 3 * model.num_nodes();
+    let scale = |dof: usize| 1.0 / model.masses()[dof / 3].sqrt();
+    let mut dense = nalgebra::DMatrix::<f64>::zeros(n, n);
+    for row in 0..model.num_nodes() {
+        for idx in k.row_offsets[row] as usize..k.row_offsets[row + 1] as usize {
+            let col = k.col_indices[idx] as usize;
+            for a in 0..3 {
+                for b in 0..3 {
+                    let (r, c) = (3 * row + a, 3 * col + b);
+                    dense[(r, c)] = k.blocks[idx][(a, b)] * scale(r) * scale(c);
+                }
+            }
+        }
+    }
+    let sym = (&dense + dense.transpose()) * 0.5;
+    sym.symmetric_eigenvalues().max()
+}
+
+#[test]
+fn the_stiffness_growth_bounds_the_highest_frequency() {
+    let l = Lattice::block([2, 2, 2], 0.1, [0.0; 3]).unwrap();
+    let m = Material::new(1000.0, 0.45, 1.0).unwrap();
+    for param in [
+        &Volumetric as &dyn mss_core::Parameterization,
+        &VolumetricBarrier,
+    ] {
+        let model = Model::new(&l, m, param).unwrap();
+        let rest = model.rest_positions().to_vec();
+        // At rest the element bound is the assembled one (a corner node of
+        // the block belongs to one cell), up to round-off.
+        assert!((model.stiffness_growth(&rest) - 1.0).abs() < 1e-12);
+        let bound_at_rest = model.omega_max_bound().powi(2);
+        assert!(omega_sq(&model, &rest) <= bound_at_rest);
+        let mut previous = 1.0;
+        for jz in [0.9, 0.7, 0.5, 0.3, 0.15] {
+            let f = Mat3::new(1.02, 0.05, 0.0, 0.0, 0.98, 0.0, 0.0, 0.0, jz);
+            let x = deformed(&model, f);
+            let growth = model.stiffness_growth(&x);
+            let actual = omega_sq(&model, &x);
+            assert!(
+                growth * bound_at_rest >= actual,
+                "{}: J_z {jz}: bound {} < omega^2 {actual}",
+                param.name(),
+                growth * bound_at_rest
+            );
+            if param.name() == "volumetric-barrier" && jz < 0.8 {
+                assert!(growth > previous, "J_z {jz}: grows with compression");
+                previous = growth;
+            }
+        }
+    }
+    // Springs do not stiffen along their length: no growth is claimed.
+    let springs = Model::new(&l, m, &mss_core::SpringsOnly).unwrap();
+    let x = deformed(&springs, Mat3::from_diagonal(&Vec3::new(1.0, 1.0, 0.5)));
+    assert_eq!(springs.stiffness_growth(&x), 1.0);
+}

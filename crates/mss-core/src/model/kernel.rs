@@ -336,6 +336,34 @@ pub(crate) fn barrier_energy(j: f64) -> f64 {
     }
 }
 
+/// How much the volumetric term's stiffness has grown at `x` relative to
+/// rest: `phi''(J) |cof F|^2 / 3 + |phi'(J)| |F| / sqrt(3)` (1 at rest), from
+/// the two parts of its Hessian, `phi'' b b^T` with `b = dJ/dx` (of size
+/// `|cof F| |grad N|`) and `phi' d b/dx` (of size `|F| |grad N|^2`).
+pub(crate) fn volumetric_growth(p: &CellParams, x: &[V3<f64>; 8]) -> f64 {
+    let (cols, jac) = deformation_gradient(x, p.grad_scale);
+    let (slope, curvature) = if p.vol_barrier {
+        barrier_slope(jac)
+    } else {
+        (jac - 1.0, 1.0)
+    };
+    let cof2: f64 = (0..3)
+        .map(|j| {
+            let c = cross(cols[(j + 1) % 3], cols[(j + 2) % 3]);
+            dot(c, c)
+        })
+        .sum();
+    let f2: f64 = cols.iter().map(|c| dot(*c, *c)).sum();
+    curvature * cof2 / 3.0 + slope.abs() * (f2 / 3.0).sqrt()
+}
+
+/// Largest Gershgorin row sum of a cell's 24x24 Jacobian.
+pub(crate) fn gershgorin(jac: &[[f64; 24]; 24]) -> f64 {
+    jac.iter()
+        .map(|row| row.iter().map(|v| v.abs()).sum::<f64>())
+        .fold(0.0, f64::max)
+}
+
 /// `phi'(J)` and `phi''(J)` of [`barrier_energy`].
 fn barrier_slope(j: f64) -> (f64, f64) {
     if j >= BARRIER_KNEE {

@@ -7,6 +7,22 @@
 //! stability bound of symplectic Euler for a damped oscillator, which reduces
 //! to `safety * 2 / w` without damping.
 //!
+//! The limit holds at rest. As a body deforms its stiffness changes (the
+//! barrier of `volumetric-barrier` stiffens compressed cells, folding
+//! springs stiffen transversally), and a step that was stable can stop being
+//! so. [`Explicit`] therefore controls its sub-step. At every check it
+//! estimates how much the stiffness has grown ([`Model::stiffness_growth`])
+//! and, from the next step on, halves the sub-step until it is below the
+//! limit at rest divided by the square root of that growth, less half the
+//! safety margin (up to
+//! [`MAX_GROWTH_HALVINGS`] times). And when a step fails its
+//! checks (non-finite values, a cell deforming by a quarter of its size in
+//! one sub-step, an inverted cell), it goes back to the state at the start
+//! of that step and takes it again with the sub-step halved, up to
+//! [`MAX_HALVINGS`] times; after [`RELAX_AFTER`] good sub-steps it tries the
+//! longer sub-step again. Only when the shortest sub-step fails too is the
+//! failure returned: then it is not the step (docs/robustness.md).
+//!
 //! Steps do not allocate: forces, damping products and the last-good snapshot
 //! live in buffers owned by [`Explicit`]. Node updates run in parallel over
 //! fixed-size chunks with no reduction other than a logical AND, so results are
@@ -23,6 +39,29 @@ use crate::{BlockCsr, Model, Vec3};
 
 /// Nodes per parallel task.
 const CHUNK: usize = 1024;
+
+/// How many times a failing step is retried with its sub-step halved.
+pub const MAX_HALVINGS: u32 = 5;
+
+/// How many times the sub-step is halved, at most, for the estimated growth
+/// of the stiffness.
+pub const MAX_GROWTH_HALVINGS: u32 = 8;
+
+/// Consecutive checks asking for fewer growth halvings before one is undone.
+pub const CALM_CHECKS: u32 = 5;
+
+/// How an attempt at a step ended.
+enum Attempt {
+    Done,
+    /// The stiffness grew: the step needs this many growth halvings.
+    Stiffer(u32),
+    Failed(Divergence),
+}
+
+/// Good sub-steps after which a halved sub-step is doubled again (this
+/// doubles, in turn, each time a retry was needed, so that a body that keeps
+/// needing the short step soon keeps it).
+pub const RELAX_AFTER: u64 = 1000;
 
 /// Which explicit scheme.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -85,6 +124,25 @@ pub struct Explicit {
     dt: f64,
     dt_sub: f64,
     substeps: u32,
+    /// Sub-steps per step that the stability limit at rest asks for.
+    base_substeps: u32,
+    /// Stable sub-step at rest (s), with the safety factor.
+    limit: f64,
+    /// Halvings of the sub-step in force (see the module docs): the larger
+    /// of `fail_halvings` and `growth_halvings`.
+    halvings: u32,
+    /// Halvings asked for by failed steps (undone after good sub-steps).
+    fail_halvings: u32,
+    /// Halvings asked for by the stiffness growth seen at the checks.
+    growth_halvings: u32,
+    /// Checks in a row that asked for fewer growth halvings.
+    calm_checks: u32,
+    /// Good sub-steps since the last change of `halvings`.
+    good_substeps: u64,
+    /// Good sub-steps after which a halving is undone.
+    relax_after: u64,
+    /// The state at the start of the step being taken (to retry it).
+    start: State,
     ws: ForceWorkspace,
     /// Conservative force (internal + external) at `cache_x`, `cache_time`.
     f_cons: Vec<Vec3>,
@@ -147,6 +205,19 @@ impl Explicit {
             dt,
             dt_sub,
             substeps,
+            base_substeps: substeps,
+            limit,
+            halvings: 0,
+            fail_halvings: 0,
+            growth_halvings: 0,
+            calm_checks: 0,
+            good_substeps: 0,
+            relax_after: RELAX_AFTER,
+            start: State {
+                x: vec![Vec3::zeros(); n],
+                v: vec![Vec3::zeros(); n],
+                time: 0.0,
+            },
             ws: problem.model().workspace(),
             f_cons: vec![Vec3::zeros(); n],
             cache_x: vec![Vec3::zeros(); n],
@@ -169,9 +240,89 @@ impl Explicit {
         })
     }
 
-    /// Sub-steps per call to [`Integrator::step`].
+    /// Sub-steps per call to [`Integrator::step`] (more while the step
+    /// control has halved the sub-step).
     pub fn substeps(&self) -> u32 {
         self.substeps
+    }
+
+    /// Puts in force the larger of the halvings asked for.
+    fn update_substep(&mut self) {
+        let halvings = self.fail_halvings.max(self.growth_halvings);
+        if halvings != self.halvings {
+            self.halvings = halvings;
+            self.substeps = self.base_substeps << halvings;
+            self.dt_sub = self.dt / f64::from(self.substeps);
+            self.good_substeps = 0;
+        }
+    }
+
+    /// The halvings that the stiffness growth at `x` asks for.
+    fn halvings_for_growth(&self, model: &Model, x: &[Vec3]) -> u32 {
+        if self.opts.unchecked {
+            return 0;
+        }
+        // Growth may use up half the safety margin (in the step's logarithm)
+        // before the sub-step is halved, so that small vibrations, which
+        // change the stiffness by their amplitude, do not halve it; a step
+        // at the limit (safety 1) has no margin to give, beyond round-off.
+        let wanted =
+            self.limit / (model.stiffness_growth(x) * self.opts.safety).sqrt() * (1.0 + 1e-9);
+        let base = self.dt / f64::from(self.base_substeps);
+        (0..MAX_GROWTH_HALVINGS)
+            .find(|&k| base / f64::from(1u32 << k) <= wanted)
+            .unwrap_or(MAX_GROWTH_HALVINGS)
+    }
+
+    /// Takes one step of `dt` in `substeps` sub-steps, checking every
+    /// `check_interval` sub-steps.
+    fn advance(&mut self, problem: &Problem, state: &mut State, t_end: f64) -> Attempt {
+        for s in 0..self.substeps {
+            let ok = self.substep(problem, state);
+            self.since_check += 1;
+            if !ok {
+                return Attempt::Failed(Divergence::NonFinite);
+            }
+            if self.since_check >= self.opts.check_interval {
+                if let Some(reason) = self.check(problem.model(), state) {
+                    return Attempt::Failed(reason);
+                }
+                let needed = self.halvings_for_growth(problem.model(), &state.x);
+                if needed > self.halvings {
+                    return Attempt::Stiffer(needed);
+                }
+                // Undo growth halvings only after several calm checks: the
+                // stiffness of a rebounding body swings faster than checks.
+                if needed < self.growth_halvings {
+                    self.calm_checks += 1;
+                    if self.calm_checks >= CALM_CHECKS {
+                        self.growth_halvings -= 1;
+                        self.calm_checks = 0;
+                    }
+                } else {
+                    self.calm_checks = 0;
+                }
+                self.since_check = 0;
+                if s + 1 == self.substeps {
+                    state.time = t_end;
+                }
+                self.save_good(state);
+            }
+        }
+        Attempt::Done
+    }
+
+    /// Puts the state back at the start of the step being taken.
+    fn restart_step(&mut self, state: &mut State, good_before: f64) {
+        state.x.copy_from_slice(&self.start.x);
+        state.v.copy_from_slice(&self.start.v);
+        state.time = self.start.time;
+        if self.good.time > good_before {
+            // A checkpoint inside the abandoned attempt is not good.
+            self.save_good(state);
+        }
+        self.since_check = 0;
+        self.cache_valid = false;
     }
 
     /// The sub-step actually integrated (s).
@@ -319,46 +470,72 @@ impl Integrator for Explicit {
     fn step(&mut self, problem: &Problem, state: &mut State) -> Result<StepInfo, SolverError> {
         state.check_size(problem.model())?;
         if !self.good_valid || self.last_time != state.time {
-            // A new or externally changed state: it is the reference to fall back on.
+            // A new or externally changed state: it is the reference to fall
+            // back on, and it may already be far from rest.
             self.save_good(state);
             self.since_check = 0;
+            self.growth_halvings = self.halvings_for_growth(problem.model(), &state.x);
+            self.update_substep();
         }
         self.steps += 1;
         let t_end = state.time + self.dt;
-        for s in 0..self.substeps {
-            let ok = self.substep(problem, state);
-            self.since_check += 1;
-            let last = s + 1 == self.substeps;
-            let failure = if !ok {
-                Some(Divergence::NonFinite)
-            } else if self.since_check >= self.opts.check_interval {
-                self.check(problem.model(), state)
-            } else {
-                None
-            };
-            if let Some(reason) = failure {
-                let time = state.time;
-                state.x.copy_from_slice(&self.good.x);
-                state.v.copy_from_slice(&self.good.v);
-                state.time = self.good.time;
-                self.cache_valid = false;
-                return Err(SolverError::Diverged {
-                    solver: "explicit",
-                    step: self.steps,
-                    time,
-                    reason,
-                    kept_time: self.good.time,
-                    hint: EXPLICIT_HINT,
-                });
-            }
-            if self.since_check >= self.opts.check_interval {
-                self.since_check = 0;
-                if last {
-                    state.time = t_end;
+        self.start.x.copy_from_slice(&state.x);
+        self.start.v.copy_from_slice(&state.v);
+        self.start.time = state.time;
+        let good_before = self.good.time;
+        loop {
+            let reason = match self.advance(problem, state, t_end) {
+                Attempt::Done => break,
+                Attempt::Stiffer(needed) => {
+                    // The body stiffened within the step: take it again with
+                    // the sub-step its stiffness asks for.
+                    log::debug!(
+                        "explicit: step {} taken again in {} sub-steps (stiffness grew)",
+                        self.steps,
+                        self.base_substeps << needed
+                    );
+                    self.restart_step(state, good_before);
+                    self.growth_halvings = needed;
+                    self.calm_checks = 0;
+                    self.update_substep();
+                    continue;
                 }
-                self.save_good(state);
+                Attempt::Failed(reason) => reason,
+            };
+            self.cache_valid = false;
+            if self.fail_halvings < MAX_HALVINGS {
+                // Take the step again from its start with half the sub-step.
+                log::info!(
+                    "explicit: step {} ({reason}) retried with the sub-step halved to {:.3e} s",
+                    self.steps,
+                    0.5 * self.dt_sub
+                );
+                self.restart_step(state, good_before);
+                self.relax_after = self.relax_after.saturating_mul(2);
+                self.fail_halvings = self.halvings + 1;
+                self.update_substep();
+                continue;
             }
+            let time = state.time;
+            state.x.copy_from_slice(&self.good.x);
+            state.v.copy_from_slice(&self.good.v);
+            state.time = self.good.time;
+            return Err(SolverError::Diverged {
+                solver: "explicit",
+                step: self.steps,
+                time,
+                reason,
+                kept_time: self.good.time,
+                hint: EXPLICIT_HINT,
+            });
         }
+        let substeps = self.substeps;
+        self.good_substeps += u64::from(substeps);
+        if self.fail_halvings > 0 && self.good_substeps >= self.relax_after {
+            self.fail_halvings -= 1;
+            self.good_substeps = 0;
+        }
+        self.update_substep();
         // Sub-step times accumulate round-off: land exactly on the step's end.
         state.time = t_end;
         self.last_time = t_end;
@@ -368,7 +545,7 @@ impl Integrator for Explicit {
         Ok(StepInfo {
             time: state.time,
             dt: self.dt,
-            substeps: self.substeps,
+            substeps,
             newton_iterations: 0,
         })
     }
