@@ -65,9 +65,12 @@ pub mod generate;
 pub mod lattice;
 pub mod load;
 pub mod mesh;
+pub mod placement;
+pub mod ply;
 pub mod skin;
 pub mod springs;
 pub mod voxelize;
+pub mod vtk;
 pub mod winding;
 
 pub use embed::Embedding;
@@ -78,6 +81,7 @@ pub use load::{
     LoadError, LoadReport, LoadedMesh, MeshFormat, MeshLoader, load_mesh, load_mesh_bytes,
 };
 pub use mesh::{Aabb, TriMesh};
+pub use placement::{Placement, PlacementError, Units, UpAxis};
 pub use skin::{Skin, boundary_skin};
 pub use springs::SpringTopology;
 pub use voxelize::{

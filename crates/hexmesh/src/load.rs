@@ -1,5 +1,6 @@
-//! Loading surface meshes: OBJ (tobj), STL ASCII and binary (stl_io), and
-//! user formats through [`MeshLoader`].
+//! Loading surface meshes: OBJ (tobj), STL ASCII and binary (stl_io), PLY
+//! ([`ply`](crate::ply)), VTK legacy and XML ([`vtk`](crate::vtk)), and user
+//! formats through [`MeshLoader`].
 //!
 //! Every loader's output goes through the same cleaning and checks
 //! ([`clean_mesh`]): non-finite coordinates and out-of-range indices are errors;
@@ -157,6 +158,10 @@ pub enum MeshFormat {
     Obj,
     /// STL, ASCII or binary (detected from the content).
     Stl,
+    /// PLY, ASCII or binary of either endianness (from the header).
+    Ply,
+    /// VTK: legacy, or XML unstructured grid / poly data (from the content).
+    Vtk,
 }
 
 impl MeshFormat {
@@ -165,6 +170,8 @@ impl MeshFormat {
         match ext.to_ascii_lowercase().as_str() {
             "obj" => Some(Self::Obj),
             "stl" => Some(Self::Stl),
+            "ply" => Some(Self::Ply),
+            "vtk" | "vtu" | "vtp" => Some(Self::Vtk),
             _ => None,
         }
     }
@@ -445,7 +452,7 @@ impl MeshLoader for StlLoader {
 /// builds, extends and passes where meshes are read (no global state, so two
 /// programs in one process, or two tests, cannot disturb each other).
 ///
-/// [`Loaders::default`] serves the built-in formats (OBJ, STL). A loader added
+/// [`Loaders::default`] serves the built-in formats (OBJ, STL, PLY, VTK). A loader added
 /// later wins for an extension that several loaders serve.
 ///
 /// ```
@@ -489,7 +496,7 @@ impl MeshLoader for StlLoader {
 /// assert!(loaders.for_extension("tri").is_none());
 /// loaders.register(Arc::new(Tri));
 /// assert!(loaders.for_extension("TRI").is_some());
-/// assert_eq!(loaders.known_extensions(), "obj, stl, tri");
+/// assert_eq!(loaders.known_extensions(), "obj, ply, stl, tri, vtk, vtp, vtu");
 ///
 /// let dir = tempfile::tempdir().unwrap();
 /// let path = dir.path().join("one.tri");
@@ -521,7 +528,12 @@ pub const MAX_MESH_BYTES: u64 = 1 << 30;
 impl Default for Loaders {
     fn default() -> Self {
         Self {
-            loaders: vec![Arc::new(ObjLoader), Arc::new(StlLoader)],
+            loaders: vec![
+                Arc::new(ObjLoader),
+                Arc::new(StlLoader),
+                Arc::new(crate::ply::PlyLoader),
+                Arc::new(crate::vtk::VtkLoader),
+            ],
             max_bytes: MAX_MESH_BYTES,
         }
     }
@@ -631,6 +643,8 @@ pub fn load_mesh_bytes(
     match format {
         MeshFormat::Obj => load_with(&ObjLoader, bytes, name),
         MeshFormat::Stl => load_with(&StlLoader, bytes, name),
+        MeshFormat::Ply => load_with(&crate::ply::PlyLoader, bytes, name),
+        MeshFormat::Vtk => load_with(&crate::vtk::VtkLoader, bytes, name),
     }
 }
 

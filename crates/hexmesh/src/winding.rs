@@ -467,6 +467,14 @@ impl WindingInside {
         }
     }
 
+    /// Whether point `p` is inside (the same answer the voxelizer gets for a
+    /// cell centre at `p`).
+    pub fn contains(&self, p: [f64; 3]) -> bool {
+        let mut out = [false];
+        self.classify_row(p[1], p[2], p[0], 0.0, &mut out);
+        out[0]
+    }
+
     /// What orientation repair did, and whether the mesh is closed.
     pub fn orient_report(&self) -> &OrientReport {
         &self.report

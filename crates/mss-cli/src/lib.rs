@@ -39,7 +39,7 @@ pub mod progress;
     name = "mss",
     version,
     about = "Hexahedral mass-spring soft bodies from surface meshes (Baudet et al. 2009)",
-    long_about = "Turns a closed surface mesh (OBJ, STL) into a lattice of cubic cells, builds the \
+    long_about = "Turns a closed surface mesh (OBJ, STL, PLY, VTK) into a lattice of cubic cells, builds the \
                   hexahedral mass-spring system of Baudet et al. (WSCG 2009) whose springs and \
                   correction forces reproduce a given Young's modulus and Poisson's ratio, and \
                   simulates it. Results are VTK files (open the .pvd in ParaView) and OBJ skins."

@@ -384,9 +384,18 @@ fn cases() -> Vec<Case> {
         ),
         mesh_case(
             "unknown mesh format",
-            "mesh.ply",
-            b"ply\nformat ascii 1.0\n".to_vec(),
-            &["mesh.ply", "unknown format"],
+            "mesh.off",
+            b"OFF\n3 1 0\n".to_vec(),
+            &["mesh.off", "unknown format"],
+        ),
+        mesh_case(
+            "a PLY header that promises more faces than the file has",
+            "short.ply",
+            b"ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n\
+              property float z\nelement face 9\nproperty list uchar int vertex_indices\n\
+              end_header\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 1 2\n"
+                .to_vec(),
+            &["short.ply", "line"],
         ),
         case(
             "voxelize: missing mesh",

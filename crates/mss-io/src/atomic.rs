@@ -94,21 +94,7 @@ pub fn write_atomic(
             "the output path has no file name (it ends in `..` or `/`)",
         )
     })?;
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    let n = TEMP_COUNTER.fetch_add(1, Ordering::Relaxed);
-    let mut temp_name = std::ffi::OsString::from(".");
-    temp_name.push(file_name);
-    temp_name.push(format!(".tmp-{}-{n}", std::process::id()));
-    let temp = dir.join(temp_name);
-
-    let file = OpenOptions::new()
-        .write(true)
-        .create_new(true)
-        .open(&temp)
-        .map_err(|e| IoError::io(path, e))?;
+    let (temp, file) = create_temporary(path, file_name)?;
     match fill_and_close(file, write) {
         Ok(()) => fs::rename(&temp, path).map_err(|e| {
             let _ = fs::remove_file(&temp);
@@ -123,6 +109,29 @@ pub fn write_atomic(
             Err(IoError::io(path, e))
         }
     }
+}
+
+/// Creates a fresh temporary file `.NAME.tmp-PID-N` beside `path` (whose
+/// file name is `file_name`), unique within this process; errors name `path`.
+pub(crate) fn create_temporary(
+    path: &Path,
+    file_name: &std::ffi::OsStr,
+) -> Result<(PathBuf, File), IoError> {
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let n = TEMP_COUNTER.fetch_add(1, Ordering::Relaxed);
+    let mut temp_name = std::ffi::OsString::from(".");
+    temp_name.push(file_name);
+    temp_name.push(format!(".tmp-{}-{n}", std::process::id()));
+    let temp = dir.join(temp_name);
+    let file = OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&temp)
+        .map_err(|e| IoError::io(path, e))?;
+    Ok((temp, file))
 }
 
 fn fill_and_close(

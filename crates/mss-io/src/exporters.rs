@@ -64,7 +64,8 @@ pub type SkinExporterFactory =
 /// | `vtk` | legacy binary `.vtk` |
 /// | `vtk-ascii` | legacy text `.vtk` |
 ///
-/// Skins: `obj` (with vertex normals) and `stl` (binary).
+/// Skins: `obj` (smooth: vertex normals), `obj-flat` (one normal per
+/// triangle) and `stl` (binary).
 #[derive(Clone)]
 pub struct Exporters {
     frames: Vec<(String, FrameExporterFactory)>,
@@ -103,6 +104,7 @@ impl Default for Exporters {
         e.register_frames("vtk", legacy(LegacyFormat::Binary));
         e.register_frames("vtk-ascii", legacy(LegacyFormat::Ascii));
         e.register_skins("obj", skin(SkinFormat::Obj));
+        e.register_skins("obj-flat", skin(SkinFormat::ObjFlat));
         e.register_skins("stl", skin(SkinFormat::Stl));
         e
     }

@@ -1,5 +1,6 @@
-//! Skin (triangle surface) output: Wavefront OBJ with per-vertex normals and
-//! binary STL, plus exporter plugins for writing skins per frame.
+//! Skin (triangle surface) output: Wavefront OBJ with smooth (per-vertex) or
+//! flat (per-triangle) normals and binary STL, plus exporter plugins for
+//! writing skins per frame.
 //!
 //! Inputs are plain slices: `positions` (current vertex positions, e.g. a skin
 //! deformed with the lattice) and `triangles` indexing them, counter-clockwise
@@ -80,17 +81,47 @@ fn validate(path: &Path, positions: &[[f64; 3]], triangles: &[[u32; 3]]) -> Resu
     Ok(())
 }
 
-/// Writes a Wavefront OBJ file, atomically: `v` lines with the positions
-/// (shortest digits that parse back to exactly the same `f64`), `vn` lines
-/// with area-weighted vertex normals ([`vertex_normals`]), and `f a//a b//b
-/// c//c` faces (1-based, normal index = vertex index).
+/// How an OBJ skin is shaded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Normals {
+    /// One normal per vertex, area-weighted over its triangles
+    /// ([`vertex_normals`]): smooth shading, right for a smooth input surface.
+    #[default]
+    Smooth,
+    /// One normal per triangle: flat shading, right for the voxel skin, whose
+    /// cube corners a smooth normal rounds into blobs.
+    Flat,
+}
+
+/// Writes a Wavefront OBJ file with smooth normals ([`write_obj_with`]).
 pub fn write_obj(
     path: &Path,
     positions: &[[f64; 3]],
     triangles: &[[u32; 3]],
 ) -> Result<(), IoError> {
+    write_obj_with(path, positions, triangles, Normals::Smooth)
+}
+
+/// Writes a Wavefront OBJ file, atomically: `v` lines with the positions
+/// (shortest digits that parse back to exactly the same `f64`), in the
+/// order given (so a point cache of the same vertices applies to it); then
+/// for [`Normals::Smooth`] one `vn` per vertex and faces `f a//a b//b c//c`,
+/// for [`Normals::Flat`] one `vn` per triangle, `s off` and faces
+/// `f a//t b//t c//t` (1-based).
+pub fn write_obj_with(
+    path: &Path,
+    positions: &[[f64; 3]],
+    triangles: &[[u32; 3]],
+    normals: Normals,
+) -> Result<(), IoError> {
     validate(path, positions, triangles)?;
-    let normals = vertex_normals(positions, triangles);
+    let normal_rows = match normals {
+        Normals::Smooth => vertex_normals(positions, triangles),
+        Normals::Flat => triangles
+            .iter()
+            .map(|t| normalized(triangle_cross(positions, t)))
+            .collect(),
+    };
     write_atomic(path, |w| {
         writeln!(
             w,
@@ -98,7 +129,7 @@ pub fn write_obj(
             positions.len(),
             triangles.len()
         )?;
-        for (tag, rows) in [(&b"v "[..], positions), (&b"vn "[..], &normals[..])] {
+        for (tag, rows) in [(&b"v "[..], positions), (&b"vn "[..], &normal_rows[..])] {
             for p in rows {
                 w.write_all(tag)?;
                 write_f64(w, p[0])?;
@@ -109,9 +140,21 @@ pub fn write_obj(
                 w.write_all(b"\n")?;
             }
         }
-        for t in triangles {
-            let [a, b, c] = t.map(|i| u64::from(i) + 1);
-            writeln!(w, "f {a}//{a} {b}//{b} {c}//{c}")?;
+        match normals {
+            Normals::Smooth => {
+                for t in triangles {
+                    let [a, b, c] = t.map(|i| u64::from(i) + 1);
+                    writeln!(w, "f {a}//{a} {b}//{b} {c}//{c}")?;
+                }
+            }
+            Normals::Flat => {
+                w.write_all(b"s off\n")?;
+                for (k, t) in triangles.iter().enumerate() {
+                    let [a, b, c] = t.map(|i| u64::from(i) + 1);
+                    let n = k + 1;
+                    writeln!(w, "f {a}//{n} {b}//{n} {c}//{n}")?;
+                }
+            }
         }
         Ok(())
     })
@@ -168,6 +211,8 @@ pub fn write_stl(
 pub enum SkinFormat {
     /// Wavefront OBJ with vertex normals ([`write_obj`]).
     Obj,
+    /// Wavefront OBJ with one normal per triangle ([`Normals::Flat`]).
+    ObjFlat,
     /// Binary STL ([`write_stl`]).
     Stl,
 }
@@ -176,7 +221,7 @@ impl SkinFormat {
     /// File extension without the dot.
     pub fn extension(self) -> &'static str {
         match self {
-            SkinFormat::Obj => "obj",
+            SkinFormat::Obj | SkinFormat::ObjFlat => "obj",
             SkinFormat::Stl => "stl",
         }
     }
@@ -190,6 +235,7 @@ impl SkinFormat {
     ) -> Result<(), IoError> {
         match self {
             SkinFormat::Obj => write_obj(path, positions, triangles),
+            SkinFormat::ObjFlat => write_obj_with(path, positions, triangles, Normals::Flat),
             SkinFormat::Stl => write_stl(path, positions, triangles),
         }
     }
@@ -303,7 +349,10 @@ impl SkinSeries {
 
 impl SkinExporter for SkinSeries {
     fn name(&self) -> &'static str {
-        self.format.extension()
+        match self.format {
+            SkinFormat::ObjFlat => "obj-flat",
+            other => other.extension(),
+        }
     }
 
     fn write_skin(

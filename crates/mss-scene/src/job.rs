@@ -89,6 +89,9 @@ pub struct Job {
     pub lattice: hexmesh::Lattice,
     /// Voxelization statistics.
     pub vox_stats: hexmesh::voxelize::VoxelizeStats,
+    /// The materials of `[[regions]]` and the cells they hold (`None`
+    /// without regions).
+    pub regions: Option<crate::regions::RegionAssignment>,
     /// The problem (model, constraints, loads, damping).
     pub problem: Problem,
     /// Time stepping plan.
@@ -115,6 +118,14 @@ pub struct RunSummary {
     pub scene: String,
     /// Mesh name.
     pub mesh: String,
+    /// How the mesh was placed before voxelizing (`[mesh]` units, scale,
+    /// up, rotate, translate), or `"none"`.
+    pub placement: String,
+    /// Size of the placed mesh's bounding box along x, y, z (m).
+    pub mesh_extent: [f64; 3],
+    /// Cells per material: `[material]`, then each `[[regions]]` table
+    /// (one entry without regions).
+    pub cells_per_material: Vec<usize>,
     /// Lattice cells.
     pub cells: usize,
     /// Lattice nodes.
@@ -171,7 +182,7 @@ impl Job {
         let scene_name = input.name();
         let scene = &input.scene;
         let t0 = Instant::now();
-        let (mesh_name, loaded) =
+        let (mesh_name, mut loaded) =
             load_mesh(&input.mesh_source(), &registry.loaders).map_err(|e| match e {
                 crate::build::MeshSourceError::Load(source) => JobError::Mesh {
                     scene: scene_name.clone(),
@@ -183,6 +194,17 @@ impl Job {
                     message: other.to_string(),
                 },
             })?;
+        let placement = scene.mesh.placement();
+        placement
+            .apply(&mut loaded.mesh)
+            .map_err(|e| JobError::Setting {
+                scene: scene_name.clone(),
+                key: "[mesh]".into(),
+                message: format!("{mesh_name}: {e}"),
+            })?;
+        if !placement.is_identity() {
+            log::info!("{mesh_name}: placed with {placement}");
+        }
         let opts = scene.voxelize.options();
         let hook = |done: u64, total: u64| progress(Progress::Voxelizing { done, total });
         let vox = hexmesh::voxelize_with_progress(&loaded.mesh, &opts, &hook);
@@ -194,11 +216,49 @@ impl Job {
         })?;
         let voxelize_seconds = t0.elapsed().as_secs_f64();
         let (material, param) = input.material(&registry)?;
-        let model =
-            Model::new(&vox.lattice, material, &*param).map_err(|source| JobError::Model {
-                scene: scene_name.clone(),
-                source,
-            })?;
+        let regions = if scene.regions.is_empty() {
+            None
+        } else {
+            let mesh_of = |path: &str| -> Result<hexmesh::TriMesh, String> {
+                let source = crate::scene::Scene::source_of(path, &input.origin);
+                let (name, mut loaded) =
+                    load_mesh(&source, &registry.loaders).map_err(|e| e.to_string())?;
+                placement
+                    .apply(&mut loaded.mesh)
+                    .map_err(|e| format!("{name}: {e}"))?;
+                Ok(loaded.mesh)
+            };
+            let a =
+                crate::regions::assign_regions(&vox.lattice, &material, &scene.regions, &mesh_of)
+                    .map_err(|e| JobError::Setting {
+                    scene: scene_name.clone(),
+                    key: format!("[[regions]] #{}", e.region + 1),
+                    message: e.message,
+                })?;
+            for (r, m) in a.materials.iter().enumerate().skip(1) {
+                param.validate(m).map_err(|e| JobError::Setting {
+                    scene: scene_name.clone(),
+                    key: format!("[[regions]] #{r}"),
+                    message: e.to_string(),
+                })?;
+            }
+            log::info!(
+                "{} regions: cells per material {:?}",
+                scene.regions.len(),
+                a.cells_per_material()
+            );
+            Some(a)
+        };
+        let model = match &regions {
+            None => Model::new(&vox.lattice, material, &*param),
+            Some(a) => {
+                Model::with_cell_materials(&vox.lattice, &a.materials, &a.cell_material, &*param)
+            }
+        }
+        .map_err(|source| JobError::Model {
+            scene: scene_name.clone(),
+            source,
+        })?;
         let problem = input.problem(model)?;
         let plan = input.time_plan(&problem)?;
         // Refuse a bad integrator choice (unknown name, a dt above the
@@ -209,6 +269,7 @@ impl Job {
             mesh: loaded.mesh,
             lattice: vox.lattice,
             vox_stats: vox.stats,
+            regions,
             problem,
             plan,
             voxelize_seconds,
@@ -342,6 +403,12 @@ impl Job {
         Ok(RunSummary {
             scene: name,
             mesh: self.mesh_name.clone(),
+            placement: scene.mesh.placement().describe(),
+            mesh_extent: self.mesh.bounding_box().map_or([0.0; 3], |b| b.extent()),
+            cells_per_material: self
+                .regions
+                .as_ref()
+                .map_or_else(|| vec![model.num_cells()], |a| a.cells_per_material()),
             cells: model.num_cells(),
             nodes: model.num_nodes(),
             springs: model.num_springs(),

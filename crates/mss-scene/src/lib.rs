@@ -16,8 +16,10 @@
 //!   with progress through a callback and cancellation through [`Cancel`].
 //! - [`check`]: size, memory and output estimates and the mechanism warning
 //!   of a prepared job.
+//! - [`regions`]: materials per region (`[[regions]]`: box, sphere or a
+//!   second mesh).
 //! - [`output`]: the frames of a run (lattice, skins, embedded surface,
-//!   springs).
+//!   springs, point caches).
 //!
 //! ```
 //! use mss_scene::{Cancel, Job, Registry, SceneInput, no_progress};
@@ -57,6 +59,7 @@ pub mod check;
 pub mod error;
 pub mod job;
 pub mod output;
+pub mod regions;
 pub mod registry;
 pub mod scene;
 

@@ -9,6 +9,7 @@ use mss_core::solver::{Problem, State};
 use mss_core::{SpringSet, Vec3};
 use mss_io::IoError;
 use mss_io::exporters::Exporters;
+use mss_io::pc2::Pc2Writer;
 use mss_io::skin::{SkinExporter, SkinFrames};
 use mss_io::vtk::{Field, FrameExporter, LatticeFrame, PvdWriter, VtuEncoding, write_lines_vtu};
 
@@ -34,7 +35,15 @@ const SERIES: [(&str, &[&str]); 4] = [
 ];
 
 /// Single files a run writes.
-const RUN_FILES: [&str; 3] = ["lattice.pvd", "springs.pvd", "summary.json"];
+const RUN_FILES: [&str; 7] = [
+    "lattice.pvd",
+    "springs.pvd",
+    "summary.json",
+    "skin.pc2",
+    "skin_rest.obj",
+    "surface.pc2",
+    "surface_rest.obj",
+];
 
 /// Whether `name` is a file a run writes: `STEM_NNNN.EXT` of one of the
 /// series (four or more digits), or one of the run's single files.
@@ -119,6 +128,24 @@ struct EmbeddedOutput {
     embedding: Embedding,
     triangles: Vec<[u32; 3]>,
     exporter: Box<dyn SkinExporter>,
+    cache: Option<Pc2Writer>,
+}
+
+/// Starts `STEM.pc2` in `dir` after writing its rest shape `STEM_rest.obj`.
+fn start_cache(
+    dir: &Path,
+    stem: &str,
+    rest: &[[f64; 3]],
+    triangles: &[[u32; 3]],
+    normals: mss_io::skin::Normals,
+) -> Result<Pc2Writer, IoError> {
+    mss_io::skin::write_obj_with(
+        &dir.join(format!("{stem}_rest.obj")),
+        rest,
+        triangles,
+        normals,
+    )?;
+    Pc2Writer::create(&dir.join(format!("{stem}.pc2")), rest.len(), 0.0, 1.0)
 }
 
 /// Writes the frames of one run into one folder.
@@ -131,6 +158,7 @@ pub struct FrameWriter {
     lattice_pvd: bool,
     skin: Option<Skin>,
     skin_exporters: Vec<(Box<dyn SkinExporter>, &'static str)>,
+    skin_cache: Option<Pc2Writer>,
     embedded: Option<EmbeddedOutput>,
     springs: Option<SpringsOutput>,
     cells: Vec<[u32; 8]>,
@@ -164,19 +192,49 @@ impl FrameWriter {
         for name in &out.exporters {
             lattice_exporters.push((exporters.frames(name, dir, LATTICE_PREFIX)?, None));
         }
-        let skin = (out.skin_obj || out.skin_stl).then(|| hexmesh::boundary_skin(lattice));
+        let skin =
+            (out.skin_obj || out.skin_stl || out.pc2).then(|| hexmesh::boundary_skin(lattice));
         let mut skin_exporters = Vec::new();
-        for (on, name) in [(out.skin_obj, "obj"), (out.skin_stl, "stl")] {
+        for (on, name, ext) in [
+            (out.skin_obj, out.skin_normals.obj_exporter(), "obj"),
+            (out.skin_stl, "stl", "stl"),
+        ] {
             if on {
                 let e = exporters.skins(name, dir, SKIN_PREFIX, SkinFrames::Every)?;
-                skin_exporters.push((e, name));
+                skin_exporters.push((e, ext));
             }
         }
+        let skin_cache = match (&skin, out.pc2) {
+            (Some(skin), true) => Some(start_cache(
+                dir,
+                SKIN_PREFIX,
+                &skin.positions(lattice.nodes()),
+                &skin.triangles,
+                out.skin_normals.normals(),
+            )?),
+            _ => None,
+        };
         let embedded = if out.embedded {
             Some(EmbeddedOutput {
                 embedding: Embedding::new(lattice, mesh),
                 triangles: mesh.triangles.clone(),
-                exporter: exporters.skins("obj", dir, SURFACE_PREFIX, SkinFrames::Every)?,
+                exporter: exporters.skins(
+                    out.surface_normals.obj_exporter(),
+                    dir,
+                    SURFACE_PREFIX,
+                    SkinFrames::Every,
+                )?,
+                cache: if out.pc2 {
+                    Some(start_cache(
+                        dir,
+                        SURFACE_PREFIX,
+                        &mesh.vertices,
+                        &mesh.triangles,
+                        out.surface_normals.normals(),
+                    )?)
+                } else {
+                    None
+                },
             })
         } else {
             None
@@ -193,6 +251,7 @@ impl FrameWriter {
             lattice_pvd: out.vtu && out.pvd,
             skin,
             skin_exporters,
+            skin_cache,
             embedded,
             springs,
             cells: lattice.cells().to_vec(),
@@ -245,8 +304,15 @@ impl FrameWriter {
         let vol: Vec<f64> = diag.iter().map(|d| d.volumetric_strain).collect();
         let shear: Vec<f64> = diag.iter().map(|d| d.shear_strain).collect();
         let corr: Vec<f64> = diag.iter().map(|d| d.correction_force).collect();
+        let material: Vec<u32> = if model.materials().len() > 1 {
+            (0..model.num_cells())
+                .map(|c| model.cell_material(c))
+                .collect()
+        } else {
+            Vec::new()
+        };
         if !self.lattice.is_empty() {
-            let frame = LatticeFrame::new(&points, &self.cells)
+            let mut frame = LatticeFrame::new(&points, &self.cells)
                 .with_point_field(Field::vectors("displacement", &displacement))
                 .with_point_field(Field::vectors("velocity", &velocity))
                 .with_point_field(Field::vectors("internal_force", &f_int))
@@ -255,6 +321,9 @@ impl FrameWriter {
                 .with_cell_field(Field::scalars("volumetric_strain", &vol))
                 .with_cell_field(Field::scalars("shear_strain", &shear))
                 .with_cell_field(Field::scalars("correction_force", &corr));
+            if !material.is_empty() {
+                frame = frame.with_cell_field(Field::ids("material", &material));
+            }
             let mut written = Vec::new();
             for (exporter, ext) in &mut self.lattice {
                 exporter.write_frame(index, state.time, &frame)?;
@@ -273,6 +342,9 @@ impl FrameWriter {
                 exporter.write_skin(index, state.time, &pos, &skin.triangles)?;
                 written.push(self.dir.join(format!("{SKIN_PREFIX}_{index:04}.{ext}")));
             }
+            if let Some(cache) = &mut self.skin_cache {
+                cache.append(&pos)?;
+            }
             for p in written {
                 self.count(&p);
             }
@@ -281,6 +353,9 @@ impl FrameWriter {
             let pos = e.embedding.deform(&points);
             e.exporter
                 .write_skin(index, state.time, &pos, &e.triangles)?;
+            if let Some(cache) = &mut e.cache {
+                cache.append(&pos)?;
+            }
             let p = self.dir.join(format!("{SURFACE_PREFIX}_{index:04}.obj"));
             self.count(&p);
         }
@@ -342,6 +417,25 @@ impl FrameWriter {
         if let Some(e) = &mut self.embedded {
             e.exporter.finish()?;
         }
+        let caches = [
+            self.skin_cache.as_mut(),
+            self.embedded.as_mut().and_then(|e| e.cache.as_mut()),
+        ];
+        // Each cache and its rest shape are counted when the cache is published.
+        let mut finished = Vec::new();
+        for cache in caches.into_iter().flatten() {
+            if cache.is_finished() {
+                continue;
+            }
+            cache.finish()?;
+            let path = cache.path().to_path_buf();
+            let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("");
+            finished.push(path.with_file_name(format!("{stem}_rest.obj")));
+            finished.push(path);
+        }
+        for p in finished {
+            self.count(&p);
+        }
         let p = self.dir.join(format!("{LATTICE_PREFIX}.pvd"));
         if self.lattice_pvd && p.exists() {
             self.count(&p);
@@ -383,7 +477,11 @@ pub fn frame_size_estimate(out: &OutputSection, n: &FrameCounts) -> u64 {
     // Points, then per spring: 2 Int64 node ids, an offset, a type, three
     // Float64 fields and a flag.
     let springs = (n.nodes * 24 + n.springs * (16 + 8 + 1 + 3 * 8 + 1)) as u64;
-    let obj = |v: usize, t: usize| (v * 60 + t * 24) as u64;
+    // A `v` or `vn` line is about 30 bytes, an `f` line 24 (smooth) or 30 (flat).
+    let obj = |v: usize, t: usize, normals: crate::scene::NormalsKey| match normals {
+        crate::scene::NormalsKey::Smooth => (v * 60 + t * 24) as u64,
+        crate::scene::NormalsKey::Flat => (v * 30 + t * 60) as u64,
+    };
     let stl = |t: usize| (84 + t * 50) as u64;
     let mut total = 0;
     if out.vtu {
@@ -393,13 +491,20 @@ pub fn frame_size_estimate(out: &OutputSection, n: &FrameCounts) -> u64 {
         total += lattice;
     }
     if out.skin_obj {
-        total += obj(n.skin_vertices, n.skin_triangles);
+        total += obj(n.skin_vertices, n.skin_triangles, out.skin_normals);
     }
     if out.skin_stl {
         total += stl(n.skin_triangles);
     }
     if out.embedded {
-        total += obj(n.surface_vertices, n.surface_triangles);
+        total += obj(n.surface_vertices, n.surface_triangles, out.surface_normals);
+    }
+    if out.pc2 {
+        // One f32 triple per vertex per frame.
+        total += 12 * n.skin_vertices as u64;
+        if out.embedded {
+            total += 12 * n.surface_vertices as u64;
+        }
     }
     if out.springs {
         total += springs * 4 / 3;

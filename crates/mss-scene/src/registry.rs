@@ -29,7 +29,7 @@ use mss_io::exporters::Exporters;
 /// assert_eq!(p.name(), "paper+hg");
 /// assert!(registry.integrators.contains("implicit"));
 /// assert!(registry.exporters.frame_names().contains(&"vtu".to_string()));
-/// assert_eq!(registry.loaders.known_extensions(), "obj, stl");
+/// assert_eq!(registry.loaders.known_extensions(), "obj, ply, stl, vtk, vtp, vtu");
 /// ```
 #[derive(Debug, Clone, Default)]
 pub struct Registry {

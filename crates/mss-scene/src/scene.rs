@@ -39,12 +39,14 @@
 //!     .unwrap_err()
 //!     .to_string();
 //! assert!(err.starts_with("bad.toml:3:1: unknown field `colour`"), "{err}");
-//! assert!(err.contains("expected `path`"), "{err}");
+//! assert!(err.contains("expected one of `path`"), "{err}");
 //! ```
 
 use std::fmt;
 use std::path::{Path, PathBuf};
 
+use crate::regions::{RegionSelector, RegionSpec};
+use hexmesh::placement::{Placement, PlacementError, Units, UpAxis};
 use hexmesh::voxelize::{ComponentPolicy, OccupancyRule, Resolution, VoxelizeOptions};
 use mss_core::Material;
 use mss_core::constraints::{ConstraintSpec, Dofs, Keyframe, Motion, NodeSelector};
@@ -159,15 +161,101 @@ pub struct Scene {
     /// `[output]`: folder, file kinds and frame schedule.
     #[serde(default)]
     pub output: OutputSection,
+    /// `[[regions]]`: cells with their own material (see [`crate::regions`]).
+    #[serde(default)]
+    pub regions: Vec<RegionSpec>,
 }
 
-/// `[mesh]`: the input surface (OBJ, STL, ...).
+/// `[mesh]`: the input surface (OBJ, STL, PLY, VTK) and where it is placed
+/// before voxelizing: `units`, `scale`, `up`, `rotate`, `translate`, applied
+/// in that order (see [`hexmesh::placement`]).
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MeshSection {
     /// Path of the surface mesh, relative to the scene file's folder, or a
     /// built-in mesh as `"builtin:NAME"` (`"builtin:critter"`).
     pub path: String,
+    /// Unit of the file's coordinates: `"m"` (default), `"cm"` or `"mm"`.
+    #[serde(default)]
+    pub units: UnitsKey,
+    /// Scale factor after units: one number, or `[sx, sy, sz]` (default 1).
+    #[serde(default)]
+    pub scale: ScaleKey,
+    /// The file's up axis, turned to +z: `"x"`, `"y"` or `"z"` (default).
+    #[serde(default)]
+    pub up: UpKey,
+    /// Rotation about the fixed x, then y, then z axis (degrees, default 0).
+    #[serde(default)]
+    pub rotate: [f64; 3],
+    /// Translation applied last (m, default 0).
+    #[serde(default)]
+    pub translate: [f64; 3],
+}
+
+impl MeshSection {
+    /// The placement these keys describe.
+    pub fn placement(&self) -> Placement {
+        Placement {
+            units: match self.units {
+                UnitsKey::M => Units::Metres,
+                UnitsKey::Cm => Units::Centimetres,
+                UnitsKey::Mm => Units::Millimetres,
+            },
+            scale: match self.scale {
+                ScaleKey::Uniform(s) => [s; 3],
+                ScaleKey::PerAxis(s) => s,
+            },
+            up: match self.up {
+                UpKey::X => UpAxis::X,
+                UpKey::Y => UpAxis::Y,
+                UpKey::Z => UpAxis::Z,
+            },
+            rotate_degrees: self.rotate,
+            translate: self.translate,
+        }
+    }
+}
+
+/// `[mesh] units`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum UnitsKey {
+    /// Metres.
+    #[default]
+    M,
+    /// Centimetres.
+    Cm,
+    /// Millimetres.
+    Mm,
+}
+
+/// `[mesh] up`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum UpKey {
+    /// +x is up.
+    X,
+    /// +y is up.
+    Y,
+    /// +z is up.
+    #[default]
+    Z,
+}
+
+/// `[mesh] scale`: one factor or one per axis.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(untagged, expecting = "a number or an array of 3 numbers")]
+pub enum ScaleKey {
+    /// The same factor along every axis.
+    Uniform(f64),
+    /// Factors along x, y, z.
+    PerAxis([f64; 3]),
+}
+
+impl Default for ScaleKey {
+    fn default() -> Self {
+        ScaleKey::Uniform(1.0)
+    }
 }
 
 /// Which connected components of the voxelized lattice are kept.
@@ -712,6 +800,18 @@ pub struct OutputSection {
     /// The input surface carried by the lattice, as OBJ per frame (default true).
     #[serde(default = "yes")]
     pub embedded: bool,
+    /// Shading of the skin OBJ files: `"flat"` (one normal per triangle,
+    /// default: the skin is made of cube faces) or `"smooth"`.
+    #[serde(default = "flat")]
+    pub skin_normals: NormalsKey,
+    /// Shading of the embedded surface's OBJ files: `"smooth"` (default) or `"flat"`.
+    #[serde(default)]
+    pub surface_normals: NormalsKey,
+    /// Point caches for Blender's Mesh Cache modifier (default false):
+    /// `skin.pc2` with its rest shape `skin_rest.obj`, and, with `embedded`,
+    /// `surface.pc2` with `surface_rest.obj`; one sample per frame.
+    #[serde(default)]
+    pub pc2: bool,
     /// The springs as lines per frame, `springs_NNNN.vtu`, with cell data
     /// `strain` ((l - L0) / L0), `stiffness` (N/m), `rest_length` (m) and
     /// `diagonal`, plus `springs.pvd` when frames form a series (default false).
@@ -728,6 +828,39 @@ pub struct OutputSection {
     /// [`Registry`](crate::Registry) (default none).
     #[serde(default)]
     pub exporters: Vec<String>,
+}
+
+/// `[output] skin_normals` / `surface_normals`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum NormalsKey {
+    /// One normal per vertex.
+    #[default]
+    Smooth,
+    /// One normal per triangle.
+    Flat,
+}
+
+impl NormalsKey {
+    /// The writer's setting.
+    pub fn normals(self) -> mss_io::skin::Normals {
+        match self {
+            NormalsKey::Smooth => mss_io::skin::Normals::Smooth,
+            NormalsKey::Flat => mss_io::skin::Normals::Flat,
+        }
+    }
+
+    /// The skin exporter writing OBJ files with these normals.
+    pub fn obj_exporter(self) -> &'static str {
+        match self {
+            NormalsKey::Smooth => "obj",
+            NormalsKey::Flat => "obj-flat",
+        }
+    }
+}
+
+fn flat() -> NormalsKey {
+    NormalsKey::Flat
 }
 
 fn default_folder() -> PathBuf {
@@ -747,6 +880,9 @@ impl Default for OutputSection {
             skin_obj: true,
             skin_stl: false,
             embedded: true,
+            skin_normals: NormalsKey::Flat,
+            surface_normals: NormalsKey::Smooth,
+            pc2: false,
             springs: false,
             every_steps: None,
             every_time: None,
@@ -882,7 +1018,13 @@ impl Scene {
     /// bundled mesh; a relative path is relative to the scene file's folder. In
     /// the bundled scene, [`BUNDLED_MESH_PATH`] is the bundled critter.
     pub fn mesh_source(&self, origin: &SceneOrigin) -> MeshSource {
-        let p = self.mesh.path.as_str();
+        Self::source_of(&self.mesh.path, origin)
+    }
+
+    /// Where a mesh path of a scene from `origin` points (the rules of
+    /// [`Scene::mesh_source`]).
+    pub fn source_of(path: &str, origin: &SceneOrigin) -> MeshSource {
+        let p = path;
         if let Some(name) = p.strip_prefix(BUILTIN_PREFIX) {
             return MeshSource::Builtin(name.to_owned());
         }
@@ -927,10 +1069,18 @@ impl Scene {
         if self.mesh.path.trim().is_empty() {
             return bad(
                 "[mesh] path",
-                "is empty; give the path of an OBJ or STL file (relative to the scene file) \
+                "is empty; give the path of a surface mesh file (OBJ, STL, PLY, VTK; relative to the scene file) \
                  or \"builtin:critter\""
                     .into(),
             );
+        }
+        if let Err(e) = self.mesh.placement().validate() {
+            let key = match e {
+                PlacementError::BadScale { .. } => "[mesh] scale",
+                PlacementError::NonFinite { what: "rotate", .. } => "[mesh] rotate",
+                _ => "[mesh] translate",
+            };
+            return bad(key, e.to_string());
         }
         let v = &self.voxelize;
         match (v.cells, v.cell_size) {
@@ -975,6 +1125,47 @@ impl Scene {
         }
         for (i, s) in self.fixed.iter().enumerate() {
             check_selector(s, &format!("[[fixed]] #{}", i + 1), name)?;
+        }
+        for (i, r) in self.regions.iter().enumerate() {
+            let key = format!("[[regions]] #{}", i + 1);
+            match &r.select {
+                RegionSelector::Box { min, max, .. } => check_box(min, max, &key, name)?,
+                RegionSelector::Sphere { centre, radius } => {
+                    if !(finite3(centre) && radius.is_finite() && *radius > 0.0) {
+                        return bad(
+                            &key,
+                            format!(
+                                "sphere centre = {centre:?}, radius = {radius}: the centre must \
+                                 be finite and the radius a positive length (m)"
+                            ),
+                        );
+                    }
+                }
+                RegionSelector::Mesh { path } if path.trim().is_empty() => {
+                    return bad(
+                        &key,
+                        "mesh path is empty; give a closed surface file".into(),
+                    );
+                }
+                RegionSelector::Mesh { .. } => {}
+            }
+            for (what, value) in [
+                ("young", r.young),
+                ("poisson", r.poisson),
+                ("density", r.density),
+            ] {
+                if let Some(v) = value
+                    && !v.is_finite()
+                {
+                    return bad(&key, format!("{what} = {v}; must be a finite number"));
+                }
+            }
+            if r.young.is_none() && r.poisson.is_none() && r.density.is_none() {
+                return bad(
+                    &key,
+                    "gives none of young, poisson, density: it would change nothing".into(),
+                );
+            }
         }
         let l = &self.loads;
         if let Some(g) = &l.gravity

@@ -207,6 +207,10 @@ pub struct BeamSettings {
     /// `None`: compressible neo-Hookean; the linear regime always uses linear
     /// elasticity).
     pub reference_law: Option<FemLaw>,
+    /// Young's modulus (Pa) of the free half (x > L / 2), for a beam of two
+    /// materials (`None`: one material, [`BEAM_YOUNG`], everywhere). Poisson's
+    /// ratio and density are the same in both halves.
+    pub second_half_young: Option<f64>,
 }
 
 /// The paper's cantilever dimensions and material.
@@ -260,13 +264,90 @@ pub fn timoshenko(x: f64, q: f64, e: f64, nu: f64) -> f64 {
     euler_bernoulli(x, q, e) + q * (BEAM_LENGTH * x - x * x / 2.0) / (5.0 / 6.0 * g * a)
 }
 
+/// Deflections `(x, Euler-Bernoulli, Timoshenko)` at `points` along a
+/// cantilever (length [`BEAM_LENGTH`], square side [`BEAM_SIDE`]) clamped at
+/// x = 0 under the line load `q` (N/m) whose Young's modulus varies along x
+/// as `young(x)`: curvature `M / EI` with `M = q (L - x)^2 / 2` and shear
+/// strain `V / (kappa G A)` with `V = q (L - x)`, integrated from the clamp
+/// (Simpson's rule on 4000 intervals per metre, exact for piecewise-constant
+/// moduli that jump on a grid point).
+pub fn beam_theories_varying(
+    q: f64,
+    young: &dyn Fn(f64) -> f64,
+    nu: f64,
+    points: &[f64],
+) -> Vec<(f64, f64, f64)> {
+    let i = BEAM_SIDE.powi(4) / 12.0;
+    let a = BEAM_SIDE * BEAM_SIDE;
+    let n = (4000.0 * BEAM_LENGTH).ceil() as usize;
+    let dx = BEAM_LENGTH / n as f64;
+    // A modulus jump at a grid point is taken from the side of each interval.
+    let mid = |k: usize| young((k as f64 + 0.5) * dx);
+    let (mut slope, mut bend, mut shear) = (0.0, 0.0, 0.0);
+    let mut grid = vec![(0.0, 0.0, 0.0)];
+    for k in 0..n {
+        let (x0, x1) = (k as f64 * dx, (k + 1) as f64 * dx);
+        let e = mid(k);
+        let g = e / (2.0 * (1.0 + nu));
+        let curvature = |x: f64| q * (BEAM_LENGTH - x).powi(2) / (2.0 * e * i);
+        let xm = 0.5 * (x0 + x1);
+        // Curvature is quadratic and slope cubic within an interval: Simpson's
+        // rule integrates both exactly.
+        let simpson = |a: f64, b: f64| {
+            (b - a) / 6.0 * (curvature(a) + 4.0 * curvature(0.5 * (a + b)) + curvature(b))
+        };
+        let slope_mid = slope + simpson(x0, xm);
+        let slope_end = slope_mid + simpson(xm, x1);
+        bend += dx / 6.0 * (slope + 4.0 * slope_mid + slope_end);
+        slope = slope_end;
+        let v = |x: f64| q * (BEAM_LENGTH - x) / (5.0 / 6.0 * g * a);
+        shear += 0.5 * dx * (v(x0) + v(x1));
+        grid.push((x1, bend, bend + shear));
+    }
+    points
+        .iter()
+        .map(|&x| {
+            let k = ((x / dx).floor() as usize).min(n - 1);
+            let t = (x - k as f64 * dx) / dx;
+            let (a0, b0) = (grid[k], grid[k + 1]);
+            (x, a0.1 + t * (b0.1 - a0.1), a0.2 + t * (b0.2 - a0.2))
+        })
+        .collect()
+}
+
 /// A static problem: lattice, material, clamped nodes, consistent nodal loads.
 struct Case<'a> {
-    material: Material,
+    /// The materials; cell `c` has `materials[material_at(centre of c)]`.
+    materials: Vec<Material>,
+    material_at: &'a dyn Fn([f64; 3]) -> u32,
     clamp: &'a dyn Fn([f64; 3]) -> bool,
     /// Consistent nodal forces on a lattice (coarse or refined).
     loads: &'a dyn Fn(&Fem) -> Vec<Vec3>,
     monitor: &'a dyn Fn([f64; 3]) -> bool,
+}
+
+/// Material index of every cell of `lattice`, from its centre.
+fn cell_materials(lattice: &Lattice, case: &Case) -> Vec<u32> {
+    let (o, h) = (lattice.origin(), lattice.h());
+    lattice
+        .cell_coords()
+        .iter()
+        .map(|c| (case.material_at)(std::array::from_fn(|k| o[k] + (c[k] as f64 + 0.5) * h)))
+        .collect()
+}
+
+/// The FEM of `lattice` refined `r` times with the case's materials.
+fn case_fem(lattice: &Lattice, r: u32, case: &Case) -> Result<Fem, ExperimentError> {
+    Ok(Fem::with_cell_materials(
+        lattice,
+        r,
+        &case.materials,
+        &cell_materials(lattice, case),
+    )?)
+}
+
+fn one_material(_: [f64; 3]) -> u32 {
+    0
 }
 
 fn mean_over(lattice: &Lattice, u: &[Vec3], pred: &dyn Fn([f64; 3]) -> bool) -> Vec3 {
@@ -292,7 +373,7 @@ fn reference(
 ) -> Result<(Vec<Vec<Vec3>>, ReferenceInfo), ExperimentError> {
     let t0 = std::time::Instant::now();
     let solve = |r: u32| -> Result<(Fem, Vec<Vec3>), ExperimentError> {
-        let fem = Fem::new(base, r, case.material)?;
+        let fem = case_fem(base, r, case)?;
         let bc = fem.clamp_where(case.clamp);
         let f = (case.loads)(&fem);
         let opts = NewtonOptions {
@@ -363,7 +444,7 @@ fn reference(
 
 /// Consistent nodal forces on an MSS lattice, computed like the FEM's.
 fn lattice_loads(lattice: &Lattice, case: &Case) -> Result<Vec<Vec3>, ExperimentError> {
-    let fem = Fem::new(lattice, 1, case.material)?;
+    let fem = case_fem(lattice, 1, case)?;
     Ok((case.loads)(&fem))
 }
 
@@ -389,7 +470,12 @@ fn mss_solve(
     param: &dyn Parameterization,
     regime: Regime,
 ) -> Result<Vec<Vec3>, ExperimentError> {
-    let model = Model::new(lattice, case.material, param)?;
+    let model = Model::with_cell_materials(
+        lattice,
+        &case.materials,
+        &cell_materials(lattice, case),
+        param,
+    )?;
     let f = lattice_loads(lattice, case)?;
     let fixed: Vec<bool> = lattice.nodes().iter().map(|&p| (case.clamp)(p)).collect();
     match regime {
@@ -501,12 +587,19 @@ fn section_curve(lattice: &Lattice, u: &[Vec3]) -> Vec<(f64, f64)> {
 pub fn beam(settings: &BeamSettings) -> Result<BeamResult, ExperimentError> {
     check_resolutions("beam", &settings.resolutions, settings.reference)?;
     let material = Material::new(BEAM_YOUNG, settings.poisson, settings.density)?;
+    let mut materials = vec![material];
+    if let Some(young) = settings.second_half_young {
+        materials.push(Material::new(young, settings.poisson, settings.density)?);
+    }
+    let two = materials.len() > 1;
     let lattice_for = |n: u32| Lattice::block([4 * n, n, n], BEAM_SIDE / n as f64, [0.0; 3]);
     let clamp = |p: [f64; 3]| p[0].abs() < 1e-9;
     let tip = |p: [f64; 3]| (p[0] - BEAM_LENGTH).abs() < 1e-9;
     let loads = |fem: &Fem| fem.gravity_load(Vec3::new(0.0, 0.0, -GRAVITY));
+    let halves = move |p: [f64; 3]| u32::from(two && p[0] > BEAM_LENGTH / 2.0);
     let case = Case {
-        material,
+        materials,
+        material_at: &halves,
         clamp: &clamp,
         loads: &loads,
         monitor: &tip,
@@ -539,20 +632,24 @@ pub fn beam(settings: &BeamSettings) -> Result<BeamResult, ExperimentError> {
         points: section_curve(&curve_lattice, &ref_fine),
     }];
     let xs: Vec<f64> = (0..=40).map(|i| BEAM_LENGTH * i as f64 / 40.0).collect();
+    let second = settings.second_half_young.unwrap_or(BEAM_YOUNG);
+    let young_at = |x: f64| {
+        if x > BEAM_LENGTH / 2.0 {
+            second
+        } else {
+            BEAM_YOUNG
+        }
+    };
+    let theories = beam_theories_varying(q, &young_at, settings.poisson, &xs);
     curves.push(Curve {
         label: "Euler-Bernoulli".into(),
-        points: xs
-            .iter()
-            .map(|&x| (x, euler_bernoulli(x, q, BEAM_YOUNG)))
-            .collect(),
+        points: theories.iter().map(|&(x, eb, _)| (x, eb)).collect(),
     });
     curves.push(Curve {
         label: "Timoshenko".into(),
-        points: xs
-            .iter()
-            .map(|&x| (x, timoshenko(x, q, BEAM_YOUNG, settings.poisson)))
-            .collect(),
+        points: theories.iter().map(|&(x, _, t)| (x, t)).collect(),
     });
+    let &(_, eb_tip, timoshenko_tip) = theories.last().unwrap_or(&(0.0, 0.0, 0.0));
     for r in &runs {
         curves.push(Curve {
             label: format!("{} {}x{}x{}", r.model, r.dims[0], r.dims[1], r.dims[2]),
@@ -563,8 +660,8 @@ pub fn beam(settings: &BeamSettings) -> Result<BeamResult, ExperimentError> {
         settings: settings.clone(),
         reference: info,
         runs,
-        euler_bernoulli_tip: euler_bernoulli(BEAM_LENGTH, q, BEAM_YOUNG),
-        timoshenko_tip: timoshenko(BEAM_LENGTH, q, BEAM_YOUNG, settings.poisson),
+        euler_bernoulli_tip: eb_tip,
+        timoshenko_tip,
         curves,
     })
 }
@@ -692,7 +789,8 @@ pub fn lshape(settings: &LShapeSettings) -> Result<LShapeResult, ExperimentError
     };
     let base = Lattice::l_shape(1, L_UNIT)?;
     let case = Case {
-        material,
+        materials: vec![material],
+        material_at: &one_material,
         clamp: &clamp,
         loads: &loads,
         monitor: &monitor,

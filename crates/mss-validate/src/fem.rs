@@ -56,6 +56,22 @@ pub enum FemError {
         /// Nodes of the (refined) mesh.
         nodes: usize,
     },
+    /// A cell's material index is out of range.
+    #[error("material index {index} does not exist ({count} materials given)")]
+    MaterialIndex {
+        /// Index given.
+        index: u32,
+        /// Materials given.
+        count: usize,
+    },
+    /// A cell material list does not have one entry per cell.
+    #[error("{given} cell materials for {cells} cells")]
+    CellCount {
+        /// Entries given.
+        given: usize,
+        /// Cells of the lattice.
+        cells: usize,
+    },
     /// A node index is out of range.
     #[error("node {node} does not exist (the mesh has {nodes} nodes)")]
     Node {
@@ -181,17 +197,26 @@ pub struct FemSolution {
 pub struct Fem {
     lattice: Lattice,
     refinement: u32,
-    mu: f64,
-    lambda: f64,
-    density: f64,
+    /// Lamé constants, density and linear element stiffness per material.
+    materials: Vec<FemMaterial>,
+    /// Material of each (refined) cell; empty when there is one material.
+    cell_material: Vec<u32>,
     /// Shape-function gradients (1/m) at the 8 Gauss points, `[gp][node][axis]`.
     grads: [[[f64; 3]; 8]; 8],
     /// Gauss weight times Jacobian determinant (same for every point).
     wdet: f64,
-    /// Linear element stiffness, row-major 24 x 24, dof `3 a + i`.
-    ke: Vec<f64>,
     /// The stiffness pattern (nodes sharing a cell), zero.
     pattern: BlockCsr,
+}
+
+/// One material of the reference: constants and its linear element stiffness.
+#[derive(Debug, Clone)]
+struct FemMaterial {
+    mu: f64,
+    lambda: f64,
+    density: f64,
+    /// Linear element stiffness, row-major 24 x 24, dof `3 a + i`.
+    ke: Vec<f64>,
 }
 
 /// Splits every cell of `lattice` into `r^3` cubes of edge `h / r`.
@@ -222,14 +247,42 @@ impl Fem {
     /// an isotropic material (E > 0, -1 < nu < 0.5; the density is used by
     /// [`Fem::gravity_load`]).
     pub fn new(lattice: &Lattice, refinement: u32, material: Material) -> Result<Self, FemError> {
-        let m = Material::with_poisson_range(
-            material.young,
-            material.poisson,
-            material.density,
-            -1.0,
-            0.5,
-        )?;
-        let lattice = refine(lattice, refinement)?;
+        Self::build(lattice, refinement, &[material], None)
+    }
+
+    /// Like [`Fem::new`], with material `materials[cell_material[c]]` in cell
+    /// `c` of `lattice` (and in every refined cell inside it).
+    pub fn with_cell_materials(
+        lattice: &Lattice,
+        refinement: u32,
+        materials: &[Material],
+        cell_material: &[u32],
+    ) -> Result<Self, FemError> {
+        if cell_material.len() != lattice.num_cells() {
+            return Err(FemError::CellCount {
+                given: cell_material.len(),
+                cells: lattice.num_cells(),
+            });
+        }
+        if let Some(&bad) = cell_material
+            .iter()
+            .find(|&&m| m as usize >= materials.len())
+        {
+            return Err(FemError::MaterialIndex {
+                index: bad,
+                count: materials.len(),
+            });
+        }
+        Self::build(lattice, refinement, materials, Some(cell_material))
+    }
+
+    fn build(
+        coarse: &Lattice,
+        refinement: u32,
+        materials: &[Material],
+        cell_material: Option<&[u32]>,
+    ) -> Result<Self, FemError> {
+        let lattice = refine(coarse, refinement)?;
         let h = lattice.h();
         let g = 1.0 / 3f64.sqrt();
         let mut grads = [[[0.0; 3]; 8]; 8];
@@ -249,38 +302,75 @@ impl Fem {
             }
         }
         let wdet = (h / 2.0).powi(3);
-        let (mu, lambda) = (m.shear_modulus(), m.lambda());
-        let mut ke = vec![0.0; 576];
-        for gr in &grads {
-            for a in 0..8 {
-                for b in 0..8 {
-                    let ga = gr[a];
-                    let gb = gr[b];
-                    let dot = ga[0] * gb[0] + ga[1] * gb[1] + ga[2] * gb[2];
-                    for i in 0..3 {
-                        for k in 0..3 {
-                            let mut v = lambda * ga[i] * gb[k] + mu * ga[k] * gb[i];
-                            if i == k {
-                                v += mu * dot;
+        let mut fem_materials = Vec::with_capacity(materials.len());
+        for material in materials {
+            let m = Material::with_poisson_range(
+                material.young,
+                material.poisson,
+                material.density,
+                -1.0,
+                0.5,
+            )?;
+            let (mu, lambda) = (m.shear_modulus(), m.lambda());
+            let mut ke = vec![0.0; 576];
+            for gr in &grads {
+                for a in 0..8 {
+                    for b in 0..8 {
+                        let ga = gr[a];
+                        let gb = gr[b];
+                        let dot = ga[0] * gb[0] + ga[1] * gb[1] + ga[2] * gb[2];
+                        for i in 0..3 {
+                            for k in 0..3 {
+                                let mut v = lambda * ga[i] * gb[k] + mu * ga[k] * gb[i];
+                                if i == k {
+                                    v += mu * dot;
+                                }
+                                ke[(3 * a + i) * 24 + 3 * b + k] += wdet * v;
                             }
-                            ke[(3 * a + i) * 24 + 3 * b + k] += wdet * v;
                         }
                     }
                 }
             }
+            fem_materials.push(FemMaterial {
+                mu,
+                lambda,
+                density: m.density,
+                ke,
+            });
         }
+        // A refined cell takes the material of the coarse cell it lies in.
+        let cell_material = match cell_material {
+            None => Vec::new(),
+            Some(per_coarse) => {
+                let index: std::collections::HashMap<[u32; 3], u32> = coarse
+                    .cell_coords()
+                    .iter()
+                    .enumerate()
+                    .map(|(c, &k)| (k, per_coarse[c]))
+                    .collect();
+                let r = refinement;
+                lattice
+                    .cell_coords()
+                    .iter()
+                    .map(|k| index.get(&k.map(|v| v / r)).copied().unwrap_or(0))
+                    .collect()
+            }
+        };
         let pattern = BlockCsr::lattice_pattern(lattice.num_nodes(), lattice.cells());
         Ok(Self {
             pattern,
             lattice,
             refinement,
-            mu,
-            lambda,
-            density: m.density,
+            materials: fem_materials,
+            cell_material,
             grads,
             wdet,
-            ke,
         })
+    }
+
+    fn material_of(&self, cell: usize) -> &FemMaterial {
+        let m = self.cell_material.get(cell).map_or(0, |&m| m as usize);
+        &self.materials[m]
     }
 
     /// The (refined) mesh the solution lives on.
@@ -316,9 +406,10 @@ impl Fem {
 
     /// Consistent nodal forces (N) of the body force `density * g` (`g` in m/s^2).
     pub fn gravity_load(&self, g: Vec3) -> Vec<Vec3> {
-        let per_node = self.density * self.lattice.h().powi(3) / 8.0;
+        let volume = self.lattice.h().powi(3);
         let mut f = vec![Vec3::zeros(); self.num_nodes()];
-        for cell in self.lattice.cells() {
+        for (c, cell) in self.lattice.cells().iter().enumerate() {
+            let per_node = self.material_of(c).density * volume / 8.0;
             for &n in cell {
                 f[n as usize] += g * per_node;
             }
@@ -555,10 +646,11 @@ impl Fem {
         let cells = self.lattice.cells();
         let per_elem: Vec<[f64; 24]> = cells
             .par_iter()
-            .map(|cell| {
+            .enumerate()
+            .map(|(c, cell)| {
                 let ue = gather(cell, u);
                 let mut fe = [0.0; 24];
-                self.element(law, &ue, &mut fe, None);
+                self.element(self.material_of(c), law, &ue, &mut fe, None);
                 fe
             })
             .collect();
@@ -574,13 +666,20 @@ impl Fem {
     }
 
     /// Element internal forces and (optionally) tangent for displacements `ue`.
-    fn element(&self, law: FemLaw, ue: &[f64; 24], fe: &mut [f64; 24], ke: Option<&mut [f64]>) {
+    fn element(
+        &self,
+        material: &FemMaterial,
+        law: FemLaw,
+        ue: &[f64; 24],
+        fe: &mut [f64; 24],
+        ke: Option<&mut [f64]>,
+    ) {
         if law == FemLaw::Linear {
             for (i, fi) in fe.iter_mut().enumerate() {
-                *fi = (0..24).map(|j| self.ke[i * 24 + j] * ue[j]).sum();
+                *fi = (0..24).map(|j| material.ke[i * 24 + j] * ue[j]).sum();
             }
             if let Some(ke) = ke {
-                ke.copy_from_slice(&self.ke);
+                ke.copy_from_slice(&material.ke);
             }
             return;
         }
@@ -588,7 +687,7 @@ impl Fem {
         if let Some(k) = ke.as_deref_mut() {
             k.fill(0.0);
         }
-        let (mu, lambda) = (self.mu, self.lambda);
+        let (mu, lambda) = (material.mu, material.lambda);
         for gr in &self.grads {
             // Deformation gradient F_iJ = delta_iJ + sum_a u_ai dN_a/dX_J.
             let mut f = [[0.0; 3]; 3];
@@ -645,14 +744,16 @@ impl Fem {
         let mut fint = vec![Vec3::zeros(); u.len()];
         let mut k = self.pattern.clone();
         const CHUNK: usize = 2048;
-        for chunk in cells.chunks(CHUNK) {
+        for (k_chunk, chunk) in cells.chunks(CHUNK).enumerate() {
             let elems: Vec<([f64; 24], Vec<f64>)> = chunk
                 .par_iter()
-                .map(|cell| {
+                .enumerate()
+                .map(|(c, cell)| {
                     let ue = gather(cell, u);
                     let mut fe = [0.0; 24];
                     let mut ke = vec![0.0; 576];
-                    self.element(law, &ue, &mut fe, Some(&mut ke));
+                    let material = self.material_of(k_chunk * CHUNK + c);
+                    self.element(material, law, &ue, &mut fe, Some(&mut ke));
                     (fe, ke)
                 })
                 .collect();

@@ -459,7 +459,14 @@ pub fn beam_section(
     let _ = writeln!(s, "## {title}\n");
     let _ = writeln!(
         s,
-        "Cantilever 0.4 x 0.1 x 0.1 m along x, x = 0 clamped, gravity 9.81 m/s^2 along -z, E = 1000 Pa, nu = {}, rho = {} kg/m^3 ({}).\n",
+        "Cantilever 0.4 x 0.1 x 0.1 m along x, x = 0 clamped, gravity 9.81 m/s^2 along -z, {}, nu = {}, rho = {} kg/m^3 ({}).\n",
+        match st.second_half_young {
+            None => "E = 1000 Pa".to_owned(),
+            Some(e) => format!(
+                "E = 1000 Pa for x < 0.2 m and {e} Pa for x > 0.2 m (per-cell materials in the MSS \
+                 and in the FEM; the beam theories integrate the stepped stiffness)"
+            ),
+        },
         st.poisson,
         st.density,
         st.regime.label()

@@ -88,6 +88,18 @@ fn models_with_hourglass() -> Result<Vec<SharedParameterization>, SuiteError> {
     Ok(builtin_models(&names)?)
 }
 
+/// Every built-in model family: the three, their hourglass-controlled
+/// variants and the barrier law.
+fn every_model() -> Result<Vec<SharedParameterization>, SuiteError> {
+    let names: Vec<&str> = MODELS
+        .iter()
+        .chain(&HOURGLASS_MODELS)
+        .chain(&["volumetric-barrier", "volumetric-barrier+hg"])
+        .copied()
+        .collect();
+    Ok(builtin_models(&names)?)
+}
+
 fn find<'a>(
     runs: &'a [experiments::RunResult],
     model: &str,
@@ -144,7 +156,8 @@ pub fn run_suite(
             (vec![1, 2, 4, 8], 16, vec![1, 2, 4, 8], 16)
         };
         // (prefix, title, nu, rho, regime, resolutions, reference cells,
-        // FEM law of a large-deflection reference, hourglass models too)
+        // FEM law of a large-deflection reference, hourglass models too,
+        // Young's modulus of the free half when it differs)
         let cases = [
             (
                 "beam_nu03",
@@ -156,6 +169,7 @@ pub fn run_suite(
                 refr,
                 None,
                 true,
+                None,
             ),
             (
                 "beam_nu0",
@@ -167,6 +181,7 @@ pub fn run_suite(
                 refr,
                 None,
                 false,
+                None,
             ),
             (
                 "beam_large",
@@ -178,6 +193,7 @@ pub fn run_suite(
                 ref_large,
                 None,
                 true,
+                None,
             ),
             // The same MSS runs against a St. Venant-Kirchhoff reference: the
             // law the independent large-deflection figures match (see the comparison).
@@ -191,22 +207,50 @@ pub fn run_suite(
                 ref_large,
                 Some(FemLaw::StVenantKirchhoff),
                 false,
+                None,
+            ),
+            // A stepped cantilever: the free half ten times stiffer than the
+            // clamped one (per-cell materials on both sides).
+            (
+                "beam_two_materials",
+                "Cantilever of two materials (x < 0.2 m: E = 1 kPa, x > 0.2 m: E = 10 kPa), small load, nu = 0.3",
+                0.3,
+                0.01,
+                Regime::Linear,
+                res.clone(),
+                refr,
+                None,
+                true,
+                Some(1.0e4),
             ),
         ];
-        for (prefix, title, nu, rho, regime, resolutions, reference, reference_law, hourglass) in
-            cases
+        for (
+            prefix,
+            title,
+            nu,
+            rho,
+            regime,
+            resolutions,
+            reference,
+            reference_law,
+            hourglass,
+            second_half_young,
+        ) in cases
         {
             let t = Instant::now();
             log::info!("running {title}");
             progress(title);
             let settings = BeamSettings {
+                second_half_young,
                 reference_law,
                 poisson: nu,
                 density: rho,
                 regime,
                 resolutions,
                 reference,
-                models: if hourglass {
+                models: if second_half_young.is_some() {
+                    every_model()?
+                } else if hourglass {
                     models_with_hourglass()?
                 } else {
                     models()?

@@ -35,6 +35,7 @@ fn error_metric_is_relative_to_the_largest_reference_displacement() {
 fn small_load_cantilever_errors_fall_and_paper_beats_springs() {
     // Reference: Q1 on 32x8x8 extrapolated with 16x4x4.
     let s = BeamSettings {
+        second_half_young: None,
         reference_law: None,
         poisson: 0.3,
         density: 0.01,
@@ -81,6 +82,7 @@ fn small_load_cantilever_errors_fall_and_paper_beats_springs() {
 #[test]
 fn nu_zero_cantilever_matches_model_md_tips() {
     let s = BeamSettings {
+        second_half_young: None,
         reference_law: None,
         poisson: 0.0,
         density: 0.01,
@@ -107,6 +109,7 @@ fn nu_zero_cantilever_matches_model_md_tips() {
 fn large_deflection_cantilever_errors_fall() {
     // Neo-Hookean reference on 16x4x4 (extrapolated with 8x2x2): coarse but fast.
     let s = BeamSettings {
+        second_half_young: None,
         reference_law: None,
         poisson: 0.3,
         density: 3.125,
@@ -172,6 +175,7 @@ fn hourglass_control_fixes_the_one_cell_beam_and_leaves_16x4x4_alone() {
     // The criterion for keeping the option: it must fix 4x1x1 (one cell
     // through the thickness, free mechanisms) without making 16x4x4 worse.
     let s = BeamSettings {
+        second_half_young: None,
         reference_law: None,
         poisson: 0.3,
         density: 0.01,
@@ -314,4 +318,73 @@ fn scene_comparison_refuses_drag_springs_and_prescribed_motions() {
         matches!(err, ExperimentError::UnsupportedConstraint { index: 2, .. }),
         "{err:?}"
     );
+}
+
+#[test]
+fn beam_theories_of_a_varying_modulus_reduce_to_the_closed_forms() {
+    use mss_validate::experiments::{
+        BEAM_LENGTH, BEAM_YOUNG, beam_theories_varying, euler_bernoulli, timoshenko,
+    };
+    let q = 0.981;
+    let xs: Vec<f64> = (0..=8).map(|i| BEAM_LENGTH * i as f64 / 8.0).collect();
+    for (x, eb, t) in beam_theories_varying(q, &|_| BEAM_YOUNG, 0.3, &xs) {
+        let (e0, t0) = (
+            euler_bernoulli(x, q, BEAM_YOUNG),
+            timoshenko(x, q, BEAM_YOUNG, 0.3),
+        );
+        assert!((eb - e0).abs() <= 1e-9 * e0.max(1e-30), "{x}: {eb} vs {e0}");
+        assert!((t - t0).abs() <= 1e-9 * t0.max(1e-30), "{x}: {t} vs {t0}");
+    }
+    // A free half ten times stiffer: less than the soft beam, more than the
+    // stiff one, and exactly the soft beam's up to the interface.
+    let half = |x: f64| {
+        if x > BEAM_LENGTH / 2.0 {
+            10.0 * BEAM_YOUNG
+        } else {
+            BEAM_YOUNG
+        }
+    };
+    let two = beam_theories_varying(q, &half, 0.3, &xs);
+    let tip = two[8].1;
+    assert!(tip < euler_bernoulli(BEAM_LENGTH, q, BEAM_YOUNG));
+    assert!(tip > euler_bernoulli(BEAM_LENGTH, q, 10.0 * BEAM_YOUNG));
+    assert!((two[4].1 - euler_bernoulli(BEAM_LENGTH / 2.0, q, BEAM_YOUNG)).abs() < 1e-12);
+}
+
+#[test]
+fn a_cantilever_of_two_materials_converges_to_its_reference() {
+    // Root half E = 1 kPa, free half 10 kPa: every model's error falls with
+    // refinement against the two-material FEM, and the FEM follows the
+    // stepped-beam theory.
+    let s = BeamSettings {
+        second_half_young: Some(1.0e4),
+        reference_law: None,
+        poisson: 0.3,
+        density: 0.01,
+        regime: Regime::Linear,
+        resolutions: vec![2, 4],
+        reference: 8,
+        models: builtin_models(&["paper", "springs", "volumetric", "volumetric-barrier+hg"])
+            .unwrap(),
+    };
+    let r = beam(&s).unwrap();
+    for m in ["paper", "springs", "volumetric", "volumetric-barrier+hg"] {
+        assert!(stats(&r, m, 4).0 < stats(&r, m, 2).0, "{m}");
+        assert!(stats(&r, m, 4).2 < stats(&r, m, 2).2, "{m}");
+    }
+    assert!(stats(&r, "volumetric", 4).0 < stats(&r, "springs", 4).0);
+    let tref = -r.reference.monitor_ref.z;
+    assert!(
+        (tref - r.timoshenko_tip).abs() < 0.05 * r.timoshenko_tip,
+        "{tref} vs {}",
+        r.timoshenko_tip
+    );
+    // Stiffer than a soft beam, softer than a stiff one.
+    let soft = mss_validate::experiments::timoshenko(
+        mss_validate::experiments::BEAM_LENGTH,
+        0.01 * 9.81 * 0.01,
+        1.0e3,
+        0.3,
+    );
+    assert!(tref < soft);
 }

@@ -214,3 +214,70 @@ fn consistent_loads_sum_to_the_resultant() {
         .sum();
     assert!((t.y - 5.0 * 0.04).abs() < 1e-14);
 }
+
+/// Two materials stacked along z under uniaxial tension (rollers on the
+/// planes x, y, z = 0): the layers act in series, so the top moves by
+/// sigma (H1 / E1 + H2 / E2) exactly, for any refinement; gravity weighs
+/// each cell with its own density.
+#[test]
+fn stacked_materials_stretch_in_series() {
+    let lat = Lattice::block([2, 2, 4], 0.25, [0.0; 3]).unwrap();
+    // nu = 0: the layers' lateral strains agree, so each is in uniaxial stress.
+    let soft = Material::new(1000.0, 0.0, 1.0).unwrap();
+    let stiff = Material::new(3000.0, 0.0, 5.0).unwrap();
+    let upper: Vec<u32> = lat
+        .cell_coords()
+        .iter()
+        .map(|c| u32::from(c[2] >= 2))
+        .collect();
+    for r in [1, 2] {
+        let fem = Fem::with_cell_materials(&lat, r, &[soft, stiff], &upper).unwrap();
+        let mut bc = FemConstraints::new(fem.num_nodes());
+        for (n, p) in fem.lattice().nodes().iter().enumerate() {
+            for (k, x) in p.iter().enumerate() {
+                if x.abs() < 1e-12 {
+                    bc.fix(n as u32, k, 0.0).unwrap();
+                }
+            }
+        }
+        let sigma = 2.0;
+        let f = fem.traction_load(
+            |c, _| (c[2] - 1.0).abs() < 1e-12,
+            Vec3::new(0.0, 0.0, sigma),
+        );
+        let sol = fem
+            .solve(FemLaw::Linear, &bc, &f, &NewtonOptions::default())
+            .unwrap();
+        let expected = sigma * (0.5 / 1000.0 + 0.5 / 3000.0);
+        for n in fem.nodes_where(|p| (p[2] - 1.0).abs() < 1e-12) {
+            let w = sol.displacement[n as usize].z;
+            assert!(
+                (w - expected).abs() < 1e-10 * expected,
+                "r {r}: {w} vs {expected}"
+            );
+        }
+        let g = fem.gravity_load(Vec3::new(0.0, 0.0, -1.0));
+        let total: f64 = g.iter().map(|v| v.z).sum();
+        assert!((total + 0.5 * 1.0 * 0.5 * 0.5 + 0.5 * 5.0 * 0.5 * 0.5).abs() < 1e-12);
+    }
+    // One material given twice is the single-material FEM.
+    let one = Fem::new(&lat, 1, soft).unwrap();
+    let twice = Fem::with_cell_materials(&lat, 1, &[soft, soft], &upper).unwrap();
+    let u: Vec<Vec3> = lat.nodes().iter().map(|&p| affine(p) * 10.0).collect();
+    let (a, b) = (
+        one.internal_forces(FemLaw::NeoHookean, &u).unwrap(),
+        twice.internal_forces(FemLaw::NeoHookean, &u).unwrap(),
+    );
+    assert_eq!(a, b);
+    assert!(matches!(
+        Fem::with_cell_materials(&lat, 1, &[soft], &upper),
+        Err(FemError::MaterialIndex { index: 1, count: 1 })
+    ));
+    assert!(matches!(
+        Fem::with_cell_materials(&lat, 1, &[soft], &[0]),
+        Err(FemError::CellCount {
+            given: 1,
+            cells: 16
+        })
+    ));
+}

@@ -40,11 +40,14 @@ pub fn run(args: &CheckArgs, global: &GlobalArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     println!("scene            {}: OK", job.input.name());
+    let [ex, ey, ez] = job.mesh.bounding_box().map_or([0.0; 3], |b| b.extent());
     println!(
-        "mesh             {}: {} vertices, {} triangles",
+        "mesh             {}: {} vertices, {} triangles, {ex:.4} x {ey:.4} x {ez:.4} m \
+         (placement: {})",
         job.mesh_name,
         job.mesh.vertices.len(),
-        job.mesh.triangles.len()
+        job.mesh.triangles.len(),
+        scene.mesh.placement()
     );
     println!(
         "lattice          {} cells, {} nodes, {} springs, cell size {:.4} m",
@@ -69,6 +72,20 @@ pub fn run(args: &CheckArgs, global: &GlobalArgs) -> anyhow::Result<()> {
             String::new()
         }
     );
+    if let Some(a) = &job.regions {
+        let cells = a.cells_per_material();
+        for (k, m) in a.materials.iter().enumerate().skip(1) {
+            println!(
+                "region #{k:<8} E = {} Pa, nu = {}, density = {} kg/m^3: {} cells ({} selected)",
+                m.young,
+                m.poisson,
+                m.density,
+                cells[k],
+                a.selected[k - 1]
+            );
+        }
+        println!("[material]       {} cells", cells[0]);
+    }
     println!("mass             {:.4} kg", model.total_mass());
     println!("held nodes       {}", report.held_nodes);
     println!(

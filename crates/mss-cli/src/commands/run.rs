@@ -103,11 +103,21 @@ fn interrupt_on_signals(cancel: &Cancel) -> anyhow::Result<()> {
 
 fn print_summary(s: &RunSummary) {
     println!("scene            {}", s.scene);
-    println!("mesh             {}", s.mesh);
+    let [ex, ey, ez] = s.mesh_extent;
+    println!(
+        "mesh             {} ({ex:.4} x {ey:.4} x {ez:.4} m; placement: {})",
+        s.mesh, s.placement
+    );
     println!(
         "lattice          {} cells, {} nodes, {} springs, cell size {:.4} m",
         s.cells, s.nodes, s.springs, s.cell_size
     );
+    if s.cells_per_material.len() > 1 {
+        println!(
+            "materials        cells per material ([material], then each region): {:?}",
+            s.cells_per_material
+        );
+    }
     println!(
         "mass             {:.4} kg, {} held nodes",
         s.mass, s.held_nodes

@@ -18,7 +18,7 @@ use crate::progress::JobBars;
 /// Arguments of `mss voxelize`.
 #[derive(Debug, Clone, Args)]
 pub struct VoxelizeArgs {
-    /// Surface mesh (OBJ or STL), or "builtin:critter".
+    /// Surface mesh (OBJ, STL, PLY, VTK .vtk/.vtu/.vtp), or "builtin:critter".
     #[arg(value_name = "MESH")]
     pub mesh: String,
     /// Cells along the longest axis of the mesh's bounding box [default: 24].
@@ -40,6 +40,15 @@ pub struct VoxelizeArgs {
     /// Refuse lattices with more cells than this.
     #[arg(long, value_name = "N", default_value_t = VoxelizeSection::default().max_cells)]
     pub max_cells: u64,
+    /// Unit of the mesh's coordinates: m, cm or mm (as `[mesh] units`).
+    #[arg(long, value_name = "UNIT", default_value = "m", value_parser = ["m", "cm", "mm"])]
+    pub units: String,
+    /// Scale factor after units (as `[mesh] scale`).
+    #[arg(long, value_name = "S", default_value_t = 1.0)]
+    pub scale: f64,
+    /// The mesh's up axis, turned to +z: x, y or z (as `[mesh] up`).
+    #[arg(long, value_name = "AXIS", default_value = "z", value_parser = ["x", "y", "z"])]
+    pub up: String,
     /// Also write the springs as lines: springs.vtu (rest_length, diagonal).
     // No strain or stiffness here: those need a material and a deformed
     // state; a scene's `[output] springs` writes them per frame.
@@ -124,7 +133,21 @@ pub fn run(args: &VoxelizeArgs, global: &GlobalArgs) -> anyhow::Result<()> {
     };
     mss_scene::build::prepare_output_folder(&out_dir)?;
     let t0 = Instant::now();
-    let (mesh_name, loaded) = mss_scene::build::load_mesh(&source, &Registry::default().loaders)?;
+    let (mesh_name, mut loaded) =
+        mss_scene::build::load_mesh(&source, &Registry::default().loaders)?;
+    let placement = hexmesh::Placement {
+        units: hexmesh::Units::from_symbol(&args.units).unwrap_or_default(),
+        scale: [args.scale; 3],
+        up: match args.up.as_str() {
+            "x" => hexmesh::UpAxis::X,
+            "y" => hexmesh::UpAxis::Y,
+            _ => hexmesh::UpAxis::Z,
+        },
+        ..hexmesh::Placement::default()
+    };
+    placement
+        .apply(&mut loaded.mesh)
+        .with_context(|| format!("cannot place {mesh_name} (--units, --scale, --up)"))?;
     let load_seconds = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
     let bars = JobBars::new(&mesh_name, global.chatty());
