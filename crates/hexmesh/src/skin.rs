@@ -6,8 +6,10 @@
 //! node (or an edge) do not form a single disc. The skin stays a closed
 //! 2-manifold by giving such a node one skin vertex per local fan of faces:
 //! at an edge shared by four boundary faces (two cells touching along the
-//! edge only) the faces are paired per cell, and the faces around a node are
-//! grouped into cycles across paired edges. Every group becomes its own skin
+//! edge only) the faces are paired per cell, or, where the two cells are
+//! joined through other cells around both ends of the edge (so that their
+//! common surface would touch itself along it), around each empty cell; and
+//! the faces around a node are grouped into cycles across paired edges. Every group becomes its own skin
 //! vertex, all bound to the same node. Hence every skin edge is used by
 //! exactly two triangles, in opposite directions, and the enclosed (signed)
 //! volume equals the lattice volume.
@@ -56,6 +58,60 @@ fn union(parent: &mut [u32], a: u32, b: u32) {
     }
 }
 
+/// Grid coordinates of the cell across face `face` (0..6 = -x, +x, -y, +y,
+/// -z, +z) of the cell at `c` (wrapping below 0, which no cell has).
+fn neighbour(c: [u32; 3], face: u8) -> [u32; 3] {
+    let axis = (face / 2) as usize;
+    let mut n = c;
+    n[axis] = if face.is_multiple_of(2) {
+        c[axis].wrapping_sub(1)
+    } else {
+        c[axis] + 1
+    };
+    n
+}
+
+/// Whether cells `c0` and `c1` (which share an edge ending at `node`) are
+/// joined through face-adjacent occupied cells among the 8 around `node`.
+fn joined_around(lattice: &Lattice, node: u32, c0: u32, c1: u32) -> bool {
+    let p = lattice.node_coords()[node as usize];
+    // The 2 x 2 x 2 block of cells around the node: bit i of the index is
+    // the offset along axis i.
+    let at = |i: usize| -> Option<u32> {
+        let c: [u32; 3] = std::array::from_fn(|k| {
+            if (i >> k) & 1 == 1 {
+                p[k]
+            } else {
+                p[k].wrapping_sub(1)
+            }
+        });
+        if c.contains(&u32::MAX) {
+            return None;
+        }
+        lattice.cell_at(c)
+    };
+    let block: [Option<u32>; 8] = std::array::from_fn(at);
+    let index_of = |cell: u32| block.iter().position(|&b| b == Some(cell));
+    let (Some(start), Some(goal)) = (index_of(c0), index_of(c1)) else {
+        return false;
+    };
+    let mut seen = 1u8 << start;
+    let mut stack = vec![start];
+    while let Some(i) = stack.pop() {
+        if i == goal {
+            return true;
+        }
+        for k in 0..3 {
+            let j = i ^ (1 << k);
+            if block[j].is_some() && seen & (1 << j) == 0 {
+                seen |= 1 << j;
+                stack.push(j);
+            }
+        }
+    }
+    false
+}
+
 /// Every boundary face of `lattice` as two outward triangles (see the module
 /// docs for how non-manifold nodes and edges are split).
 pub fn boundary_skin(lattice: &Lattice) -> Skin {
@@ -81,11 +137,27 @@ pub fn boundary_skin(lattice: &Lattice) -> Skin {
         let pairs: Vec<((u32, u8), (u32, u8))> = match users.len() {
             2 => vec![(users[0], users[1])],
             4 => {
-                // Two cells touching along this edge only: pair each cell's own two faces.
+                // Two cells touching along this edge only. Pair each cell's
+                // own two faces (the cells' surfaces part along the edge),
+                // unless the two cells are joined through other cells around
+                // both ends of the edge: then that surface would touch
+                // itself along the edge, and the faces are paired around
+                // each empty cell instead (the voids part).
                 let cell = |u: &(u32, u8)| faces[u.0 as usize].cell;
-                let first = cell(&users[0]);
-                let (same, other): (Vec<&FaceEdge>, Vec<&FaceEdge>) =
-                    users.iter().partition(|u| cell(u) == first);
+                let void = |u: &(u32, u8)| {
+                    let face = &faces[u.0 as usize];
+                    neighbour(lattice.cell_coords()[face.cell as usize], face.face)
+                };
+                let (a, b) = key;
+                let c0 = cell(&users[0]);
+                let c1 = users.iter().map(cell).find(|&c| c != c0).unwrap_or(c0);
+                let joined = joined_around(lattice, a, c0, c1) && joined_around(lattice, b, c0, c1);
+                let first = users[0];
+                let (same, other): (Vec<&FaceEdge>, Vec<&FaceEdge>) = if joined {
+                    users.iter().partition(|u| void(u) == void(&first))
+                } else {
+                    users.iter().partition(|u| cell(u) == cell(&first))
+                };
                 if same.len() == 2 && other.len() == 2 {
                     vec![(*same[0], *same[1]), (*other[0], *other[1])]
                 } else {

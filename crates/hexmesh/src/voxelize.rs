@@ -127,11 +127,24 @@ pub struct VoxelizeOptions {
     pub rule: OccupancyRule,
     /// Empty cells added around the bounding box on every side.
     pub padding_cells: u32,
-    /// Refuse grids with more cells than this (checked before allocating).
+    /// Refuse lattices with more occupied cells than this (checked after
+    /// classification, before the lattice is built).
     pub max_cells: u64,
+    /// Refuse bounding grids with more cells than this (checked before
+    /// anything is allocated; the grid costs about [`GRID_BYTES_PER_CELL`]
+    /// bytes per grid cell while classifying).
+    pub max_grid_cells: u64,
     /// Which components are kept.
     pub components: ComponentPolicy,
 }
+
+/// Bytes the voxelizer holds per cell of the bounding grid at its peak (the
+/// occupancy, the kept component, and the rows in flight).
+pub const GRID_BYTES_PER_CELL: u64 = 3;
+
+/// Bytes a built [`Lattice`] holds per occupied cell, about (cell
+/// coordinates and corners, nodes, their coordinates and the lookup).
+pub const LATTICE_BYTES_PER_CELL: u64 = 120;
 
 impl Default for VoxelizeOptions {
     fn default() -> Self {
@@ -139,7 +152,8 @@ impl Default for VoxelizeOptions {
             resolution: Resolution::CellsAlongLongestAxis(24),
             rule: OccupancyRule::Centre,
             padding_cells: 1,
-            max_cells: 2_000_000,
+            max_cells: 10_000_000,
+            max_grid_cells: 2_000_000_000,
             components: ComponentPolicy::LargestOnly,
         }
     }
@@ -180,15 +194,27 @@ pub enum VoxelizeError {
     /// An occupancy rule parameter is out of range.
     #[error("bad occupancy rule: {0}")]
     BadRule(String),
-    /// The grid would be too large.
+    /// The bounding grid would be too large to classify.
     #[error(
-        "grid of {dims:?} = {cells} cells exceeds the limit of {max_cells}: use a coarser \
-         resolution or raise max_cells"
+        "the bounding grid of {dims:?} = {cells} cells exceeds the limit of {max_grid_cells} \
+         (about {} bytes per grid cell while voxelizing): use a coarser resolution",
+        GRID_BYTES_PER_CELL
     )]
-    TooManyCells {
+    GridTooLarge {
         /// Grid dimensions that would be needed.
         dims: [u64; 3],
         /// Their product.
+        cells: u64,
+        /// The limit.
+        max_grid_cells: u64,
+    },
+    /// The lattice would have more occupied cells than allowed.
+    #[error(
+        "the lattice would have {cells} occupied cells, more than the limit of {max_cells}: use \
+         a coarser resolution or raise max_cells"
+    )]
+    TooManyCells {
+        /// Occupied cells.
         cells: u64,
         /// The limit.
         max_cells: u64,
@@ -372,10 +398,10 @@ pub fn plan_grid(mesh: &TriMesh, opts: &VoxelizeOptions) -> Result<Grid, Voxeliz
         // Tolerance so that an extent of exactly n cells gives n, not n + 1.
         let n = (ext[k] / h * (1.0 - 1e-12)).ceil().max(1.0);
         if !n.is_finite() || n > 1e12 {
-            return Err(VoxelizeError::TooManyCells {
+            return Err(VoxelizeError::GridTooLarge {
                 dims: [u64::MAX; 3],
                 cells: u64::MAX,
-                max_cells: opts.max_cells,
+                max_grid_cells: opts.max_grid_cells,
             });
         }
         dims64[k] = n as u64 + 2 * pad;
@@ -384,11 +410,11 @@ pub fn plan_grid(mesh: &TriMesh, opts: &VoxelizeOptions) -> Result<Grid, Voxeliz
         .iter()
         .try_fold(1u64, |a, &d| a.checked_mul(d))
         .unwrap_or(u64::MAX);
-    if cells > opts.max_cells || dims64.iter().any(|&d| d > u32::MAX as u64 / 2) {
-        return Err(VoxelizeError::TooManyCells {
+    if cells > opts.max_grid_cells || dims64.iter().any(|&d| d > u32::MAX as u64 / 2) {
+        return Err(VoxelizeError::GridTooLarge {
             dims: dims64,
             cells,
-            max_cells: opts.max_cells,
+            max_grid_cells: opts.max_grid_cells,
         });
     }
     let dims = dims64.map(|d| d as u32);
@@ -562,6 +588,13 @@ fn classify_and_build(
     let ms_components = ms(t1);
     if found == 0 {
         return Err(VoxelizeError::NoCells { h: grid.h });
+    }
+    let occupied_cells = kept.iter().filter(|&&o| o).count() as u64;
+    if occupied_cells > opts.max_cells {
+        return Err(VoxelizeError::TooManyCells {
+            cells: occupied_cells,
+            max_cells: opts.max_cells,
+        });
     }
     let t2 = Instant::now();
     let unique_edges = count_edges(&grid, &kept);
@@ -992,13 +1025,13 @@ mod tests {
     #[test]
     fn refused_grid_reports_nothing() {
         let opts = VoxelizeOptions {
-            max_cells: 10,
+            max_grid_cells: 10,
             ..VoxelizeOptions::default()
         };
         let called = Mutex::new(false);
         let hook = |_: u64, _: u64| *called.lock().unwrap() = true;
         let err = voxelize_with_progress(&critter(), &opts, &hook).unwrap_err();
-        assert!(matches!(err, VoxelizeError::TooManyCells { .. }), "{err}");
+        assert!(matches!(err, VoxelizeError::GridTooLarge { .. }), "{err}");
         assert!(!*called.lock().unwrap());
     }
 }

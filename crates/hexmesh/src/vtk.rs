@@ -317,6 +317,29 @@ impl MeshLoader for VtkLoader {
                 message: "neither a legacy VTK file (\"# vtk DataFile ...\") nor VTK XML".into(),
             });
         }
+        // vtkio passes over text it does not expect (a misspelt section is
+        // silently dropped) and its errors carry no position: check the
+        // geometry sections of ASCII surface files first.
+        if is_legacy
+            && !is_binary_legacy(bytes)
+            && is_surface_dataset(bytes)
+            && let Some((line, message)) = locate_legacy_problem(bytes)
+        {
+            return Err(LoadError::Parse {
+                file: PathBuf::from(name),
+                line: Some(line),
+                message,
+            });
+        }
+        // vtkio's XML reader asserts on mismatched tags (a panic, and no
+        // position): check that the XML is well formed first, with lines.
+        if is_xml && let Err((line, message)) = check_xml(bytes) {
+            return Err(LoadError::Parse {
+                file: PathBuf::from(name),
+                line: Some(line),
+                message,
+            });
+        }
         // vtkio is a pre-release: a panic inside it on a malformed file must
         // still be an error about that file, not an abort of the program.
         let parsed = std::panic::catch_unwind(|| {
@@ -389,6 +412,178 @@ impl MeshLoader for VtkLoader {
             triangles: surface.triangles,
         })
     }
+}
+
+/// Checks that `bytes` is well-formed XML (tags balanced and matching);
+/// on error, the 1-based line and what is wrong. Files with raw appended
+/// data (arbitrary bytes after `<AppendedData encoding="raw">`) are checked
+/// only up to it.
+fn check_xml(bytes: &[u8]) -> Result<(), (usize, String)> {
+    use quick_xml::events::Event;
+    let mut reader = quick_xml::Reader::from_reader(bytes);
+    reader.config_mut().check_end_names = true;
+    let mut buf = Vec::new();
+    let line_at = |pos: u64| {
+        let pos = (pos as usize).min(bytes.len());
+        bytes[..pos].iter().filter(|&&b| b == b'\n').count() + 1
+    };
+    // Open elements: name and line.
+    let mut open: Vec<(String, usize)> = Vec::new();
+    loop {
+        match reader.read_event_into(&mut buf) {
+            Ok(Event::Eof) => {
+                return match open.last() {
+                    None => Ok(()),
+                    Some((name, line)) => Err((
+                        line_at(bytes.len() as u64),
+                        format!(
+                            "the file ends inside <{name}> (opened on line {line}): is it truncated?"
+                        ),
+                    )),
+                };
+            }
+            Ok(Event::Start(e)) => {
+                if e.name().as_ref() == b"AppendedData"
+                    && e.attributes()
+                        .flatten()
+                        .any(|a| a.key.as_ref() == b"encoding" && a.value.as_ref() == b"raw")
+                {
+                    return Ok(());
+                }
+                let name = String::from_utf8_lossy(e.name().as_ref()).into_owned();
+                open.push((name, line_at(reader.buffer_position())));
+            }
+            Ok(Event::End(_)) => {
+                open.pop();
+            }
+            Ok(_) => {}
+            Err(e) => {
+                return Err((
+                    line_at(reader.error_position()),
+                    format!("malformed XML: {}", one_line(&e.to_string())),
+                ));
+            }
+        }
+        buf.clear();
+    }
+}
+
+/// Whether a legacy file's fourth line is `DATASET POLYDATA` or
+/// `DATASET UNSTRUCTURED_GRID`.
+fn is_surface_dataset(bytes: &[u8]) -> bool {
+    bytes.split(|&b| b == b'\n').nth(3).is_some_and(|l| {
+        let words: Vec<String> = String::from_utf8_lossy(l)
+            .split_whitespace()
+            .map(str::to_ascii_uppercase)
+            .collect();
+        words.len() == 2
+            && words[0] == "DATASET"
+            && (words[1] == "POLYDATA" || words[1] == "UNSTRUCTURED_GRID")
+    })
+}
+
+/// Whether a legacy file says `BINARY` on its third line.
+fn is_binary_legacy(bytes: &[u8]) -> bool {
+    bytes
+        .split(|&b| b == b'\n')
+        .nth(2)
+        .is_some_and(|l| l.trim_ascii().eq_ignore_ascii_case(b"BINARY"))
+}
+
+/// For an ASCII legacy file vtkio refused: the first line that is clearly
+/// wrong in the geometry sections (an unknown keyword, a token that is not a
+/// number where numbers are due, a section shorter than its header says),
+/// and what is wrong. Attribute data from `POINT_DATA` / `CELL_DATA` on is not
+/// checked.
+fn locate_legacy_problem(bytes: &[u8]) -> Option<(usize, String)> {
+    let text = String::from_utf8_lossy(bytes);
+    let lines: Vec<&str> = text.lines().collect();
+    // After the version, title, encoding and DATASET lines.
+    let mut at = 4;
+    while at < lines.len() {
+        let words: Vec<&str> = lines[at].split_whitespace().collect();
+        let header = at + 1;
+        at += 1;
+        let Some(first) = words.first() else {
+            continue;
+        };
+        let count = |i: usize| words.get(i).and_then(|w| w.parse::<u64>().ok());
+        let version5 = lines
+            .get(at)
+            .is_some_and(|l| l.trim_start().to_ascii_uppercase().starts_with("OFFSETS"));
+        let blocks: Vec<(Option<u64>, &str)> = match first.to_ascii_uppercase().as_str() {
+            "POINT_DATA" | "CELL_DATA" | "FIELD" | "METADATA" => return None,
+            "POINTS" => vec![(count(1).and_then(|n| n.checked_mul(3)), "point coordinates")],
+            "CELLS" if version5 => vec![(count(1), "offsets"), (count(2), "connectivity entries")],
+            "VERTICES" | "LINES" | "POLYGONS" | "TRIANGLE_STRIPS" | "CELLS" => {
+                vec![(count(2), "cell entries")]
+            }
+            "CELL_TYPES" => vec![(count(1), "cell types")],
+            _ => {
+                return Some((
+                    header,
+                    format!(
+                        "unexpected {:?} where a section keyword is due",
+                        lines[header - 1].trim()
+                    ),
+                ));
+            }
+        };
+        for (n, what) in blocks {
+            let Some(n) = n else {
+                return Some((
+                    header,
+                    format!("bad section header {:?}", lines[header - 1].trim()),
+                ));
+            };
+            if version5 {
+                // The OFFSETS / CONNECTIVITY line before each block.
+                at += 1;
+            }
+            if let Err(e) = take_numbers(&lines, &mut at, n, what) {
+                return Some(e);
+            }
+        }
+    }
+    None
+}
+
+/// Consumes `count` numbers from `lines` starting at `*at`; an error names
+/// the line of a token that is not a number, or where the section ended.
+fn take_numbers(
+    lines: &[&str],
+    at: &mut usize,
+    count: u64,
+    what: &str,
+) -> Result<(), (usize, String)> {
+    let mut left = count;
+    while left > 0 {
+        let Some(line) = lines.get(*at) else {
+            return Err((
+                lines.len(),
+                format!("the file ends {left} {what} short of the {count} announced"),
+            ));
+        };
+        for token in line.split_whitespace() {
+            if left == 0 {
+                return Err((
+                    *at + 1,
+                    format!("more values than the {count} {what} announced"),
+                ));
+            }
+            if token.parse::<f64>().is_err() {
+                return Err((
+                    *at + 1,
+                    format!(
+                        "{token:?} is not a number ({count} {what} announced, {left} still due)"
+                    ),
+                ));
+            }
+            left -= 1;
+        }
+        *at += 1;
+    }
+    Ok(())
 }
 
 fn one_line(s: &str) -> String {

@@ -278,4 +278,62 @@ fn bad_vtk_files_are_typed_errors() {
             "{needle}: {err}"
         );
     }
+    // XML: malformed or truncated files, with the line.
+    let vtu = std::fs::read_to_string(fixture("box_tets.vtu")).unwrap();
+    let cut = &vtu[..vtu.len() / 2];
+    let swapped = vtu.replacen("</Points>", "</Pionts>", 1);
+    for (text, needle) in [
+        (cut, "the file ends inside <"),
+        (swapped.as_str(), "malformed XML"),
+    ] {
+        match load_mesh_bytes(text.as_bytes(), MeshFormat::Vtk, "t.vtu").unwrap_err() {
+            LoadError::Parse {
+                line: Some(l),
+                message,
+                ..
+            } => assert!(l > 1 && message.contains(needle), "{l}: {message}"),
+            other => panic!("{needle}: {other:?}"),
+        }
+    }
+    // ASCII files: the line and the value at fault, also in version 5 files.
+    let v5 = std::fs::read_to_string(fixture("bunny_legacy_ascii.vtk")).unwrap();
+    let mut lines: Vec<&str> = v5.lines().collect();
+    lines[3689] = "3 4 q";
+    let v5_bad = lines.join("\n");
+    for (text, line, needle) in [
+        (
+            good.replace("POINTS 4", "POINTS 40"),
+            10,
+            "\"POLYGONS\" is not a number",
+        ),
+        (
+            good.replace("1 0 0\n", "1 x 0\n"),
+            7,
+            "\"x\" is not a number",
+        ),
+        (
+            good.replace("POLYGONS 4 16", "POLYGONS 4 26"),
+            14,
+            "ends 10 cell entries short",
+        ),
+        (
+            good.replace("POLYGONS", "POLYGONES"),
+            10,
+            "where a section keyword is due",
+        ),
+        (
+            v5_bad,
+            3690,
+            "\"q\" is not a number (11022 connectivity entries",
+        ),
+    ] {
+        match load_mesh_bytes(text.as_bytes(), MeshFormat::Vtk, "t.vtk").unwrap_err() {
+            LoadError::Parse {
+                line: Some(l),
+                message,
+                ..
+            } => assert!(l == line && message.contains(needle), "{l}: {message}"),
+            other => panic!("{needle}: {other:?}"),
+        }
+    }
 }

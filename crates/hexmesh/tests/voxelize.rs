@@ -63,8 +63,8 @@ fn refuses_bad_requests_before_allocating() {
         },
     )
     .unwrap_err();
-    assert!(matches!(err, VoxelizeError::TooManyCells { .. }), "{err}");
-    let limit = VoxelizeOptions::default().max_cells;
+    assert!(matches!(err, VoxelizeError::GridTooLarge { .. }), "{err}");
+    let limit = VoxelizeOptions::default().max_grid_cells;
     assert!(
         err.to_string()
             .contains(&format!("exceeds the limit of {limit}")),
@@ -302,4 +302,47 @@ fn bunny_as_binary_stl_with_solid_header_gives_same_cells() {
     assert!(s.stats.mesh_closed);
     // The OBJ has 6 decimals, so its coordinates are exact in f32 to well below a cell.
     assert_eq!(a.lattice.cell_coords(), s.lattice.cell_coords());
+}
+
+/// `max_cells` counts occupied cells, not the bounding grid: a thin diagonal
+/// shape whose grid is mostly empty fits a limit below its grid size, and a
+/// lattice above the limit is refused before it is built.
+#[test]
+fn max_cells_counts_occupied_cells() {
+    let m = hexmesh::generate::sphere(0.5, 3);
+    let base = VoxelizeOptions {
+        resolution: Resolution::CellsAlongLongestAxis(20),
+        ..Default::default()
+    };
+    let v = voxelize(&m, &base).unwrap();
+    let occupied = v.lattice.num_cells() as u64;
+    let grid: u64 = v.stats.grid_dims.iter().map(|&d| d as u64).product();
+    assert!(grid > occupied);
+    let just = VoxelizeOptions {
+        max_cells: occupied,
+        max_grid_cells: grid,
+        ..base.clone()
+    };
+    assert_eq!(
+        voxelize(&m, &just).unwrap().lattice.num_cells() as u64,
+        occupied
+    );
+    let under = VoxelizeOptions {
+        max_cells: occupied - 1,
+        ..base.clone()
+    };
+    match voxelize(&m, &under).unwrap_err() {
+        VoxelizeError::TooManyCells { cells, max_cells } => {
+            assert_eq!((cells, max_cells), (occupied, occupied - 1))
+        }
+        other => panic!("{other}"),
+    }
+    let small_grid = VoxelizeOptions {
+        max_grid_cells: grid - 1,
+        ..base
+    };
+    assert!(matches!(
+        voxelize(&m, &small_grid).unwrap_err(),
+        VoxelizeError::GridTooLarge { .. }
+    ));
 }

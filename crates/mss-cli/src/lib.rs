@@ -69,9 +69,23 @@ pub struct GlobalArgs {
     /// Output folder (overrides the scene's `[output] folder`).
     #[arg(long, value_name = "DIR", global = true)]
     pub out: Option<PathBuf>,
+    /// Memory a job may use, like 8GiB or 500MB (default: three quarters of
+    /// the machine's memory). Jobs estimated to need more are refused before
+    /// they allocate it.
+    #[arg(long, value_name = "SIZE", global = true, value_parser = mss_scene::limits::parse_size)]
+    pub max_memory: Option<u64>,
 }
 
 impl GlobalArgs {
+    /// The resource limits of the command line.
+    pub fn limits(&self) -> mss_scene::limits::Limits {
+        let mut limits = mss_scene::limits::Limits::default();
+        if let Some(m) = self.max_memory {
+            limits.memory_bytes = m;
+        }
+        limits
+    }
+
     /// Whether progress bars and summaries are shown.
     pub fn chatty(&self) -> bool {
         self.quiet == 0

@@ -134,20 +134,10 @@ pub fn spinner(what: &str, show: bool) -> ProgressBar {
     pb
 }
 
-/// Bytes as a short human-readable size (binary units).
+/// Bytes as a short human-readable size (binary units), as the library's
+/// messages write them.
 pub fn human_bytes(bytes: u64) -> String {
-    const UNITS: [&str; 5] = ["B", "KiB", "MiB", "GiB", "TiB"];
-    let mut v = bytes as f64;
-    let mut u = 0;
-    while v >= 1024.0 && u + 1 < UNITS.len() {
-        v /= 1024.0;
-        u += 1;
-    }
-    if u == 0 {
-        format!("{bytes} B")
-    } else {
-        format!("{v:.1} {}", UNITS[u])
-    }
+    mss_scene::error::human(bytes)
 }
 
 #[cfg(test)]

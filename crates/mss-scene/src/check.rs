@@ -5,26 +5,13 @@
 use serde::Serialize;
 
 use crate::job::Job;
-use crate::output::{FrameCounts, frame_size_estimate};
+use std::path::Path;
+
+use crate::limits::run_memory_estimate;
 
 /// Largest model (nodes) on which a run counts zero-energy modes before
 /// starting; [`CheckReport::new`] always counts them.
 pub const RUN_MODE_CHECK_MAX_NODES: usize = 20_000;
-
-/// Estimated memory of a run (bytes): the model, the state and the solver's
-/// work arrays; implicit and static solves add a sparse 3x3-block matrix
-/// (27 blocks per node row) and its solver's copies.
-pub fn memory_estimate(model_bytes: usize, nodes: usize, needs_matrix: bool) -> u64 {
-    let vec3 = 24;
-    let explicit = nodes * vec3 * 8;
-    let matrix = nodes * 27 * (72 + 4);
-    let extra = if needs_matrix {
-        3 * matrix + nodes * vec3 * 8
-    } else {
-        0
-    };
-    (model_bytes + explicit + extra) as u64
-}
 
 /// The figures of a prepared job that `mss check` prints.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -48,31 +35,42 @@ impl CheckReport {
     /// large lattices).
     pub fn new(job: &Job) -> Self {
         let model = job.problem.model();
-        let skin = hexmesh::boundary_skin(&job.lattice);
-        let frame_bytes = frame_size_estimate(
-            &job.input.scene.output,
-            &FrameCounts {
-                nodes: model.num_nodes(),
-                cells: model.num_cells(),
-                springs: model.num_springs(),
-                skin_vertices: skin.vertex_nodes.len(),
-                skin_triangles: skin.triangles.len(),
-                surface_vertices: job.mesh.vertices.len(),
-                surface_triangles: job.mesh.triangles.len(),
-            },
-        );
+        let (frame_bytes, frames) = job.output_estimate();
         let held_nodes = (0..model.num_nodes())
             .filter(|&n| job.problem.constraints().mask(n).iter().any(|&h| h))
             .count();
         let needs_matrix = !job.input.scene.solver.is_explicit();
         CheckReport {
             held_nodes,
-            memory_bytes: memory_estimate(model.memory_bytes(), model.num_nodes(), needs_matrix),
-            frames: job.plan.num_frames(),
+            memory_bytes: run_memory_estimate(model.num_cells(), model.num_nodes(), needs_matrix),
+            frames,
             frame_bytes,
             hourglass_stiffness: model.cell_coefficients(0).hourglass,
             mechanism_warning: mechanism_warning(job),
         }
+    }
+
+    /// Free bytes on the disk of `out_dir` and a warning when the output
+    /// would take more than half of it (the run refuses more than all of it).
+    pub fn disk(&self, out_dir: &Path) -> (Option<u64>, Option<String>) {
+        let free = crate::limits::free_disk_bytes(out_dir);
+        let needed = self.frames.saturating_mul(self.frame_bytes);
+        let warning = free.and_then(|f| {
+            (needed > f / 2).then(|| {
+                format!(
+                    "the output (about {}) {} the {} free in {}",
+                    crate::error::human(needed),
+                    if needed > f {
+                        "exceeds"
+                    } else {
+                        "takes more than half of"
+                    },
+                    crate::error::human(f),
+                    out_dir.display()
+                )
+            })
+        });
+        (free, warning)
     }
 }
 

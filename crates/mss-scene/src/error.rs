@@ -77,4 +77,58 @@ pub enum JobError {
     /// Writing an output file failed.
     #[error(transparent)]
     Output(#[from] mss_io::IoError),
+    /// The job would need more memory than the limit.
+    #[error(
+        "{scene}: {what} would need about {} of memory, more than the limit of {} ({}); use a coarser resolution{}",
+        human(*needed), human(*limit), limit_origin, hint
+    )]
+    Memory {
+        /// Scene name.
+        scene: String,
+        /// What would need it.
+        what: String,
+        /// Estimated bytes.
+        needed: u64,
+        /// The limit (bytes).
+        limit: u64,
+        /// Where the limit comes from.
+        limit_origin: &'static str,
+        /// What else can be done, starting with ", ".
+        hint: &'static str,
+    },
+    /// The output would not fit on the disk.
+    #[error(
+        "{scene}: the run would write about {} into {} ({frames} frames of about {} each), but only {} are free there; write fewer frames (`[output] every_time`, `last_only`), fewer file kinds, or into another folder",
+        human(*needed), folder.display(), human(*frame_bytes), human(*free)
+    )]
+    DiskSpace {
+        /// Scene name.
+        scene: String,
+        /// Output folder.
+        folder: PathBuf,
+        /// Frames the run writes.
+        frames: u64,
+        /// Estimated bytes per frame.
+        frame_bytes: u64,
+        /// Estimated bytes in all.
+        needed: u64,
+        /// Free bytes.
+        free: u64,
+    },
+}
+
+/// Bytes with a binary unit, for messages.
+pub fn human(bytes: u64) -> String {
+    const UNITS: [&str; 5] = ["B", "KiB", "MiB", "GiB", "TiB"];
+    let mut v = bytes as f64;
+    let mut u = 0;
+    while v >= 1024.0 && u + 1 < UNITS.len() {
+        v /= 1024.0;
+        u += 1;
+    }
+    if u == 0 {
+        format!("{bytes} B")
+    } else {
+        format!("{v:.1} {}", UNITS[u])
+    }
 }

@@ -14,6 +14,7 @@ use serde::Serialize;
 
 use crate::build::{SceneInput, TimePlan, load_mesh, prepare_output_folder};
 use crate::error::JobError;
+use crate::limits::{Limits, run_memory_estimate};
 use crate::output::{FrameWriter, remove_previous_run};
 use crate::registry::Registry;
 
@@ -94,6 +95,8 @@ pub struct Job {
     pub regions: Option<crate::regions::RegionAssignment>,
     /// The problem (model, constraints, loads, damping).
     pub problem: Problem,
+    /// The resource limits it was prepared with.
+    pub limits: Limits,
     /// Time stepping plan.
     pub plan: TimePlan,
     /// Seconds spent loading and voxelizing the mesh.
@@ -179,7 +182,32 @@ impl Job {
         registry: Registry,
         progress: ProgressFn<'_>,
     ) -> Result<Job, JobError> {
+        Self::prepare_with_limits(input, registry, Limits::default(), progress)
+    }
+
+    /// [`Job::prepare`] with resource limits: the bounding grid and the run
+    /// are estimated before they are allocated and refused above
+    /// `limits.memory_bytes` ([`crate::limits`]); the limits are kept for
+    /// the disk check of [`Job::run`].
+    pub fn prepare_with_limits(
+        input: SceneInput,
+        registry: Registry,
+        limits: Limits,
+        progress: ProgressFn<'_>,
+    ) -> Result<Job, JobError> {
         let scene_name = input.name();
+        let memory_error = |what: String, needed: u64, hint: &'static str| JobError::Memory {
+            scene: scene_name.clone(),
+            what,
+            needed,
+            limit: limits.memory_bytes,
+            limit_origin: if limits.memory_bytes == Limits::default().memory_bytes {
+                "three quarters of this machine's memory; --max-memory sets it"
+            } else {
+                "as set"
+            },
+            hint,
+        };
         let scene = &input.scene;
         let t0 = Instant::now();
         let (mesh_name, mut loaded) =
@@ -205,16 +233,64 @@ impl Job {
         if !placement.is_identity() {
             log::info!("{mesh_name}: placed with {placement}");
         }
-        let opts = scene.voxelize.options();
+        let mut opts = scene.voxelize.options();
+        // The lattice is built only below the cells the memory allows.
+        let needs_matrix = !scene.solver.is_explicit();
+        let budget = crate::limits::cell_budget(limits.memory_bytes, needs_matrix);
+        let memory_binds = budget < opts.max_cells;
+        opts.max_cells = opts.max_cells.min(budget);
+        // The grid is allocated whole while classifying: estimate it first.
+        if let Ok(grid) = hexmesh::voxelize::plan_grid(&loaded.mesh, &opts) {
+            let needed = grid.len() as u64 * hexmesh::voxelize::GRID_BYTES_PER_CELL;
+            if needed > limits.memory_bytes {
+                return Err(memory_error(
+                    format!("voxelizing (a bounding grid of {:?} cells)", grid.dims),
+                    needed,
+                    "",
+                ));
+            }
+        }
         let hook = |done: u64, total: u64| progress(Progress::Voxelizing { done, total });
         let vox = hexmesh::voxelize_with_progress(&loaded.mesh, &opts, &hook);
         progress(Progress::StageDone);
-        let vox = vox.map_err(|source| JobError::Voxelize {
-            scene: scene_name.clone(),
-            mesh: mesh_name.clone(),
-            source,
+        let vox = vox.map_err(|source| match source {
+            hexmesh::VoxelizeError::TooManyCells { cells, .. } if memory_binds => memory_error(
+                format!("a lattice of {cells} cells"),
+                run_memory_estimate(cells as usize, cells as usize, needs_matrix)
+                    + cells * hexmesh::voxelize::LATTICE_BYTES_PER_CELL,
+                if needs_matrix {
+                    ", or the explicit solver (no matrices)"
+                } else {
+                    ""
+                },
+            ),
+            source => JobError::Voxelize {
+                scene: scene_name.clone(),
+                mesh: mesh_name.clone(),
+                source,
+            },
         })?;
         let voxelize_seconds = t0.elapsed().as_secs_f64();
+        let needed = run_memory_estimate(
+            vox.lattice.num_cells(),
+            vox.lattice.num_nodes(),
+            needs_matrix,
+        );
+        if needed > limits.memory_bytes {
+            return Err(memory_error(
+                format!(
+                    "the {} run of {} cells",
+                    scene.solver.kind,
+                    vox.lattice.num_cells()
+                ),
+                needed,
+                if needs_matrix {
+                    ", or the explicit solver (no matrices)"
+                } else {
+                    ""
+                },
+            ));
+        }
         let (material, param) = input.material(&registry)?;
         let regions = if scene.regions.is_empty() {
             None
@@ -270,6 +346,7 @@ impl Job {
             lattice: vox.lattice,
             vox_stats: vox.stats,
             regions,
+            limits,
             problem,
             plan,
             voxelize_seconds,
@@ -300,6 +377,7 @@ impl Job {
         let plan = self.plan;
         let s = &scene.solver;
         let integrator = self.input.integrator(&self.registry, problem, &plan)?;
+        self.check_disk_space(out_dir)?;
         let mut state = State::at_rest(problem.model());
         problem.apply_constraints(&mut state);
         let mut steps_done = 0;
@@ -365,10 +443,19 @@ impl Job {
                         );
                         break;
                     }
+                    if plan.frame_after(k) {
+                        // A frame is written only of a state that passed
+                        // every check.
+                        integrator.check_next_step();
+                    }
                     if let Err(source) = integrator.step(problem, &mut state) {
                         progress(Progress::StageDone);
-                        // Keep what was simulated: the last good state is a frame.
-                        let _ = writer.write(problem, &state);
+                        // Keep what was simulated: the last good state is a
+                        // frame, unless it is the last frame already written
+                        // (time never goes back in the series).
+                        if writer.last_time().is_none_or(|t| state.time > t) {
+                            let _ = writer.write(problem, &state);
+                        }
                         let _ = writer.finish();
                         return Err(JobError::Solver {
                             scene: name,
@@ -431,6 +518,66 @@ impl Job {
             output_folder: out_dir.display().to_string(),
             interrupted,
         })
+    }
+
+    /// Estimated bytes of one frame and frames written by [`Job::run`].
+    pub fn output_estimate(&self) -> (u64, u64) {
+        let model = self.problem.model();
+        let skin = hexmesh::boundary_skin(&self.lattice);
+        let frame_bytes = crate::output::frame_size_estimate(
+            &self.input.scene.output,
+            &crate::output::FrameCounts {
+                nodes: model.num_nodes(),
+                cells: model.num_cells(),
+                springs: model.num_springs(),
+                skin_vertices: skin.vertex_nodes.len(),
+                skin_triangles: skin.triangles.len(),
+                surface_vertices: self.mesh.vertices.len(),
+                surface_triangles: self.mesh.triangles.len(),
+            },
+        );
+        (frame_bytes, self.plan.num_frames())
+    }
+
+    /// Refuses a run whose frames would not fit on the output folder's disk.
+    fn check_disk_space(&self, out_dir: &Path) -> Result<(), JobError> {
+        if !self.limits.check_disk {
+            return Ok(());
+        }
+        let Some(free) = self
+            .limits
+            .output_bytes
+            .or_else(|| crate::limits::free_disk_bytes(out_dir))
+        else {
+            return Ok(());
+        };
+        let (frame_bytes, frames) = self.output_estimate();
+        let needed = frame_bytes.saturating_mul(frames);
+        // The files of an earlier run there are replaced: their space counts.
+        let replaced: u64 = crate::output::previous_run_files(out_dir)
+            .iter()
+            .filter_map(|f| std::fs::metadata(f).ok())
+            .map(|m| m.len())
+            .sum();
+        if needed > free.saturating_add(replaced) {
+            return Err(JobError::DiskSpace {
+                scene: self.input.name(),
+                folder: out_dir.to_path_buf(),
+                frames,
+                frame_bytes,
+                needed,
+                free,
+            });
+        }
+        if needed > free / 2 {
+            log::warn!(
+                "{}: the run will write about {} bytes, more than half the {free} bytes free in {}",
+                self.input.name(),
+                needed,
+                out_dir.display()
+            );
+        }
+        Ok(())
     }
 
     fn writer(&self, out_dir: &Path) -> Result<FrameWriter, JobError> {

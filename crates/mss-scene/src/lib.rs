@@ -15,7 +15,8 @@
 //! - [`Job`]: prepare (load, voxelize, build) and run (time loop, outputs),
 //!   with progress through a callback and cancellation through [`Cancel`].
 //! - [`check`]: size, memory and output estimates and the mechanism warning
-//!   of a prepared job.
+//!   of a prepared job; [`limits`]: the memory and disk guards that refuse a
+//!   job before it allocates or writes too much.
 //! - [`regions`]: materials per region (`[[regions]]`: box, sphere or a
 //!   second mesh).
 //! - [`output`]: the frames of a run (lattice, skins, embedded surface,
@@ -58,6 +59,7 @@ pub mod build;
 pub mod check;
 pub mod error;
 pub mod job;
+pub mod limits;
 pub mod output;
 pub mod regions;
 pub mod registry;

@@ -163,6 +163,7 @@ pub struct FrameWriter {
     springs: Option<SpringsOutput>,
     cells: Vec<[u32; 8]>,
     next_index: usize,
+    last_time: Option<f64>,
     files: usize,
     bytes: u64,
 }
@@ -256,6 +257,7 @@ impl FrameWriter {
             springs,
             cells: lattice.cells().to_vec(),
             next_index: 0,
+            last_time: None,
             files: 0,
             bytes: 0,
         })
@@ -264,6 +266,11 @@ impl FrameWriter {
     /// Frames written so far.
     pub fn frames(&self) -> usize {
         self.next_index
+    }
+
+    /// Time of the last frame written (s), if any.
+    pub fn last_time(&self) -> Option<f64> {
+        self.last_time
     }
 
     /// Files written so far and their total size (bytes).
@@ -363,6 +370,7 @@ impl FrameWriter {
             self.write_springs(index, problem, state, &points)?;
         }
         self.next_index += 1;
+        self.last_time = Some(state.time);
         Ok(())
     }
 

@@ -300,3 +300,139 @@ fn static_solver_keys_reach_the_solver() {
         .to_string();
     assert!(err.contains("`iterative`"), "{err}");
 }
+
+/// A run that blows up writes no frame that failed the divergence checks,
+/// never goes back in time in its series, and says where it failed.
+#[test]
+fn a_diverging_run_writes_only_checked_frames_in_time_order() {
+    for (force, every) in [(1.0e15, 1), (2.0e3, 1), (2.0e3, 3)] {
+        let job = Job::prepare(
+            input(&format!(
+                "[[loads.forces]]\nselect = {{ kind = \"face\", face = \"z+\" }}\n\
+                 force = [{force:e}, 0.0, 0.0]\n[solver]\nduration = 0.05\n\
+                 [output]\nevery_steps = {every}\n"
+            )),
+            Registry::default(),
+            &no_progress,
+        )
+        .unwrap();
+        let out = tempfile::tempdir().unwrap();
+        let err = job
+            .run(out.path(), &no_progress, &Cancel::new())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("diverged at step")
+                && (err.contains("cell ") || err.contains("(first: "))
+                && err.contains("last good time"),
+            "{err}"
+        );
+        let times = pvd_times(&out.path().join("lattice.pvd"));
+        assert!(times.windows(2).all(|w| w[1] > w[0]), "{force}: {times:?}");
+        // Every frame written is a state that passed the checks: no cell
+        // turned inside out, no non-finite position.
+        let model = job.problem.model();
+        for k in 0..times.len() {
+            let skin =
+                std::fs::read_to_string(out.path().join(format!("skin_{k:04}.obj"))).unwrap();
+            assert!(
+                !skin.contains("NaN") && !skin.contains("inf"),
+                "{force}: frame {k}"
+            );
+        }
+        assert!(model.num_cells() > 0);
+    }
+}
+
+/// Jobs estimated to need more memory than the limit are refused before the
+/// allocation, naming the figures; a run whose output would not fit is
+/// refused before it writes anything.
+#[test]
+fn resource_limits_refuse_before_allocating_or_writing() {
+    use mss_scene::limits::Limits;
+    let tight = |memory: u64| Limits {
+        memory_bytes: memory,
+        ..Limits::default()
+    };
+    let err = |extra: &str, limits: Limits| {
+        Job::prepare_with_limits(input(extra), Registry::default(), limits, &no_progress)
+            .map(|_| ())
+            .unwrap_err()
+            .to_string()
+    };
+    // The grid alone: 8 cells along the critter need a few hundred grid cells.
+    let e = err("", tight(100));
+    assert!(
+        e.contains("voxelizing") && e.contains("limit of 100 B (as set)"),
+        "{e}"
+    );
+    // The same jobs fit the default limit.
+    let fits = Job::prepare(
+        input("[solver]\nkind = \"static\"\n"),
+        Registry::default(),
+        &no_progress,
+    )
+    .unwrap();
+    let (cells, nodes) = (fits.lattice.num_cells(), fits.lattice.num_nodes());
+    let explicit = mss_scene::limits::run_memory_estimate(cells, nodes, false);
+    let matrices = mss_scene::limits::run_memory_estimate(cells, nodes, true);
+    // The lattice: allowed to classify, not to build the run.
+    let e = err("", tight(explicit - 1000));
+    assert!(e.contains(&format!("a lattice of {cells} cells")), "{e}");
+    // Matrices of a static solve: the explicit run would fit; the way out is named.
+    let e = err("[solver]\nkind = \"static\"\n", tight(matrices - 1));
+    assert!(e.contains("explicit solver") && e.contains("memory"), "{e}");
+    Job::prepare_with_limits(
+        input(""),
+        Registry::default(),
+        tight(matrices - 1),
+        &no_progress,
+    )
+    .unwrap();
+
+    let limits = Limits {
+        output_bytes: Some(10_000),
+        ..Limits::default()
+    };
+    let job =
+        Job::prepare_with_limits(input(""), Registry::default(), limits, &no_progress).unwrap();
+    let out = tempfile::tempdir().unwrap();
+    let dir = out.path().join("run");
+    let e = job
+        .run(&dir, &no_progress, &Cancel::new())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("would write about") && e.contains("free there"),
+        "{e}"
+    );
+    assert!(!dir.exists() || std::fs::read_dir(&dir).unwrap().next().is_none());
+}
+
+/// The scene fuzz inputs kept in the repository (`fuzz/seeds/scene`,
+/// `fuzz/corpus-min/scene`, `fuzz/regressions/scene`) parse or give a
+/// one-line error, as the fuzz target asserts.
+#[test]
+fn kept_scene_fuzz_inputs_parse_or_fail_on_one_line() {
+    let root = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fuzz");
+    let mut n = 0;
+    for kind in ["seeds", "corpus-min", "regressions"] {
+        let Ok(dir) = std::fs::read_dir(root.join(kind).join("scene")) else {
+            continue;
+        };
+        for entry in dir.filter_map(Result::ok) {
+            let bytes = std::fs::read(entry.path()).unwrap();
+            if let Ok(text) = std::str::from_utf8(&bytes)
+                && let Err(e) = mss_scene::Scene::from_toml_str(text, "fuzz.toml")
+            {
+                assert!(
+                    !e.to_string().contains('\n'),
+                    "{}: {e}",
+                    entry.path().display()
+                );
+            }
+            n += 1;
+        }
+    }
+    assert!(n >= 2);
+}

@@ -27,7 +27,7 @@ pub fn run(args: &CheckArgs, global: &GlobalArgs) -> anyhow::Result<()> {
         });
     let bars = JobBars::new(&label, global.chatty());
     // The same preparation as `mss run`: whatever it refuses, check refuses.
-    let job = super::run::prepare(args.scene.as_deref(), None, &bars)?;
+    let job = super::run::prepare(args.scene.as_deref(), None, global.limits(), &bars)?;
     let report = CheckReport::new(&job);
     let scene = &job.input.scene;
     let model = job.problem.model();
@@ -98,14 +98,23 @@ pub fn run(args: &CheckArgs, global: &GlobalArgs) -> anyhow::Result<()> {
         "time stepping    {}, dt = {:.3e} s, {} steps for {} s",
         scene.solver.kind, plan.dt, plan.steps, scene.solver.duration
     );
-    println!("memory estimate  {}", human_bytes(report.memory_bytes));
     println!(
-        "output estimate  {} frames x {} = {} in {}",
+        "memory estimate  {} (limit {})",
+        human_bytes(report.memory_bytes),
+        human_bytes(job.limits.memory_bytes)
+    );
+    let (free, disk_warning) = report.disk(&out_dir);
+    println!(
+        "output estimate  {} frames x {} = {} in {}{}",
         report.frames,
         human_bytes(report.frame_bytes),
         human_bytes(report.frame_bytes.saturating_mul(report.frames)),
-        out_dir.display()
+        out_dir.display(),
+        free.map_or_else(String::new, |f| format!(" ({} free)", human_bytes(f)))
     );
+    if let Some(w) = &disk_warning {
+        println!("warning          {w}");
+    }
     match &report.mechanism_warning {
         Some(w) => println!("warning          {w}"),
         None => println!("mechanisms       none expected"),

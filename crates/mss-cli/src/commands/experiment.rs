@@ -74,9 +74,14 @@ pub struct ExperimentArgs {
 
 /// Runs `mss experiment`, writing into `out_dir`; `chatty` shows progress
 /// and prints a summary.
-pub fn run(args: &ExperimentArgs, out_dir: &Path, chatty: bool) -> anyhow::Result<()> {
+pub fn run(
+    args: &ExperimentArgs,
+    out_dir: &Path,
+    chatty: bool,
+    limits: mss_scene::limits::Limits,
+) -> anyhow::Result<()> {
     let which = match args.which {
-        Which::Scene => return run_scene(args, out_dir, chatty),
+        Which::Scene => return run_scene(args, out_dir, chatty, limits),
         Which::Beam => Experiment::Beam,
         Which::Lshape => Experiment::Lshape,
         Which::Material => Experiment::Material,
@@ -146,7 +151,12 @@ fn relative_link(report: &Path, out_dir: &Path) -> String {
 /// `mss experiment scene SCENE.toml`: the scene's static equilibrium against
 /// the FEM reference, written as `report.md`, `scene_errors.csv` and
 /// `scene_MODEL.vtu`.
-fn run_scene(args: &ExperimentArgs, out_dir: &Path, chatty: bool) -> anyhow::Result<()> {
+fn run_scene(
+    args: &ExperimentArgs,
+    out_dir: &Path,
+    chatty: bool,
+    limits: mss_scene::limits::Limits,
+) -> anyhow::Result<()> {
     let t_all = Instant::now();
     let path = args
         .scene
@@ -156,7 +166,8 @@ fn run_scene(args: &ExperimentArgs, out_dir: &Path, chatty: bool) -> anyhow::Res
     let name = input.name();
     let registry = mss_scene::Registry::default();
     let bars = progress::JobBars::new(&name, chatty);
-    let job = mss_scene::Job::prepare(input, registry.clone(), &|p| bars.report(p));
+    let job =
+        mss_scene::Job::prepare_with_limits(input, registry.clone(), limits, &|p| bars.report(p));
     bars.clear();
     let job = job?;
     let scene = &job.input.scene;

@@ -39,7 +39,7 @@ pub fn dispatch(cli: &Cli) -> anyhow::Result<()> {
                 .out
                 .clone()
                 .unwrap_or_else(|| "out/experiments".into());
-            experiment::run(a, &out, cli.global.chatty())
+            experiment::run(a, &out, cli.global.chatty(), cli.global.limits())
         }
     }
 }

@@ -27,6 +27,7 @@ pub struct RunArgs {
 pub fn prepare(
     scene: Option<&std::path::Path>,
     duration: Option<f64>,
+    limits: mss_scene::limits::Limits,
     bars: &JobBars,
 ) -> anyhow::Result<Job> {
     let mut input = SceneInput::load(scene)?;
@@ -36,7 +37,7 @@ pub fn prepare(
         }
         input.scene.solver.duration = d;
     }
-    let job = Job::prepare(input, Registry::default(), &|p| bars.report(p));
+    let job = Job::prepare_with_limits(input, Registry::default(), limits, &|p| bars.report(p));
     bars.clear();
     Ok(job?)
 }
@@ -53,7 +54,7 @@ pub fn run(args: &RunArgs, global: &GlobalArgs) -> anyhow::Result<()> {
     let bars = JobBars::new(&label, show);
     // Everything is checked before the output folder is created, so that bad
     // input leaves no file behind.
-    let job = prepare(args.scene.as_deref(), args.duration, &bars)?;
+    let job = prepare(args.scene.as_deref(), args.duration, global.limits(), &bars)?;
     let out_dir = mss_scene::build::output_folder(&job.input.scene, global.out.as_deref());
     // A static solve reports mechanisms itself, as its one-line error; dynamic
     // runs go on, so they get the warning.

@@ -126,7 +126,16 @@ pub fn run(args: &VoxelizeArgs, global: &GlobalArgs) -> anyhow::Result<()> {
         },
         max_cells: args.max_cells,
     };
-    let opts = section.options();
+    let mut opts = section.options();
+    // Grid and lattice within the memory limit (the lattice and its
+    // outputs cost about as much per cell as an explicit run).
+    let limits = global.limits();
+    opts.max_grid_cells = opts
+        .max_grid_cells
+        .min(limits.memory_bytes / hexmesh::voxelize::GRID_BYTES_PER_CELL);
+    opts.max_cells = opts
+        .max_cells
+        .min(mss_scene::limits::cell_budget(limits.memory_bytes, false));
     let source = match args.mesh.strip_prefix(mss_scene::scene::BUILTIN_PREFIX) {
         Some(name) => MeshSource::Builtin(name.to_owned()),
         None => MeshSource::File(PathBuf::from(&args.mesh)),

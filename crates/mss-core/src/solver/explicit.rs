@@ -23,6 +23,10 @@
 //! longer sub-step again. Only when the shortest sub-step fails too is the
 //! failure returned: then it is not the step (docs/robustness.md).
 //!
+//! A step after [`Integrator::check_next_step`] ends with a full check, so
+//! a state written as a frame has always passed them; the state kept after a
+//! failure is the last one that passed.
+//!
 //! Steps do not allocate: forces, damping products and the last-good snapshot
 //! live in buffers owned by [`Explicit`]. Node updates run in parallel over
 //! fixed-size chunks with no reduction other than a logical AND, so results are
@@ -155,6 +159,8 @@ pub struct Explicit {
     good_valid: bool,
     steps: u64,
     since_check: u32,
+    /// Whether the step under way ends with a check ([`Integrator::check_next_step`]).
+    check_at_end: bool,
     /// `state.time` at the end of the last step (to notice external changes).
     last_time: f64,
 }
@@ -236,6 +242,7 @@ impl Explicit {
             good_valid: false,
             steps: 0,
             since_check: 0,
+            check_at_end: false,
             last_time: f64::NAN,
         })
     }
@@ -283,7 +290,8 @@ impl Explicit {
             if !ok {
                 return Attempt::Failed(Divergence::NonFinite);
             }
-            if self.since_check >= self.opts.check_interval {
+            let last = s + 1 == self.substeps;
+            if self.since_check >= self.opts.check_interval || (last && self.check_at_end) {
                 if let Some(reason) = self.check(problem.model(), state) {
                     return Attempt::Failed(reason);
                 }
@@ -303,7 +311,7 @@ impl Explicit {
                     self.calm_checks = 0;
                 }
                 self.since_check = 0;
-                if s + 1 == self.substeps {
+                if last {
                     state.time = t_end;
                 }
                 self.save_good(state);
@@ -467,6 +475,10 @@ impl Integrator for Explicit {
         self.dt
     }
 
+    fn check_next_step(&mut self) {
+        self.check_at_end = true;
+    }
+
     fn step(&mut self, problem: &Problem, state: &mut State) -> Result<StepInfo, SolverError> {
         state.check_size(problem.model())?;
         if !self.good_valid || self.last_time != state.time {
@@ -516,6 +528,7 @@ impl Integrator for Explicit {
                 self.update_substep();
                 continue;
             }
+            self.check_at_end = false;
             let time = state.time;
             state.x.copy_from_slice(&self.good.x);
             state.v.copy_from_slice(&self.good.v);
@@ -529,6 +542,7 @@ impl Integrator for Explicit {
                 hint: EXPLICIT_HINT,
             });
         }
+        self.check_at_end = false;
         let substeps = self.substeps;
         self.good_substeps += u64::from(substeps);
         if self.fail_halvings > 0 && self.good_substeps >= self.relax_after {

@@ -569,6 +569,12 @@ pub trait Integrator: Send {
     fn step(&mut self, problem: &Problem, state: &mut State) -> Result<StepInfo, SolverError>;
     /// The time advanced by one call to [`Integrator::step`] (s).
     fn dt(&self) -> f64;
+    /// Asks that the next [`Integrator::step`] end with every divergence
+    /// check the integrator has (an integrator that checks only every few
+    /// sub-steps, like [`Explicit`], checks at the end of that step too), so
+    /// that the state it returns can be written as a frame. The default does
+    /// nothing: an integrator that checks every step needs nothing more.
+    fn check_next_step(&mut self) {}
 }
 
 /// Newton iteration limit per step or load increment of the implicit and
