@@ -10,10 +10,12 @@
 //! Knows nothing of file formats: it takes a [`hexmesh::Lattice`].
 
 pub mod constraints;
+pub mod contact;
 pub mod loads;
 pub mod material;
 pub mod model;
 pub mod modes;
+pub mod simulation;
 pub mod solver;
 pub mod sparse;
 pub mod springs;

@@ -738,6 +738,15 @@ impl Model {
     pub fn cell_coefficients(&self, cell: usize) -> CellCoefficients {
         self.coefficients[self.cell_material(cell) as usize]
     }
+    /// Nodes on the lattice's boundary (outer surface and cavities): those
+    /// with fewer than 8 cells around them, ascending.
+    pub fn boundary_nodes(&self) -> Vec<u32> {
+        (0..self.num_nodes())
+            .filter(|&n| self.adj_offsets[n + 1] - self.adj_offsets[n] < 8)
+            .map(|n| n as u32)
+            .collect()
+    }
+
     /// Approximate heap memory of the model (bytes), excluding workspaces.
     pub fn memory_bytes(&self) -> usize {
         self.rest.capacity() * 24

@@ -92,9 +92,30 @@ impl SceneInput {
 
     /// The problem of the scene for a built model: constraints, loads, damping.
     pub fn problem(&self, model: mss_core::Model) -> Result<Problem, JobError> {
+        self.problem_with(model, &Loaders::default())
+    }
+
+    /// [`SceneInput::problem`] with `loaders` for the meshes that
+    /// `[[obstacles]]` name (placed like `[mesh]`).
+    pub fn problem_with(
+        &self,
+        model: mss_core::Model,
+        loaders: &Loaders,
+    ) -> Result<Problem, JobError> {
         let scene = &self.scene;
         let n_fixed = scene.fixed.len();
-        Problem::from_specs(
+        let placement = scene.mesh.placement();
+        let mesh_of = |path: &str| -> Result<hexmesh::TriMesh, String> {
+            let source = Scene::source_of(path, &self.origin);
+            let (name, mut loaded) = load_mesh(&source, loaders).map_err(|e| e.to_string())?;
+            placement
+                .apply(&mut loaded.mesh)
+                .map_err(|e| format!("{name}: {e}"))?;
+            Ok(loaded.mesh)
+        };
+        let contact = crate::obstacles::build_contact(&model, &scene.obstacles, &mesh_of)
+            .map_err(|(i, e)| self.setting(&format!("[[obstacles]] #{}", i + 1), e))?;
+        let problem = Problem::from_specs(
             model,
             &scene.constraint_specs(),
             &scene.loads.specs(),
@@ -109,6 +130,10 @@ impl SceneInput {
             }
             ProblemError::Load { source, .. } => self.setting("[loads]", source),
             other => self.setting("[solver]", other),
+        })?;
+        Ok(match contact {
+            Some(c) => problem.with_contact(c),
+            None => problem,
         })
     }
 

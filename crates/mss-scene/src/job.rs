@@ -335,7 +335,7 @@ impl Job {
             scene: scene_name.clone(),
             source,
         })?;
-        let problem = input.problem(model)?;
+        let problem = input.problem_with(model, &registry.loaders)?;
         let plan = input.time_plan(&problem)?;
         // Refuse a bad integrator choice (unknown name, a dt above the
         // stability limit) here, before anything is written.

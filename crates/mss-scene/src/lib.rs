@@ -17,6 +17,8 @@
 //! - [`check`]: size, memory and output estimates and the mechanism warning
 //!   of a prepared job; [`limits`]: the memory and disk guards that refuse a
 //!   job before it allocates or writes too much.
+//! - [`obstacles`]: the rigid obstacles of `[[obstacles]]` (contact with
+//!   friction).
 //! - [`regions`]: materials per region (`[[regions]]`: box, sphere or a
 //!   second mesh).
 //! - [`output`]: the frames of a run (lattice, skins, embedded surface,
@@ -60,6 +62,7 @@ pub mod check;
 pub mod error;
 pub mod job;
 pub mod limits;
+pub mod obstacles;
 pub mod output;
 pub mod regions;
 pub mod registry;

@@ -311,6 +311,9 @@ impl FrameWriter {
         let vol: Vec<f64> = diag.iter().map(|d| d.volumetric_strain).collect();
         let shear: Vec<f64> = diag.iter().map(|d| d.shear_strain).collect();
         let corr: Vec<f64> = diag.iter().map(|d| d.correction_force).collect();
+        let contact_force = problem
+            .contact()
+            .map(|_| to_arr(&problem.contact_forces(state)));
         let material: Vec<u32> = if model.materials().len() > 1 {
             (0..model.num_cells())
                 .map(|c| model.cell_material(c))
@@ -330,6 +333,9 @@ impl FrameWriter {
                 .with_cell_field(Field::scalars("correction_force", &corr));
             if !material.is_empty() {
                 frame = frame.with_cell_field(Field::ids("material", &material));
+            }
+            if let Some(f) = &contact_force {
+                frame = frame.with_point_field(Field::vectors("contact_force", f));
             }
             let mut written = Vec::new();
             for (exporter, ext) in &mut self.lattice {

@@ -164,6 +164,9 @@ pub struct Scene {
     /// `[[regions]]`: cells with their own material (see [`crate::regions`]).
     #[serde(default)]
     pub regions: Vec<RegionSpec>,
+    /// `[[obstacles]]`: rigid obstacles the body touches (see [`crate::obstacles`]).
+    #[serde(default)]
+    pub obstacles: Vec<crate::obstacles::ObstacleSpec>,
 }
 
 /// `[mesh]`: the input surface (OBJ, STL, PLY, VTK) and where it is placed

@@ -436,3 +436,109 @@ fn kept_scene_fuzz_inputs_parse_or_fail_on_one_line() {
     }
     assert!(n >= 2);
 }
+
+/// `[[obstacles]]` reach the problem, their forces the frames, and bad
+/// values are refused with their key.
+#[test]
+fn obstacles_reach_the_problem_and_bad_ones_are_refused() {
+    let ground = "[[obstacles]]\nshape = { kind = \"ground\" }\nfriction = 0.4\n\
+                  [solver]\nduration = 0.01\n[output]\nlast_only = true\n";
+    let job = Job::prepare(input(ground), Registry::default(), &no_progress).unwrap();
+    let contact = job.problem.contact().expect("contact");
+    let (o, s) = contact.obstacles().next().unwrap();
+    assert_eq!((s.friction_static, s.friction_kinetic), (0.4, 0.4));
+    let lowest = job
+        .problem
+        .model()
+        .rest_positions()
+        .iter()
+        .map(|p| p.z)
+        .fold(f64::INFINITY, f64::min);
+    assert!(
+        o.penetration(0.0, mss_core::Vec3::new(0.0, 0.0, lowest - 1e-6))
+            .is_some()
+    );
+    assert!(
+        o.penetration(0.0, mss_core::Vec3::new(0.0, 0.0, lowest + 1e-6))
+            .is_none()
+    );
+    let out = tempfile::tempdir().unwrap();
+    job.run(out.path(), &no_progress, &Cancel::new()).unwrap();
+    let vtu = std::fs::read_to_string(out.path().join("lattice_0000.vtu")).unwrap();
+    assert!(vtu.contains("Name=\"contact_force\""));
+    // A closed mesh as the obstacle: a slab under the body, from a file.
+    let dir = tempfile::tempdir().unwrap();
+    let slab = hexmesh::generate::box_mesh([-1.0, -1.0, lowest - 0.1], [1.0, 1.0, lowest - 1e-3]);
+    let mut obj = String::new();
+    for p in &slab.vertices {
+        obj += &format!("v {} {} {}\n", p[0], p[1], p[2]);
+    }
+    for t in &slab.triangles {
+        obj += &format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1);
+    }
+    let slab_path = dir.path().join("slab.obj");
+    std::fs::write(&slab_path, obj).unwrap();
+    let text = scene(&format!(
+        "[[obstacles]]\nshape = {{ kind = \"mesh\", path = {:?} }}\n",
+        slab_path.display().to_string()
+    ));
+    let job = Job::prepare(
+        SceneInput::from_toml(&text, "test.toml").unwrap(),
+        Registry::default(),
+        &no_progress,
+    )
+    .unwrap();
+    let (o, _) = job.problem.contact().unwrap().obstacles().next().unwrap();
+    let inside = o
+        .penetration(0.0, mss_core::Vec3::new(0.0, 0.0, lowest - 0.01))
+        .unwrap();
+    assert!((inside.depth - (0.01 - 1e-3)).abs() < 1e-9 && inside.normal.z > 0.999);
+    for (extra, needle) in [
+        (
+            "shape = { kind = \"mesh\", path = \"no/such.obj\" }\n",
+            "no/such.obj",
+        ),
+        (
+            "shape = { kind = \"sphere\", centre = [0.0, 0.0, 0.0], radius = -1.0 }\n",
+            "radius",
+        ),
+        (
+            "shape = { kind = \"plane\", point = [0.0, 0.0, 0.0], normal = [0.0, 0.0, 0.0] }\n",
+            "normal",
+        ),
+        (
+            "shape = { kind = \"ground\" }\nfriction = -0.1\n",
+            "friction",
+        ),
+        (
+            "shape = { kind = \"ground\" }\nfriction = 0.2\nfriction_kinetic = 0.5\n",
+            "kinetic",
+        ),
+        (
+            "shape = { kind = \"ground\" }\nstiffness = 0.0\n",
+            "stiffness",
+        ),
+        (
+            "shape = { kind = \"ground\" }\nmotion = [[1.0, 0.0, 0.0, 0.0], [0.5, 0.0, 0.0, 0.0]]\n",
+            "increasing",
+        ),
+        ("shape = { kind = \"cone\" }\n", "unknown variant `cone`"),
+        (
+            "shape = { kind = \"ground\" }\nbounce = 1.0\n",
+            "unknown field `bounce`",
+        ),
+    ] {
+        let e = SceneInput::from_toml(&scene(&format!("[[obstacles]]\n{extra}")), "test.toml")
+            .and_then(|i| Job::prepare(i, Registry::default(), &no_progress))
+            .map(|_| ())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(needle) && e.contains("test.toml"),
+            "{extra}: {e}"
+        );
+        if !needle.starts_with("unknown") {
+            assert!(e.contains("[[obstacles]] #1"), "{e}");
+        }
+    }
+}

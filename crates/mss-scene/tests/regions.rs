@@ -196,25 +196,39 @@ fn bad_regions_are_refused_with_their_key() {
     }
 }
 
-#[test]
-fn the_templates_region_example_works_on_the_critter() {
+/// The template with its commented example that starts with `first_line`
+/// uncommented.
+fn template_with_example(first_line: &str) -> String {
     let template = mss_scene::scene::TEMPLATE_SCENE_TOML;
-    let start = template.find("# [[regions]]").expect("a region example");
+    let start = template.find(first_line).expect("the example");
     let end = start + template[start..].find("\n\n").unwrap();
     let uncommented: String = template[start..end]
         .lines()
         .map(|l| l.trim_start_matches("# "))
         .collect::<Vec<_>>()
         .join("\n");
-    let text = format!(
+    format!(
         "{}{}\n{}",
         &template[..start],
         uncommented,
         &template[end..]
-    );
+    )
+}
+
+#[test]
+fn the_templates_region_example_works_on_the_critter() {
+    let text = template_with_example("# [[regions]]");
     assert!(text.contains("\n[[regions]]\nselect = "));
     let input = SceneInput::from_toml(&text, "template.toml").unwrap();
     let job = Job::prepare(input, Registry::default(), &no_progress).unwrap();
     let a = job.regions.unwrap();
     assert!(a.selected[0] > 0 && a.materials[1].young == 2.0e5);
+}
+
+#[test]
+fn the_templates_obstacle_examples_work_on_the_critter() {
+    let text = template_with_example("# [[obstacles]]");
+    let input = SceneInput::from_toml(&text, "template.toml").unwrap();
+    let job = Job::prepare(input, Registry::default(), &no_progress).unwrap();
+    assert_eq!(job.problem.contact().unwrap().obstacles().count(), 2);
 }

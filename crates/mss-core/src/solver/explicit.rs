@@ -44,6 +44,10 @@ use crate::{BlockCsr, Model, Vec3};
 /// Nodes per parallel task.
 const CHUNK: usize = 1024;
 
+/// How much finer than its stability limit the explicit step resolves a
+/// contact oscillation (see [`explicit_time_step_limit`]).
+pub const CONTACT_RESOLUTION: f64 = 2.0;
+
 /// How many times a failing step is retried with its sub-step halved.
 pub const MAX_HALVINGS: u32 = 5;
 
@@ -115,7 +119,17 @@ impl Default for ExplicitOptions {
 /// The largest stable explicit step (s) for `problem`, times `safety`
 /// (see the module docs).
 pub fn explicit_time_step_limit(problem: &Problem, safety: f64) -> f64 {
-    let w = 2.0 / problem.model().critical_time_step();
+    let model = problem.model();
+    let w_model = 2.0 / model.critical_time_step();
+    // A contact spring on the lightest boundary node adds k / m to omega^2
+    // (Gershgorin: it sits on that node's diagonal). Contact switches on and
+    // off within an oscillation, which Verlet integrates without energy
+    // drift only when it resolves it: that part counts CONTACT_RESOLUTION^2
+    // times (about 7 steps per contact period at safety 0.9).
+    let w_contact_sq = problem.contact().map_or(0.0, |c| {
+        c.omega_sq(model) * CONTACT_RESOLUTION * CONTACT_RESOLUTION
+    });
+    let w = (w_model * w_model + w_contact_sq).sqrt();
     let d = problem.damping();
     let c = d.alpha + d.beta * w * w;
     safety * 4.0 / ((c * c + 4.0 * w * w).sqrt() + c)
@@ -223,6 +237,7 @@ impl Explicit {
                 x: vec![Vec3::zeros(); n],
                 v: vec![Vec3::zeros(); n],
                 time: 0.0,
+                contact: Vec::new(),
             },
             ws: problem.model().workspace(),
             f_cons: vec![Vec3::zeros(); n],
@@ -238,6 +253,7 @@ impl Explicit {
                 x: vec![Vec3::zeros(); n],
                 v: vec![Vec3::zeros(); n],
                 time: 0.0,
+                contact: Vec::new(),
             },
             good_valid: false,
             steps: 0,
@@ -324,6 +340,7 @@ impl Explicit {
     fn restart_step(&mut self, state: &mut State, good_before: f64) {
         state.x.copy_from_slice(&self.start.x);
         state.v.copy_from_slice(&self.start.v);
+        state.contact.clone_from(&self.start.contact);
         state.time = self.start.time;
         if self.good.time > good_before {
             // A checkpoint inside the abandoned attempt is not good.
@@ -338,11 +355,17 @@ impl Explicit {
         self.dt_sub
     }
 
-    fn conservative_forces(&mut self, problem: &Problem, x: &[Vec3], t: f64) {
+    /// Internal, external and contact forces at `state` (contact damping and
+    /// friction use its velocities and anchors).
+    fn conservative_forces(&mut self, problem: &Problem, state: &State) {
         let model = problem.model();
+        let (x, t) = (&state.x, state.time);
         model.internal_forces_with(x, &mut self.ws, &mut self.f_cons);
         for l in problem.loads() {
             l.add_forces(model, t, x, 1.0, &mut self.f_cons);
+        }
+        if let Some(c) = problem.contact() {
+            c.add_forces(model, t, x, &state.v, &state.contact, &mut self.f_cons);
         }
     }
 
@@ -416,29 +439,33 @@ impl Explicit {
         match self.opts.scheme {
             ExplicitScheme::VelocityVerlet => {
                 if !cached {
-                    self.conservative_forces(problem, &state.x, t0);
+                    self.conservative_forces(problem, state);
                 }
                 self.damping_product(problem, &state.v);
                 let mut ok = self.kick(problem, &mut state.v, 0.5 * dt);
                 ok &= Self::drift(problem, state, dt, t1);
-                self.conservative_forces(problem, &state.x, t1);
+                state.time = t1;
+                self.conservative_forces(problem, state);
                 self.damping_product(problem, &state.v);
                 ok &= self.kick(problem, &mut state.v, 0.5 * dt);
-                state.time = t1;
                 self.cache_x.copy_from_slice(&state.x);
                 self.cache_time = t1;
-                self.cache_valid = ok;
+                // Friction anchors move after the step: the cached force,
+                // which used the old ones, is then not the force at t1.
+                self.cache_valid = ok && problem.contact().is_none();
+                problem.update_contact(state);
                 ok
             }
             ExplicitScheme::SymplecticEuler => {
                 if !cached {
-                    self.conservative_forces(problem, &state.x, t0);
+                    self.conservative_forces(problem, state);
                 }
                 self.damping_product(problem, &state.v);
                 let mut ok = self.kick(problem, &mut state.v, dt);
                 ok &= Self::drift(problem, state, dt, t1);
                 state.time = t1;
                 self.cache_valid = false;
+                problem.update_contact(state);
                 ok
             }
         }
@@ -458,6 +485,7 @@ impl Explicit {
     fn save_good(&mut self, state: &State) {
         self.good.x.copy_from_slice(&state.x);
         self.good.v.copy_from_slice(&state.v);
+        self.good.contact.clone_from(&state.contact);
         self.good.time = state.time;
         self.good_valid = true;
     }
@@ -493,6 +521,7 @@ impl Integrator for Explicit {
         let t_end = state.time + self.dt;
         self.start.x.copy_from_slice(&state.x);
         self.start.v.copy_from_slice(&state.v);
+        self.start.contact.clone_from(&state.contact);
         self.start.time = state.time;
         let good_before = self.good.time;
         loop {
@@ -532,6 +561,7 @@ impl Integrator for Explicit {
             let time = state.time;
             state.x.copy_from_slice(&self.good.x);
             state.v.copy_from_slice(&self.good.v);
+            state.contact.clone_from(&self.good.contact);
             state.time = self.good.time;
             return Err(SolverError::Diverged {
                 solver: "explicit",

@@ -112,10 +112,12 @@ impl Implicit {
             problem,
             x0: &state.x,
             v0: &state.v,
+            anchors: &state.contact,
             t1,
             dt,
             scratch: vec![Vec3::zeros(); model.num_nodes()],
             kv: vec![Vec3::zeros(); model.num_nodes()],
+            v1: vec![Vec3::zeros(); model.num_nodes()],
         };
         let its = newton(
             &mut sys,
@@ -148,7 +150,14 @@ impl Implicit {
                 }
             }
         }
-        Ok((State { x, v: v1, time: t1 }, its))
+        let mut next = State {
+            x,
+            v: v1,
+            time: t1,
+            contact: state.contact.clone(),
+        };
+        problem.update_contact(&mut next);
+        Ok((next, its))
     }
 
     /// Advances by `dt`, halving on failure; returns the new state, Newton
@@ -216,10 +225,14 @@ struct BackwardEuler<'a> {
     problem: &'a Problem,
     x0: &'a [Vec3],
     v0: &'a [Vec3],
+    /// Friction anchors at the start of the step (held during it).
+    anchors: &'a [Option<Vec3>],
     t1: f64,
     dt: f64,
     scratch: Vec<Vec3>,
     kv: Vec<Vec3>,
+    /// Velocities `(x - x0) / dt` of the iterate.
+    v1: Vec<Vec3>,
 }
 
 impl NonlinearSystem for BackwardEuler<'_> {
@@ -231,6 +244,12 @@ impl NonlinearSystem for BackwardEuler<'_> {
         let dt = self.dt;
         model.internal_forces(x, r);
         p.external_forces(self.t1, x, 1.0, &mut self.scratch);
+        if let Some(c) = p.contact() {
+            for i in 0..x.len() {
+                self.v1[i] = (x[i] - self.x0[i]) / dt;
+            }
+            c.add_forces(model, self.t1, x, &self.v1, self.anchors, &mut self.scratch);
+        }
         let (mut s_int, mut s_ext, mut s_in) = (0.0f64, 0.0f64, 0.0f64);
         for i in 0..x.len() {
             s_int += r[i].norm_squared();
@@ -264,6 +283,12 @@ impl NonlinearSystem for BackwardEuler<'_> {
         let mut j = model.tangent(x);
         for l in p.loads() {
             l.add_jacobian(model, self.t1, x, 1.0, &mut j);
+        }
+        if let Some(c) = p.contact() {
+            for i in 0..x.len() {
+                self.v1[i] = (x[i] - self.x0[i]) / dt;
+            }
+            c.add_jacobian(model, self.t1, x, &self.v1, self.anchors, 1.0 / dt, &mut j);
         }
         for (i, &m) in model.masses().iter().enumerate() {
             let k = j.find(i, i).expect("diagonal in the lattice pattern");

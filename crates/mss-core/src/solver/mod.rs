@@ -42,7 +42,9 @@ use std::sync::OnceLock;
 
 use thiserror::Error;
 
-pub use explicit::{Explicit, ExplicitOptions, ExplicitScheme, explicit_time_step_limit};
+pub use explicit::{
+    CONTACT_RESOLUTION, Explicit, ExplicitOptions, ExplicitScheme, explicit_time_step_limit,
+};
 pub use implicit::{Implicit, ImplicitOptions};
 pub use linear::{DIRECT_MAX_FREE_DOFS, LinearSolver, LinearSolverKind, LinearStats};
 pub use statics::{
@@ -50,6 +52,7 @@ pub use statics::{
 };
 
 use crate::constraints::{ConstraintError, ConstraintSpec, Constraints};
+use crate::contact::Contact;
 use crate::loads::{Damping, Load, LoadError, LoadSpec};
 use crate::{BlockCsr, Model, Vec3};
 
@@ -91,6 +94,7 @@ pub struct Problem {
     model: Model,
     constraints: Constraints,
     loads: Vec<Box<dyn Load>>,
+    contact: Option<Contact>,
     damping: Damping,
     rest_stiffness: OnceLock<BlockCsr>,
 }
@@ -103,6 +107,7 @@ impl Problem {
             model,
             constraints,
             loads: Vec::new(),
+            contact: None,
             damping: Damping::NONE,
             rest_stiffness: OnceLock::new(),
         }
@@ -154,6 +159,39 @@ impl Problem {
     pub fn with_load(mut self, load: Box<dyn Load>) -> Self {
         self.loads.push(load);
         self
+    }
+
+    /// Adds contact with obstacles ([`crate::contact`]).
+    pub fn with_contact(mut self, contact: Contact) -> Self {
+        self.contact = Some(contact);
+        self
+    }
+
+    /// The contact with obstacles, if any.
+    pub fn contact(&self) -> Option<&Contact> {
+        self.contact.as_ref()
+    }
+
+    /// Contact forces at `state` (N per node; zero without obstacles).
+    pub fn contact_forces(&self, state: &State) -> Vec<Vec3> {
+        match &self.contact {
+            Some(c) => c.forces(&self.model, state.time, &state.x, &state.v, &state.contact),
+            None => vec![Vec3::zeros(); state.x.len()],
+        }
+    }
+
+    /// Updates the friction anchors of `state` after a step (see
+    /// [`Contact::update_anchors`]); nothing without obstacles.
+    pub fn update_contact(&self, state: &mut State) {
+        if let Some(c) = &self.contact {
+            c.update_anchors(
+                &self.model,
+                state.time,
+                &state.x,
+                &state.v,
+                &mut state.contact,
+            );
+        }
     }
 
     /// Sets the damping.
@@ -245,6 +283,10 @@ pub struct State {
     pub v: Vec<Vec3>,
     /// Time.
     pub time: f64,
+    /// Friction anchors of the contacts, one per contact node and obstacle
+    /// ([`Contact::update_anchors`]; `None`: not touching; empty without
+    /// obstacles).
+    pub contact: Vec<Option<Vec3>>,
 }
 
 impl State {
@@ -254,6 +296,7 @@ impl State {
             x: model.rest_positions().to_vec(),
             v: vec![Vec3::zeros(); model.num_nodes()],
             time: 0.0,
+            contact: Vec::new(),
         }
     }
 

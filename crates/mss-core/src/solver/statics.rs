@@ -82,6 +82,11 @@ struct StaticSystem<'a> {
     lambda: f64,
     scratch: Vec<Vec3>,
     free: &'a [bool],
+    /// Friction anchors: every node sticks where it started (a body placed
+    /// at rest, then loaded), until Coulomb's limit lets it slide.
+    anchors: Vec<Option<Vec3>>,
+    /// Zero velocities (statics has no contact damping).
+    still: Vec<Vec3>,
 }
 
 impl NonlinearSystem for StaticSystem<'_> {
@@ -89,6 +94,16 @@ impl NonlinearSystem for StaticSystem<'_> {
         let p = self.problem;
         p.model().internal_forces(x, r);
         p.external_forces(self.t, x, self.lambda, &mut self.scratch);
+        if let Some(c) = p.contact() {
+            c.add_forces(
+                p.model(),
+                self.t,
+                x,
+                &self.still,
+                &self.anchors,
+                &mut self.scratch,
+            );
+        }
         let mut s = 0.0;
         for i in 0..x.len() {
             for d in 0..3 {
@@ -109,6 +124,17 @@ impl NonlinearSystem for StaticSystem<'_> {
         let mut j = p.model().tangent(x);
         for l in p.loads() {
             l.add_jacobian(p.model(), self.t, x, self.lambda, &mut j);
+        }
+        if let Some(c) = p.contact() {
+            c.add_jacobian(
+                p.model(),
+                self.t,
+                x,
+                &self.still,
+                &self.anchors,
+                0.0,
+                &mut j,
+            );
         }
         j
     }
@@ -167,12 +193,25 @@ pub fn solve_static(
             &mut scratch_v[i],
         );
     }
+    let anchors = match problem.contact() {
+        Some(c) => {
+            let offsets: Vec<Vec3> = c.obstacles().map(|(o, _)| o.offset(state.time)).collect();
+            let x = &state.x;
+            c.nodes()
+                .iter()
+                .flat_map(|&node| offsets.iter().map(move |o| Some(x[node as usize] - o)))
+                .collect()
+        }
+        None => Vec::new(),
+    };
     let mut sys = StaticSystem {
         problem,
         t: state.time,
         lambda: 0.0,
         scratch: vec![Vec3::zeros(); n],
         free: &free,
+        anchors,
+        still: vec![Vec3::zeros(); n],
     };
     let newton_opts = NewtonOptions {
         max_iterations: opts.max_newton,

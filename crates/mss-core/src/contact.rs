@@ -1,0 +1,896 @@
+//! Contact with rigid obstacles: a ground plane, spheres, boxes, capsules
+//! and closed triangle meshes ([`MeshObstacle`], parry3d's queries), fixed,
+//! moving along a path or steered by hand ([`Steered`]), with Coulomb
+//! friction and contact damping.
+//!
+//! Contact is a penalty on the lattice's boundary nodes ([`Model::boundary_nodes`]):
+//! a node at depth `d > 0` inside an obstacle is pushed out along the
+//! obstacle's outward normal `n` with the force `f_n = k d - c v_n`
+//! (`k` the node's contact stiffness, proportional to its mass, `v_n` the normal velocity relative to the
+//! obstacle, `c = 2 zeta sqrt(k m)` for the node's mass `m` and the damping
+//! ratio `zeta`; never pulling: `f_n >= 0`).
+//!
+//! Friction is the stick-slip law of an anchored tangential spring: when a
+//! node first touches, an anchor is set where it touched (in the obstacle's
+//! moving frame). While `|k delta| <= mu_s f_n`, with `delta` the tangential
+//! offset from the anchor, the node sticks with the force `-k delta`; beyond
+//! it slides with the kinetic force `-mu_k f_n delta / |delta|` and the
+//! anchor follows it ([`Contact::update_anchors`], after every step). So a
+//! block on an incline stays put while `tan(angle) < mu_s`, and slides with
+//! the acceleration `g (sin - mu_k cos)` above. The anchors are part of the
+//! [`State`](crate::solver::State) (`contact`), so a step depends on nothing
+//! else.
+//!
+//! Derivatives (for Newton): the normal force's are exact (`-k n n^T` plus
+//! `k d dn/dx` for curved obstacles); the friction force's treat the normal
+//! as locally constant; damping adds `-(c / dt) n n^T` in implicit steps.
+//!
+//! ```
+//! use mss_core::contact::{Contact, ContactSettings, Plane};
+//! use mss_core::{Material, Model, Vec3};
+//! use mss_core::Volumetric;
+//!
+//! let lattice = hexmesh::Lattice::block([2, 2, 2], 0.05, [0.0, 0.0, -0.001]).unwrap();
+//! let model = Model::new(&lattice, Material::new(1e5, 0.3, 1000.0).unwrap(), &Volumetric).unwrap();
+//! let ground = Plane::new(Vec3::zeros(), Vec3::z()).unwrap();
+//! let contact = Contact::new(&model, vec![(Box::new(ground), ContactSettings::for_model(&model))]);
+//! // The bottom nodes are 1 mm deep in the ground: pushed up.
+//! let mut f = vec![Vec3::zeros(); model.num_nodes()];
+//! let v = vec![Vec3::zeros(); model.num_nodes()];
+//! contact.add_forces(&model, 0.0, model.rest_positions(), &v, &[], &mut f);
+//! assert!(f.iter().all(|fi| fi.z >= 0.0) && f.iter().any(|fi| fi.z > 0.0));
+//! ```
+
+use std::fmt::Debug;
+
+use crate::{BlockCsr, Mat3, Model, Vec3};
+
+/// The `velocity` and `offset` of an obstacle that follows its `path`.
+macro_rules! path_motion {
+    () => {
+        fn velocity(&self, t: f64) -> Vec3 {
+            self.path.velocity(t)
+        }
+        fn offset(&self, t: f64) -> Vec3 {
+            self.path.offset(t)
+        }
+    };
+}
+
+/// How deep a point is inside an obstacle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Penetration {
+    /// Depth (m), > 0.
+    pub depth: f64,
+    /// Outward unit normal of the obstacle's surface nearest to the point.
+    pub normal: Vec3,
+    /// Derivative of the normal with respect to the point (1/m): zero for
+    /// flat faces, `(I - n n^T) / r` on a sphere of radius `r` around the point.
+    pub normal_gradient: Mat3,
+}
+
+/// A rigid obstacle, the plug point for shapes.
+///
+/// Contract: [`penetration`](Self::penetration) is `Some` exactly for points
+/// strictly inside the obstacle at time `t`, with a positive finite depth,
+/// a unit normal and its derivative, and never panics;
+/// [`velocity`](Self::velocity) is the velocity of the obstacle's material at
+/// `t` (obstacles translate; the default is at rest).
+pub trait Obstacle: Send + Sync + Debug {
+    /// Short description for logs and messages.
+    fn name(&self) -> String;
+    /// How deep `p` is inside the obstacle at time `t`, if it is.
+    fn penetration(&self, t: f64, p: Vec3) -> Option<Penetration>;
+    /// Velocity of the obstacle at time `t` (m/s).
+    fn velocity(&self, t: f64) -> Vec3 {
+        let _ = t;
+        Vec3::zeros()
+    }
+    /// Offset of the obstacle from its initial placement at time `t` (m).
+    fn offset(&self, t: f64) -> Vec3 {
+        let _ = t;
+        Vec3::zeros()
+    }
+}
+
+/// A prescribed translation: offsets at keyframe times, linear in between,
+/// held before the first and after the last.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Path {
+    keys: Vec<(f64, Vec3)>,
+}
+
+impl Path {
+    /// A path through `(time, offset)` keyframes (times strictly increasing,
+    /// all finite); `None` otherwise.
+    pub fn new(keys: Vec<(f64, Vec3)>) -> Option<Self> {
+        let finite = keys
+            .iter()
+            .all(|(t, o)| t.is_finite() && o.iter().all(|c| c.is_finite()));
+        let increasing = keys.windows(2).all(|w| w[1].0 > w[0].0);
+        (finite && increasing).then_some(Self { keys })
+    }
+
+    /// No motion.
+    pub fn fixed() -> Self {
+        Self::default()
+    }
+
+    /// Offset at `t`.
+    pub fn offset(&self, t: f64) -> Vec3 {
+        let Some(&(t0, o0)) = self.keys.first() else {
+            return Vec3::zeros();
+        };
+        if t <= t0 {
+            return o0;
+        }
+        for w in self.keys.windows(2) {
+            let ((ta, a), (tb, b)) = (w[0], w[1]);
+            if t <= tb {
+                return a + (b - a) * ((t - ta) / (tb - ta));
+            }
+        }
+        self.keys.last().map_or(Vec3::zeros(), |k| k.1)
+    }
+
+    /// Velocity at `t` (of the segment `t` lies in; zero outside the keys).
+    pub fn velocity(&self, t: f64) -> Vec3 {
+        for w in self.keys.windows(2) {
+            let ((ta, a), (tb, b)) = (w[0], w[1]);
+            if t >= ta && t < tb {
+                return (b - a) / (tb - ta);
+            }
+        }
+        Vec3::zeros()
+    }
+}
+
+/// Why an obstacle could not be built.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ObstacleError {
+    /// A value is not finite or out of range.
+    #[error("{0}")]
+    Invalid(String),
+}
+
+fn finite(v: &Vec3) -> bool {
+    v.iter().all(|c| c.is_finite())
+}
+
+/// The half-space behind a plane: `(p - point) . normal < 0` is inside.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Plane {
+    point: Vec3,
+    normal: Vec3,
+    path: Path,
+}
+
+impl Plane {
+    /// The plane through `point` with outward `normal` (any length > 0).
+    pub fn new(point: Vec3, normal: Vec3) -> Result<Self, ObstacleError> {
+        let len = normal.norm();
+        if !(finite(&point) && len.is_finite() && len > 0.0) {
+            return Err(ObstacleError::Invalid(format!(
+                "plane point {point:?} and normal {normal:?}: the point must be finite and the normal non-zero"
+            )));
+        }
+        Ok(Self {
+            point,
+            normal: normal / len,
+            path: Path::fixed(),
+        })
+    }
+}
+
+/// A ball.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Sphere {
+    centre: Vec3,
+    radius: f64,
+    path: Path,
+}
+
+impl Sphere {
+    /// The ball of `radius` (m) around `centre`.
+    pub fn new(centre: Vec3, radius: f64) -> Result<Self, ObstacleError> {
+        if !(finite(&centre) && radius.is_finite() && radius > 0.0) {
+            return Err(ObstacleError::Invalid(format!(
+                "sphere centre {centre:?}, radius {radius}: the centre must be finite and the radius positive"
+            )));
+        }
+        Ok(Self {
+            centre,
+            radius,
+            path: Path::fixed(),
+        })
+    }
+}
+
+/// An axis-aligned box.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Cuboid {
+    min: Vec3,
+    max: Vec3,
+    path: Path,
+}
+
+impl Cuboid {
+    /// The box `min ..= max` (m).
+    pub fn new(min: Vec3, max: Vec3) -> Result<Self, ObstacleError> {
+        if !(finite(&min) && finite(&max) && (0..3).all(|k| min[k] < max[k])) {
+            return Err(ObstacleError::Invalid(format!(
+                "box {min:?} .. {max:?}: corners must be finite with min < max"
+            )));
+        }
+        Ok(Self {
+            min,
+            max,
+            path: Path::fixed(),
+        })
+    }
+}
+
+/// The points within `radius` of the segment `a b`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Capsule {
+    a: Vec3,
+    b: Vec3,
+    radius: f64,
+    path: Path,
+}
+
+impl Capsule {
+    /// The capsule around the segment `a b` (m) of `radius` (m).
+    pub fn new(a: Vec3, b: Vec3, radius: f64) -> Result<Self, ObstacleError> {
+        if !(finite(&a) && finite(&b) && radius.is_finite() && radius > 0.0) {
+            return Err(ObstacleError::Invalid(format!(
+                "capsule {a:?} .. {b:?}, radius {radius}: the ends must be finite and the radius positive"
+            )));
+        }
+        Ok(Self {
+            a,
+            b,
+            radius,
+            path: Path::fixed(),
+        })
+    }
+}
+
+/// The solid bounded by a closed triangle surface (a tool, a bone, a
+/// table), with parry3d's point queries: a point is inside by the mesh's
+/// pseudo-normals, and is pushed toward the nearest surface point. Faces are
+/// flat, so the normal's derivative is taken as zero (exact inside a face).
+pub struct MeshObstacle {
+    mesh: parry3d_f64::shape::TriMesh,
+    triangles: usize,
+    path: Path,
+}
+
+impl Debug for MeshObstacle {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("MeshObstacle")
+            .field("triangles", &self.triangles)
+            .finish()
+    }
+}
+
+impl MeshObstacle {
+    /// The solid inside `mesh`, which must be closed (its orientation is
+    /// repaired to face outward).
+    pub fn new(mesh: &hexmesh::TriMesh) -> Result<Self, ObstacleError> {
+        let (oriented, report) = hexmesh::winding::orient(mesh);
+        if !report.closed || report.nonmanifold_edges > 0 {
+            return Err(ObstacleError::Invalid(format!(
+                "the obstacle mesh must be a closed surface ({} patches, {} edges shared by more than two triangles)",
+                report.patches, report.nonmanifold_edges
+            )));
+        }
+        if oriented.vertices.iter().flatten().any(|c| !c.is_finite()) {
+            return Err(ObstacleError::Invalid(
+                "the obstacle mesh has non-finite vertices".into(),
+            ));
+        }
+        // Outward winding: a negative volume means the repair chose inward.
+        let mut triangles = oriented.triangles.clone();
+        if oriented.signed_volume() < 0.0 {
+            for t in &mut triangles {
+                t.swap(1, 2);
+            }
+        }
+        let vertices = oriented
+            .vertices
+            .iter()
+            .map(|p| parry3d_f64::math::Vector::new(p[0], p[1], p[2]))
+            .collect();
+        let count = triangles.len();
+        let mesh = parry3d_f64::shape::TriMesh::with_flags(
+            vertices,
+            triangles,
+            parry3d_f64::shape::TriMeshFlags::ORIENTED,
+        )
+        .map_err(|e| ObstacleError::Invalid(format!("the obstacle mesh: {e}")))?;
+        Ok(Self {
+            mesh,
+            triangles: count,
+            path: Path::fixed(),
+        })
+    }
+}
+
+impl Obstacle for MeshObstacle {
+    fn name(&self) -> String {
+        format!("mesh of {} triangles", self.triangles)
+    }
+    fn penetration(&self, t: f64, p: Vec3) -> Option<Penetration> {
+        use parry3d_f64::query::PointQuery;
+        let q = p - self.path.offset(t);
+        let local = parry3d_f64::math::Vector::new(q.x, q.y, q.z);
+        let proj = self.mesh.project_local_point(local, false);
+        if !proj.is_inside {
+            return None;
+        }
+        let to_surface = Vec3::new(proj.point.x - q.x, proj.point.y - q.y, proj.point.z - q.z);
+        let depth = to_surface.norm();
+        (depth > 0.0 && depth.is_finite()).then(|| Penetration {
+            depth,
+            normal: to_surface / depth,
+            normal_gradient: Mat3::zeros(),
+        })
+    }
+    path_motion!();
+}
+
+macro_rules! moving {
+    ($($t:ty),*) => {$(
+        impl $t {
+            /// The same obstacle following `path` (offsets from its placement).
+            pub fn moving(mut self, path: Path) -> Self {
+                self.path = path;
+                self
+            }
+        }
+    )*};
+}
+moving!(Plane, Sphere, Cuboid, Capsule, MeshObstacle);
+
+/// Penetration of a ball of `radius` around `c` by `p` (also the capsule's
+/// round parts); `along` is the segment direction for a capsule's side.
+fn ball(c: Vec3, radius: f64, p: Vec3, along: Option<Vec3>) -> Option<Penetration> {
+    let d = p - c;
+    let r = d.norm();
+    if r >= radius || !r.is_finite() {
+        return None;
+    }
+    // At the very centre every direction is as near: push up.
+    let normal = if r > 1e-12 * radius { d / r } else { Vec3::z() };
+    let mut tangent = Mat3::identity() - normal * normal.transpose();
+    if let Some(u) = along {
+        tangent -= u * u.transpose();
+    }
+    let normal_gradient = if r > 1e-12 * radius {
+        tangent / r
+    } else {
+        Mat3::zeros()
+    };
+    Some(Penetration {
+        depth: radius - r,
+        normal,
+        normal_gradient,
+    })
+}
+
+impl Obstacle for Plane {
+    fn name(&self) -> String {
+        format!(
+            "plane through {:?} with normal {:?}",
+            self.point.as_slice(),
+            self.normal.as_slice()
+        )
+    }
+    fn penetration(&self, t: f64, p: Vec3) -> Option<Penetration> {
+        let s = (p - self.point - self.path.offset(t)).dot(&self.normal);
+        (s < 0.0).then(|| Penetration {
+            depth: -s,
+            normal: self.normal,
+            normal_gradient: Mat3::zeros(),
+        })
+    }
+    path_motion!();
+}
+
+impl Obstacle for Sphere {
+    fn name(&self) -> String {
+        format!("sphere of radius {} m", self.radius)
+    }
+    fn penetration(&self, t: f64, p: Vec3) -> Option<Penetration> {
+        ball(self.centre + self.path.offset(t), self.radius, p, None)
+    }
+    path_motion!();
+}
+
+impl Obstacle for Cuboid {
+    fn name(&self) -> String {
+        "box".to_owned()
+    }
+    fn penetration(&self, t: f64, p: Vec3) -> Option<Penetration> {
+        let o = self.path.offset(t);
+        let (lo, hi) = (self.min + o, self.max + o);
+        if !(0..3).all(|k| p[k] > lo[k] && p[k] < hi[k]) {
+            return None;
+        }
+        // Out through the nearest face.
+        let mut best = (f64::INFINITY, 0usize, 1.0);
+        for k in 0..3 {
+            for (d, sign) in [(p[k] - lo[k], -1.0), (hi[k] - p[k], 1.0)] {
+                if d < best.0 {
+                    best = (d, k, sign);
+                }
+            }
+        }
+        let mut normal = Vec3::zeros();
+        normal[best.1] = best.2;
+        Some(Penetration {
+            depth: best.0,
+            normal,
+            normal_gradient: Mat3::zeros(),
+        })
+    }
+    path_motion!();
+}
+
+impl Obstacle for Capsule {
+    fn name(&self) -> String {
+        format!("capsule of radius {} m", self.radius)
+    }
+    fn penetration(&self, t: f64, p: Vec3) -> Option<Penetration> {
+        let o = self.path.offset(t);
+        let (a, b) = (self.a + o, self.b + o);
+        let ab = b - a;
+        let len2 = ab.norm_squared();
+        let s = if len2 > 0.0 {
+            ((p - a).dot(&ab) / len2).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let side = (s > 0.0 && s < 1.0).then(|| ab / len2.sqrt());
+        ball(a + ab * s, self.radius, p, side)
+    }
+    path_motion!();
+}
+
+/// Contact parameters of one obstacle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ContactSettings {
+    /// Penalty stiffness (N/m) of a boundary node of the mean boundary-node
+    /// mass; each node's is scaled by its mass, so that every node touches
+    /// with the same frequency (and sinks equally under its weight): a
+    /// corner node, an eighth of a cell's mass, is not the one that sets the
+    /// explicit step.
+    pub stiffness: f64,
+    /// Static friction coefficient (>= 0).
+    pub friction_static: f64,
+    /// Kinetic friction coefficient (0 <= mu_k <= mu_s).
+    pub friction_kinetic: f64,
+    /// Damping ratio of the normal contact spring (0 = elastic contact).
+    pub damping_ratio: f64,
+}
+
+/// Default contact frequency as a fraction of the lattice's highest one:
+/// a resting body sinks by `g / omega^2` (micrometres), and the explicit
+/// step, which resolves contact twice as finely ([`crate::solver::CONTACT_RESOLUTION`]),
+/// shrinks by about 1.7.
+pub const DEFAULT_FREQUENCY_FRACTION: f64 = 0.7;
+
+/// Mean mass of the boundary nodes (kg).
+fn mean_boundary_mass(model: &Model, nodes: &[u32]) -> f64 {
+    let masses = model.masses();
+    let sum: f64 = nodes.iter().map(|&n| masses[n as usize]).sum();
+    if nodes.is_empty() {
+        0.0
+    } else {
+        sum / nodes.len() as f64
+    }
+}
+
+impl ContactSettings {
+    /// Defaults for `model`: a stiffness that gives contact
+    /// [`DEFAULT_FREQUENCY_FRACTION`] of the lattice's highest frequency,
+    /// friction 0.5, damping ratio 0.2.
+    pub fn for_model(model: &Model) -> Self {
+        let omega = DEFAULT_FREQUENCY_FRACTION * 2.0 / model.critical_time_step();
+        let mass = mean_boundary_mass(model, &model.boundary_nodes());
+        Self {
+            stiffness: mass * omega * omega,
+            friction_static: 0.5,
+            friction_kinetic: 0.5,
+            damping_ratio: 0.2,
+        }
+    }
+
+    /// Checks the ranges.
+    pub fn validate(&self) -> Result<(), ObstacleError> {
+        let bad = |m: String| Err(ObstacleError::Invalid(m));
+        if !(self.stiffness.is_finite() && self.stiffness > 0.0) {
+            return bad(format!(
+                "stiffness {} must be a positive number (N/m)",
+                self.stiffness
+            ));
+        }
+        if !(self.friction_static.is_finite() && self.friction_static >= 0.0) {
+            return bad(format!("friction {} must be >= 0", self.friction_static));
+        }
+        if !(self.friction_kinetic >= 0.0 && self.friction_kinetic <= self.friction_static) {
+            return bad(format!(
+                "kinetic friction {} must be in 0 ..= the static friction {}",
+                self.friction_kinetic, self.friction_static
+            ));
+        }
+        if !(self.damping_ratio.is_finite() && self.damping_ratio >= 0.0) {
+            return bad(format!("damping ratio {} must be >= 0", self.damping_ratio));
+        }
+        Ok(())
+    }
+}
+
+/// The obstacles of a problem and the nodes that can touch them.
+#[derive(Debug)]
+pub struct Contact {
+    obstacles: Vec<(Box<dyn Obstacle>, ContactSettings)>,
+    nodes: Vec<u32>,
+    /// Per contact node: its mass over the mean boundary-node mass.
+    mass_ratio: Vec<f64>,
+}
+
+/// One node's force from one obstacle, and what friction did.
+struct Touch {
+    force: Vec3,
+    normal: Vec3,
+    /// Tangential offset from the anchor.
+    delta: Vec3,
+    sliding: bool,
+}
+
+impl Contact {
+    /// Contact of `model`'s boundary nodes with `obstacles`.
+    pub fn new(model: &Model, obstacles: Vec<(Box<dyn Obstacle>, ContactSettings)>) -> Self {
+        let nodes = model.boundary_nodes();
+        let mean = mean_boundary_mass(model, &nodes);
+        let masses = model.masses();
+        let mass_ratio = nodes
+            .iter()
+            .map(|&n| {
+                if mean > 0.0 {
+                    masses[n as usize] / mean
+                } else {
+                    1.0
+                }
+            })
+            .collect();
+        Self {
+            obstacles,
+            nodes,
+            mass_ratio,
+        }
+    }
+
+    /// The obstacles.
+    pub fn obstacles(&self) -> impl Iterator<Item = (&dyn Obstacle, &ContactSettings)> {
+        self.obstacles.iter().map(|(o, s)| (&**o, s))
+    }
+
+    /// The nodes that can touch.
+    pub fn nodes(&self) -> &[u32] {
+        &self.nodes
+    }
+
+    /// Entries of the anchor array of [`State::contact`](crate::solver::State):
+    /// one per contact node and obstacle.
+    pub fn num_anchors(&self) -> usize {
+        self.nodes.len() * self.obstacles.len()
+    }
+
+    /// The largest contact stiffness over a node's mass (1/s^2): what
+    /// contact adds to `omega_max^2` (the same for every node, by the mass
+    /// scaling of [`ContactSettings::stiffness`]).
+    pub fn omega_sq(&self, model: &Model) -> f64 {
+        let mean = mean_boundary_mass(model, &self.nodes);
+        let k = self
+            .obstacles
+            .iter()
+            .map(|(_, s)| s.stiffness)
+            .fold(0.0, f64::max);
+        if mean > 0.0 { k / mean } else { 0.0 }
+    }
+
+    /// Contact node `i`'s stiffness for obstacle settings `s` (N/m).
+    fn stiffness(&self, i: usize, s: &ContactSettings) -> f64 {
+        s.stiffness * self.mass_ratio[i]
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn touch(
+        &self,
+        model: &Model,
+        i: usize,
+        j: usize,
+        node: u32,
+        t: f64,
+        x: Vec3,
+        v: Vec3,
+        anchor: Option<Vec3>,
+    ) -> Option<(Touch, Penetration)> {
+        let (obstacle, s) = &self.obstacles[j];
+        let pen = obstacle.penetration(t, x)?;
+        let n = pen.normal;
+        let k = self.stiffness(i, s);
+        let m = model.masses()[node as usize];
+        let c = 2.0 * s.damping_ratio * (k * m).sqrt();
+        let v_rel = v - obstacle.velocity(t);
+        let f_n = (k * pen.depth - c * v_rel.dot(&n)).max(0.0);
+        // The anchor lives in the obstacle's frame; a new contact starts at x.
+        let a = anchor.map_or(x, |a| a + obstacle.offset(t));
+        let d = x - a;
+        let delta = d - n * d.dot(&n);
+        let stick = delta * (-k);
+        let limit = s.friction_static * f_n;
+        let (friction, sliding) = if stick.norm() <= limit {
+            (stick, false)
+        } else {
+            let len = delta.norm();
+            let dir = if len > 0.0 {
+                delta / len
+            } else {
+                Vec3::zeros()
+            };
+            (dir * (-s.friction_kinetic * f_n), true)
+        };
+        Some((
+            Touch {
+                force: n * f_n + friction,
+                normal: n,
+                delta,
+                sliding,
+            },
+            pen,
+        ))
+    }
+
+    fn anchor_of(anchors: &[Option<Vec3>], k: usize) -> Option<Vec3> {
+        anchors.get(k).copied().flatten()
+    }
+
+    /// Adds the contact forces at time `t`, positions `x` and velocities `v`
+    /// (both absolute) to `f`; `anchors` is [`State::contact`](crate::solver::State)
+    /// (empty: every contact is new).
+    pub fn add_forces(
+        &self,
+        model: &Model,
+        t: f64,
+        x: &[Vec3],
+        v: &[Vec3],
+        anchors: &[Option<Vec3>],
+        f: &mut [Vec3],
+    ) {
+        let nobs = self.obstacles.len();
+        for (i, &node) in self.nodes.iter().enumerate() {
+            let n = node as usize;
+            for j in 0..nobs {
+                let k = i * nobs + j;
+                if let Some((touch, _)) = self.touch(
+                    model,
+                    i,
+                    j,
+                    node,
+                    t,
+                    x[n],
+                    v[n],
+                    Self::anchor_of(anchors, k),
+                ) {
+                    f[n] += touch.force;
+                }
+            }
+        }
+    }
+
+    /// Adds `d(contact force)/dx` to `jac` (pattern of the model, diagonal
+    /// present); `dv_dx` is how velocity follows position (`1 / dt` in an
+    /// implicit step, 0 in a static solve).
+    #[allow(clippy::too_many_arguments)]
+    pub fn add_jacobian(
+        &self,
+        model: &Model,
+        t: f64,
+        x: &[Vec3],
+        v: &[Vec3],
+        anchors: &[Option<Vec3>],
+        dv_dx: f64,
+        jac: &mut BlockCsr,
+    ) {
+        let nobs = self.obstacles.len();
+        for (i, &node) in self.nodes.iter().enumerate() {
+            let n = node as usize;
+            for j in 0..nobs {
+                let k = i * nobs + j;
+                let Some((touch, pen)) = self.touch(
+                    model,
+                    i,
+                    j,
+                    node,
+                    t,
+                    x[n],
+                    v[n],
+                    Self::anchor_of(anchors, k),
+                ) else {
+                    continue;
+                };
+                let s = &self.obstacles[j].1;
+                let stiffness = self.stiffness(i, s);
+                let nn = touch.normal * touch.normal.transpose();
+                let m = model.masses()[n];
+                let c = 2.0 * s.damping_ratio * (stiffness * m).sqrt();
+                // Normal force: -k n n^T + k d dn/dx, damping -(c dv/dx) n n^T.
+                let mut block =
+                    -nn * (stiffness + c * dv_dx) + pen.normal_gradient * (stiffness * pen.depth);
+                let tangent = Mat3::identity() - nn;
+                if touch.sliding {
+                    let len = touch.delta.norm();
+                    if len > 0.0 {
+                        let dir = touch.delta / len;
+                        let f_n = touch.force.dot(&touch.normal);
+                        let mu = s.friction_kinetic;
+                        // -mu f_n d(dir)/dx - mu dir (d f_n / dx).
+                        block -=
+                            (Mat3::identity() - dir * dir.transpose()) * tangent * (mu * f_n / len);
+                        block += dir * touch.normal.transpose() * (mu * (stiffness + c * dv_dx));
+                    }
+                } else {
+                    block -= tangent * stiffness;
+                }
+                if let Some(b) = jac.find(n, n) {
+                    jac.blocks[b] += block;
+                }
+            }
+        }
+    }
+
+    /// After a step: sets the anchors of new contacts, lets sliding ones
+    /// follow their node to the kinetic limit, and clears those of nodes
+    /// that left. `anchors` is resized to [`Contact::num_anchors`] if needed.
+    pub fn update_anchors(
+        &self,
+        model: &Model,
+        t: f64,
+        x: &[Vec3],
+        v: &[Vec3],
+        anchors: &mut Vec<Option<Vec3>>,
+    ) {
+        if anchors.len() != self.num_anchors() {
+            *anchors = vec![None; self.num_anchors()];
+        }
+        let nobs = self.obstacles.len();
+        for (i, &node) in self.nodes.iter().enumerate() {
+            let n = node as usize;
+            for j in 0..nobs {
+                let k = i * nobs + j;
+                let offset = self.obstacles[j].0.offset(t);
+                let anchor = Self::anchor_of(anchors, k);
+                anchors[k] = match self.touch(model, i, j, node, t, x[n], v[n], anchor) {
+                    None => None,
+                    Some(_) if anchor.is_none() => Some(x[n] - offset),
+                    Some((touch, _)) if touch.sliding => {
+                        let s = &self.obstacles[j].1;
+                        let f_n = touch.force.dot(&touch.normal).max(0.0);
+                        let len = touch.delta.norm();
+                        let back = if len > 0.0 {
+                            touch.delta * ((s.friction_kinetic * f_n / self.stiffness(i, s)) / len)
+                        } else {
+                            Vec3::zeros()
+                        };
+                        Some(x[n] - back - offset)
+                    }
+                    // Sticking: the anchor stays.
+                    Some(_) => anchors[k],
+                };
+            }
+        }
+    }
+
+    /// Contact force per node (N) at a state (for output).
+    pub fn forces(
+        &self,
+        model: &Model,
+        t: f64,
+        x: &[Vec3],
+        v: &[Vec3],
+        anchors: &[Option<Vec3>],
+    ) -> Vec<Vec3> {
+        let mut f = vec![Vec3::zeros(); x.len()];
+        self.add_forces(model, t, x, v, anchors, &mut f);
+        f
+    }
+
+    /// Penalty energy `k d^2 / 2` summed over touching nodes (J), for energy checks.
+    pub fn energy(&self, t: f64, x: &[Vec3]) -> f64 {
+        let mut e = 0.0;
+        for (i, &node) in self.nodes.iter().enumerate() {
+            for (o, s) in &self.obstacles {
+                if let Some(p) = o.penetration(t, x[node as usize]) {
+                    e += 0.5 * self.stiffness(i, s) * p.depth * p.depth;
+                }
+            }
+        }
+        e
+    }
+}
+
+/// An obstacle moved by hand (a cursor, a tool): its offset is set through
+/// the [`SteerHandle`] returned with it, between steps, and it moves with
+/// the velocity of the last change.
+#[derive(Debug)]
+pub struct Steered {
+    inner: Box<dyn Obstacle>,
+    pose: std::sync::Arc<std::sync::RwLock<SteerPose>>,
+}
+
+#[derive(Debug, Clone, Copy, Default)]
+struct SteerPose {
+    offset: Vec3,
+    velocity: Vec3,
+}
+
+/// Moves a [`Steered`] obstacle.
+#[derive(Debug, Clone)]
+pub struct SteerHandle(std::sync::Arc<std::sync::RwLock<SteerPose>>);
+
+impl SteerHandle {
+    /// Puts the obstacle at `offset` (m) from its placement, as if it had
+    /// moved there in `dt` seconds (its velocity for contact damping and
+    /// friction until the next call).
+    pub fn move_to(&self, offset: Vec3, dt: f64) {
+        let mut pose = self.0.write().unwrap_or_else(|e| e.into_inner());
+        pose.velocity = if dt > 0.0 {
+            (offset - pose.offset) / dt
+        } else {
+            Vec3::zeros()
+        };
+        pose.offset = offset;
+    }
+
+    /// The obstacle's current offset (m).
+    pub fn offset(&self) -> Vec3 {
+        self.0.read().unwrap_or_else(|e| e.into_inner()).offset
+    }
+}
+
+impl Steered {
+    /// `obstacle`, steerable through the handle.
+    pub fn new(obstacle: Box<dyn Obstacle>) -> (Self, SteerHandle) {
+        let pose = std::sync::Arc::new(std::sync::RwLock::new(SteerPose::default()));
+        (
+            Self {
+                inner: obstacle,
+                pose: std::sync::Arc::clone(&pose),
+            },
+            SteerHandle(pose),
+        )
+    }
+
+    fn pose(&self) -> SteerPose {
+        *self.pose.read().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+impl Obstacle for Steered {
+    fn name(&self) -> String {
+        format!("steered {}", self.inner.name())
+    }
+    fn penetration(&self, t: f64, p: Vec3) -> Option<Penetration> {
+        self.inner.penetration(t, p - self.pose().offset)
+    }
+    fn velocity(&self, t: f64) -> Vec3 {
+        self.inner.velocity(t) + self.pose().velocity
+    }
+    fn offset(&self, t: f64) -> Vec3 {
+        self.inner.offset(t) + self.pose().offset
+    }
+}

@@ -1,0 +1,392 @@
+//! Contact with obstacles: a block resting on the ground carries its weight,
+//! sticks on an incline below the friction angle and slides above it, a
+//! sphere pressed in leaves no node deep inside it, an elastic drop does not
+//! gain energy; the same in the implicit and static solvers.
+
+use hexmesh::Lattice;
+use mss_core::contact::{Contact, ContactSettings, Obstacle, Path, Plane, Sphere};
+use mss_core::loads::{Damping, LoadSpec};
+use mss_core::model::{HourglassControl, VolumetricBarrier};
+use mss_core::solver::{
+    Explicit, ExplicitOptions, Implicit, ImplicitOptions, Integrator, Problem, State,
+    StaticOptions, solve_static,
+};
+use mss_core::{ConstraintSpec, Material, Model, NodeSelector, SpringsOnly, Vec3};
+
+const G: f64 = 9.81;
+
+/// A 0.1 x 0.1 x 0.05 m block of 4 x 4 x 2 cells standing at z = `z0`.
+fn block(z0: f64) -> Model {
+    let lattice = Lattice::block([4, 4, 2], 0.025, [0.0, 0.0, z0]).unwrap();
+    let param = HourglassControl::new(Box::new(VolumetricBarrier), 1.0).unwrap();
+    Model::new(&lattice, Material::new(1.0e5, 0.3, 1000.0).unwrap(), &param).unwrap()
+}
+
+fn problem(
+    model: Model,
+    g: Vec3,
+    obstacle: Box<dyn Obstacle>,
+    settings: impl Fn(ContactSettings) -> ContactSettings,
+    damping: Damping,
+    fixed: &[ConstraintSpec],
+) -> Problem {
+    let s = settings(ContactSettings::for_model(&model));
+    let contact = Contact::new(&model, vec![(obstacle, s)]);
+    Problem::from_specs(model, fixed, &[LoadSpec::Gravity { g: g.into() }], damping)
+        .unwrap()
+        .with_contact(contact)
+}
+
+fn mass_damping(alpha: f64) -> Damping {
+    Damping { alpha, beta: 0.0 }
+}
+
+fn ground() -> Box<dyn Obstacle> {
+    Box::new(Plane::new(Vec3::zeros(), Vec3::z()).unwrap())
+}
+
+fn run(p: &Problem, seconds: f64) -> State {
+    let mut it = Explicit::new(p, ExplicitOptions::default()).unwrap();
+    let mut s = State::at_rest(p.model());
+    let steps = (seconds / it.dt()).ceil() as usize;
+    for _ in 0..steps {
+        it.step(p, &mut s).unwrap();
+    }
+    s
+}
+
+/// A block on the ground under gravity, damped to rest.
+fn resting_block() -> Problem {
+    let down = Vec3::new(0.0, 0.0, -G);
+    problem(block(0.0), down, ground(), |s| s, mass_damping(30.0), &[])
+}
+
+fn mean_y(s: &State) -> f64 {
+    s.x.iter().map(|x| x.y).sum::<f64>() / s.x.len() as f64
+}
+
+#[test]
+fn a_block_on_the_ground_carries_its_weight_without_sinking() {
+    let p = resting_block();
+    let s = run(&p, 0.4);
+    let weight = p.model().total_mass() * G;
+    let f = p.contact_forces(&s);
+    let total: Vec3 = f.iter().sum();
+    assert!(
+        (total.z - weight).abs() < 0.01 * weight,
+        "{} vs {weight}",
+        total.z
+    );
+    assert!(total.x.abs() + total.y.abs() < 1e-6 * weight);
+    // No node deeper than four times the mean load of a bottom node over k.
+    let k = ContactSettings::for_model(p.model()).stiffness;
+    let touching = f.iter().filter(|v| v.z > 0.0).count();
+    let tolerance = 4.0 * weight / touching as f64 / k;
+    let deepest = s.x.iter().map(|x| -x.z).fold(f64::MIN, f64::max);
+    assert!(
+        deepest > 0.0 && deepest < tolerance,
+        "{deepest} vs {tolerance}"
+    );
+    assert!(s.v.iter().all(|v| v.norm() < 1e-3));
+}
+
+#[test]
+fn a_block_sticks_below_the_friction_angle_and_slides_above() {
+    // The incline as gravity turned by the angle (the same to the block).
+    let mu = 0.5;
+    let incline = |tan: f64| {
+        let a = tan.atan();
+        Vec3::new(0.0, G * a.sin(), -G * a.cos())
+    };
+    let friction = |s: ContactSettings| ContactSettings {
+        friction_static: mu,
+        friction_kinetic: mu,
+        ..s
+    };
+    let p = problem(
+        block(0.0),
+        incline(0.3),
+        ground(),
+        friction,
+        Damping::NONE,
+        &[],
+    );
+    // It settles onto the slope (slipping a little while the contact forces
+    // build up), then stays.
+    let mut it = Explicit::new(&p, ExplicitOptions::default()).unwrap();
+    let mut s = State::at_rest(p.model());
+    let mut at = |s: &mut State, t: f64| {
+        while s.time < t {
+            it.step(&p, s).unwrap();
+        }
+        mean_y(s)
+    };
+    let (y1, y2) = (at(&mut s, 0.2), at(&mut s, 0.5));
+    assert!((y2 - y1).abs() < 2e-5, "crept by {} m in 0.3 s", y2 - y1);
+    // Above it: the acceleration g (sin - mu cos) along the slope, once the
+    // first bounces of the landing are over. Stiffness damping calms the
+    // block's own vibrations (which make it hop) and leaves its sliding alone.
+    let calm = Damping {
+        alpha: 0.0,
+        beta: 1e-3,
+    };
+    let p = problem(block(0.0), incline(0.7), ground(), friction, calm, &[]);
+    let mut it = Explicit::new(&p, ExplicitOptions::default()).unwrap();
+    let mut s = State::at_rest(p.model());
+    let masses = p.model().masses();
+    let mut speed_at = |s: &mut State, t: f64| {
+        while s.time < t {
+            it.step(&p, s).unwrap();
+        }
+        s.momentum(masses).y / p.model().total_mass()
+    };
+    let (v1, v2) = (speed_at(&mut s, 0.1), speed_at(&mut s, 0.3));
+    let a = 0.7f64.atan();
+    let expected = G * (a.sin() - mu * a.cos());
+    let got = (v2 - v1) / 0.2;
+    assert!(
+        (got - expected).abs() < 0.05 * expected,
+        "{got} vs {expected} m/s^2"
+    );
+}
+
+#[test]
+fn a_sphere_pressed_in_leaves_no_node_deep_inside() {
+    // Held at its base; a sphere of 3 cm comes down 1 cm into the top
+    // centre over 0.2 s, then stays.
+    let radius = 0.03;
+    let centre = Vec3::new(0.05, 0.05, 0.05 + radius);
+    let path = Path::new(vec![
+        (0.0, Vec3::zeros()),
+        (0.2, Vec3::new(0.0, 0.0, -0.01)),
+    ])
+    .unwrap();
+    let sphere = Sphere::new(centre, radius).unwrap().moving(path);
+    let base = [ConstraintSpec::fixed(NodeSelector::LowestLayer)];
+    let p = problem(
+        block(0.0),
+        Vec3::zeros(),
+        Box::new(sphere.clone()),
+        |s| s,
+        mass_damping(30.0),
+        &base,
+    );
+    let s = run(&p, 0.4);
+    let depth = |x: &[Vec3], t: f64| {
+        x.iter()
+            .filter_map(|&xi| sphere.penetration(t, xi).map(|q| q.depth))
+            .fold(0.0, f64::max)
+    };
+    let f = p.contact_forces(&s);
+    let total: Vec3 = f.iter().sum();
+    assert!(total.z < 0.0, "the sphere pushes down: {total:?}");
+    let k = ContactSettings::for_model(p.model()).stiffness;
+    let touching = f.iter().filter(|v| v.norm() > 0.0).count().max(1);
+    let tolerance = 4.0 * total.norm() / touching as f64 / k;
+    let d = depth(&s.x, s.time);
+    assert!(d < tolerance && d < 0.1 * 0.025, "{d} vs {tolerance}");
+    // The static solve of the pressed state agrees.
+    let mut st = State::at_rest(p.model());
+    st.time = 0.4;
+    let opts = StaticOptions {
+        accept_unstable: true,
+        ..StaticOptions::default()
+    };
+    solve_static(&p, &mut st, &opts).unwrap();
+    let ds = depth(&st.x, 0.4);
+    assert!(ds < tolerance, "{ds} vs {tolerance}");
+    let top = |x: &[Vec3]| x.iter().map(|v| v.z).fold(f64::MIN, f64::max);
+    assert!(
+        (top(&st.x) - top(&s.x)).abs() < 0.1 * 0.01,
+        "{} vs {}",
+        top(&st.x),
+        top(&s.x)
+    );
+}
+
+#[test]
+fn an_elastic_drop_does_not_gain_energy() {
+    // 1 cm above the ground, no damping, no friction: the energy of the
+    // bounce stays what the fall started with.
+    let lattice = Lattice::block([4, 4, 2], 0.025, [0.0, 0.0, 0.01]).unwrap();
+    // Springs only: the correction forces of the other models do no work
+    // that an energy accounts for.
+    let model = Model::new(
+        &lattice,
+        Material::new(1.0e5, 0.3, 1000.0).unwrap(),
+        &SpringsOnly,
+    )
+    .unwrap();
+    let elastic = |s: ContactSettings| ContactSettings {
+        friction_static: 0.0,
+        friction_kinetic: 0.0,
+        damping_ratio: 0.0,
+        ..s
+    };
+    let p = problem(
+        model,
+        Vec3::new(0.0, 0.0, -G),
+        ground(),
+        elastic,
+        Damping::NONE,
+        &[],
+    );
+    let m = p.model();
+    let contact = p.contact().unwrap();
+    let energy = |s: &State| {
+        let gravity: f64 = s.x.iter().zip(m.masses()).map(|(x, mi)| mi * G * x.z).sum();
+        s.kinetic_energy(m.masses()) + m.energy(&s.x) + contact.energy(s.time, &s.x) + gravity
+    };
+    let mut it = Explicit::new(&p, ExplicitOptions::default()).unwrap();
+    let mut s = State::at_rest(m);
+    let e0 = energy(&s);
+    let drop = m.total_mass() * G * 0.01;
+    let mut bounced = false;
+    let mut worst = 0.0f64;
+    for _ in 0..(0.3 / it.dt()) as usize {
+        it.step(&p, &mut s).unwrap();
+        worst = worst.max(energy(&s) - e0);
+        bounced |= s.v.iter().map(|v| v.z).sum::<f64>() > 0.0;
+    }
+    assert!(bounced, "it must have hit the ground");
+    assert!(worst < 0.05 * drop, "energy grew by {worst} J of {drop} J");
+}
+
+#[test]
+fn implicit_steps_rest_on_the_ground_too() {
+    let p = resting_block();
+    let mut it = Implicit::new(
+        &p,
+        ImplicitOptions {
+            dt: 0.01,
+            ..ImplicitOptions::default()
+        },
+    )
+    .unwrap();
+    let mut s = State::at_rest(p.model());
+    for _ in 0..40 {
+        it.step(&p, &mut s).unwrap();
+    }
+    let weight = p.model().total_mass() * G;
+    let total: Vec3 = p.contact_forces(&s).iter().sum();
+    assert!(
+        (total.z - weight).abs() < 0.02 * weight,
+        "{} vs {weight}",
+        total.z
+    );
+}
+
+#[test]
+fn bad_obstacles_are_refused() {
+    assert!(Plane::new(Vec3::zeros(), Vec3::zeros()).is_err());
+    assert!(Sphere::new(Vec3::zeros(), 0.0).is_err());
+    assert!(Sphere::new(Vec3::new(f64::NAN, 0.0, 0.0), 1.0).is_err());
+    assert!(Path::new(vec![(1.0, Vec3::zeros()), (0.5, Vec3::zeros())]).is_none());
+    let s = ContactSettings::for_model(&block(0.0));
+    for bad in [
+        ContactSettings {
+            stiffness: 0.0,
+            ..s
+        },
+        ContactSettings {
+            friction_static: -1.0,
+            ..s
+        },
+        ContactSettings {
+            friction_kinetic: 0.9,
+            friction_static: 0.5,
+            ..s
+        },
+        ContactSettings {
+            damping_ratio: f64::NAN,
+            ..s
+        },
+    ] {
+        assert!(bad.validate().is_err(), "{bad:?}");
+    }
+}
+
+/// The interactive API: a pick drags the block across the ground, a steered
+/// sphere pushes it, and the result does not depend on the thread count.
+#[test]
+fn a_simulation_drags_and_pushes_the_same_for_any_thread_count() {
+    use mss_core::contact::Steered;
+    use mss_core::simulation::Simulation;
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let model = block(0.0);
+            let settings = ContactSettings::for_model(&model);
+            let (ball, handle) = Steered::new(Box::new(
+                Sphere::new(Vec3::new(-0.03, 0.05, 0.025), 0.02).unwrap(),
+            ));
+            let contact = Contact::new(
+                &model,
+                vec![(ground(), settings), (Box::new(ball), settings)],
+            );
+            let problem = Problem::from_specs(
+                model,
+                &[],
+                &[LoadSpec::Gravity { g: [0.0, 0.0, -G] }],
+                Damping {
+                    alpha: 5.0,
+                    beta: 0.0,
+                },
+            )
+            .unwrap()
+            .with_contact(contact);
+            let mut sim = Simulation::new(problem).unwrap();
+            let top = sim.nearest_node(Vec3::new(0.1, 0.05, 0.05));
+            sim.pick(&[top], 400.0).unwrap();
+            let start = sim.positions()[top as usize];
+            let frame = 1.0 / 60.0;
+            for k in 0..30 {
+                sim.drag_to(start + Vec3::new(0.002 * k as f64, 0.0, 0.0));
+                // The ball rolls in from -x and pushes the other side.
+                handle.move_to(Vec3::new(0.0005 * k as f64, 0.0, 0.0), frame);
+                sim.step(frame).unwrap();
+            }
+            sim.release();
+            assert!(sim.pick(&[], 1.0).is_err() && sim.pick(&[top], -1.0).is_err());
+            (sim.positions()[top as usize] - start, sim.state().clone())
+        })
+    };
+    let (moved, one) = run(1);
+    assert!(moved.x > 0.01, "dragged by {moved:?}");
+    let (_, two) = run(2);
+    assert_eq!(one, two);
+}
+
+/// A closed mesh obstacle answers like the analytic shape it describes, and
+/// an open one is refused.
+#[test]
+fn a_mesh_obstacle_agrees_with_the_box_it_is() {
+    use mss_core::contact::{Cuboid, MeshObstacle};
+    let (lo, hi) = ([0.0, 0.0, 0.0], [0.2, 0.1, 0.05]);
+    let mesh = MeshObstacle::new(&hexmesh::generate::box_mesh(lo, hi)).unwrap();
+    let cuboid = Cuboid::new(Vec3::from(lo), Vec3::from(hi)).unwrap();
+    let mut seed = 12345u64;
+    let mut r = || {
+        seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (seed >> 11) as f64 / (1u64 << 53) as f64
+    };
+    for _ in 0..200 {
+        let p = Vec3::new(0.3 * r() - 0.05, 0.2 * r() - 0.05, 0.1 * r() - 0.025);
+        match (mesh.penetration(0.0, p), cuboid.penetration(0.0, p)) {
+            (None, None) => {}
+            (Some(a), Some(b)) => {
+                assert!((a.depth - b.depth).abs() < 1e-12, "{p:?}");
+                assert!((a.normal - b.normal).norm() < 1e-9, "{p:?}: {a:?} vs {b:?}");
+            }
+            (a, b) => panic!("{p:?}: {a:?} vs {b:?}"),
+        }
+    }
+    let mut open = hexmesh::generate::box_mesh(lo, hi);
+    open.triangles.pop();
+    assert!(MeshObstacle::new(&open).is_err());
+}
