@@ -110,3 +110,42 @@ fn the_pressed_critter_recovers_when_the_sphere_withdraws() {
     assert_eq!(f, Vec3::zeros());
     assert!(model.inverted_cells(&s.x).is_empty());
 }
+
+/// With `[contact] points = "both"` the rendered surface, not only the
+/// lattice, keeps the obstacle out: the embedded critter's back, which lies
+/// outside its lattice's nodes in places, no longer lets the sphere in.
+#[test]
+fn the_embedded_surface_can_touch_too() {
+    let deepest_surface = |points: &str| {
+        let scene = PRESS
+            .replace(
+                "[[obstacles]]",
+                &format!("[contact]\npoints = \"{points}\"\n\n[[obstacles]]"),
+            )
+            .replace("duration = 1.0        # s", "duration = 0.5        # s");
+        let mut deepest = 0.0f64;
+        let mut embedding = None;
+        let (job, _) = run(&scene, |job, s| {
+            let e =
+                embedding.get_or_insert_with(|| hexmesh::Embedding::new(&job.lattice, &job.mesh));
+            let nodes: Vec<[f64; 3]> = s.x.iter().map(|p| [p.x, p.y, p.z]).collect();
+            let (o, _) = job.problem.contact().unwrap().obstacles().next().unwrap();
+            for v in e.deform(&nodes) {
+                if let Some(p) = o.penetration(s.time, Vec3::new(v[0], v[1], v[2])) {
+                    deepest = deepest.max(p.depth);
+                }
+            }
+        });
+        (deepest, job.problem.model().h())
+    };
+    let (nodes, h) = deepest_surface("nodes");
+    let (both, _) = deepest_surface("both");
+    assert!(
+        nodes > 0.1 * h,
+        "with nodes only the sphere enters the surface by {nodes}"
+    );
+    assert!(
+        both < 0.6 * nodes && both < 0.2 * h,
+        "{both} vs {nodes} (h {h})"
+    );
+}

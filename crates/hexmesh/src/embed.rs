@@ -46,18 +46,8 @@ impl Embedding {
         self.cells
             .iter()
             .zip(&self.coords)
-            .map(|(cell, &[u, v, w])| {
-                // VTK_HEXAHEDRON corner order (see CORNER_OFFSETS).
-                let wts = [
-                    (1.0 - u) * (1.0 - v) * (1.0 - w),
-                    u * (1.0 - v) * (1.0 - w),
-                    u * v * (1.0 - w),
-                    (1.0 - u) * v * (1.0 - w),
-                    (1.0 - u) * (1.0 - v) * w,
-                    u * (1.0 - v) * w,
-                    u * v * w,
-                    (1.0 - u) * v * w,
-                ];
+            .map(|(cell, &uvw)| {
+                let wts = trilinear_weights(uvw);
                 let mut p = [0.0; 3];
                 for (k, &n) in cell.iter().enumerate() {
                     let q = node_positions[n as usize];
@@ -80,6 +70,12 @@ impl Embedding {
         &self.cells
     }
 
+    /// Vertex `i`'s 8 nodes and their weights (sum 1; outside `[0, 1]` for a
+    /// vertex outside every cell).
+    pub fn vertex_weights(&self, i: usize) -> ([u32; 8], [f64; 8]) {
+        (self.cells[i], trilinear_weights(self.coords[i]))
+    }
+
     /// For each vertex, its trilinear coordinates in its cell.
     pub fn vertex_coords(&self) -> &[[f64; 3]] {
         &self.coords
@@ -92,6 +88,21 @@ impl Embedding {
             triangles: self.triangles.clone(),
         }
     }
+}
+
+/// Trilinear weights of the 8 corners (VTK_HEXAHEDRON order, see
+/// [`crate::CORNER_OFFSETS`]) at local coordinates `[u, v, w]`.
+fn trilinear_weights([u, v, w]: [f64; 3]) -> [f64; 8] {
+    [
+        (1.0 - u) * (1.0 - v) * (1.0 - w),
+        u * (1.0 - v) * (1.0 - w),
+        u * v * (1.0 - w),
+        (1.0 - u) * v * (1.0 - w),
+        (1.0 - u) * (1.0 - v) * w,
+        u * (1.0 - v) * w,
+        u * v * w,
+        (1.0 - u) * v * w,
+    ]
 }
 
 /// The kept cell nearest to grid point `g` (in cell units), searching cubic

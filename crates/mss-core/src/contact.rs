@@ -3,7 +3,9 @@
 //! moving along a path or steered by hand ([`Steered`]), with Coulomb
 //! friction and contact damping.
 //!
-//! Contact is a penalty on the lattice's boundary nodes ([`Model::boundary_nodes`]):
+//! Contact is a penalty on the lattice's boundary nodes ([`Model::boundary_nodes`]),
+//! or on the embedded surface's vertices, whose forces their cells' nodes
+//! share by the trilinear weights ([`ContactPoints`]):
 //! a node at depth `d > 0` inside an obstacle is pushed out along the
 //! obstacle's outward normal `n` with the force `f_n = k d - c v_n`
 //! (`k` the node's contact stiffness, proportional to its mass, `v_n` the normal velocity relative to the
@@ -21,9 +23,10 @@
 //! [`State`](crate::solver::State) (`contact`), so a step depends on nothing
 //! else.
 //!
-//! Derivatives (for Newton): the normal force's are exact (`-k n n^T` plus
-//! `k d dn/dx` for curved obstacles); the friction force's treat the normal
-//! as locally constant; damping adds `-(c / dt) n n^T` in implicit steps.
+//! Derivatives (for Newton) are exact for the normal force (`-k n n^T` plus
+//! `k d dn/dx` on curved obstacles) and for friction, sticking or sliding,
+//! including the turning of the normal; damping adds `-(c / dt) n n^T` in
+//! implicit steps (its dependence on the normal's turning is left out).
 //!
 //! ```
 //! use mss_core::contact::{Contact, ContactSettings, Plane};
@@ -532,20 +535,62 @@ impl ContactSettings {
     }
 }
 
-/// The obstacles of a problem and the nodes that can touch them.
+/// A point that can touch: a boundary node, or a vertex of the embedded
+/// surface bound to its cell's 8 nodes by trilinear weights.
+#[derive(Debug, Clone, Copy)]
+struct Point {
+    nodes: [u32; 8],
+    weights: [f64; 8],
+    /// Nodes used (1 for a node, 8 for a surface vertex).
+    len: usize,
+    /// Mass the point moves (kg): the node's, or the weighted nodes'.
+    mass: f64,
+    /// Its stiffness over the settings' `stiffness`.
+    stiffness_ratio: f64,
+}
+
+impl Point {
+    fn bound(&self) -> impl Iterator<Item = (usize, f64)> + '_ {
+        self.nodes[..self.len]
+            .iter()
+            .zip(&self.weights[..self.len])
+            .map(|(&n, &w)| (n as usize, w))
+    }
+    fn position(&self, x: &[Vec3]) -> Vec3 {
+        self.bound().map(|(n, w)| x[n] * w).sum()
+    }
+}
+
+/// Which points touch the obstacles.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ContactPoints {
+    /// The lattice's boundary nodes.
+    #[default]
+    Nodes,
+    /// The embedded surface's vertices (what is rendered), their forces
+    /// shared by their cells' nodes through the trilinear weights.
+    Surface,
+    /// Both.
+    Both,
+}
+
+/// The obstacles of a problem and the points that can touch them.
 #[derive(Debug)]
 pub struct Contact {
     obstacles: Vec<(Box<dyn Obstacle>, ContactSettings)>,
-    nodes: Vec<u32>,
-    /// Per contact node: its mass over the mean boundary-node mass.
-    mass_ratio: Vec<f64>,
+    points: Vec<Point>,
+    /// Contact's part of `omega_max^2` per unit of `stiffness` (1/(s^2 N/m)):
+    /// the largest Gershgorin row sum of the mapped stiffness over a node's mass.
+    omega_sq_per_stiffness: f64,
 }
 
-/// One node's force from one obstacle, and what friction did.
+/// One point's force from one obstacle, and what friction did.
 struct Touch {
     force: Vec3,
     normal: Vec3,
-    /// Tangential offset from the anchor.
+    /// Offset from the anchor.
+    offset: Vec3,
+    /// Its tangential part.
     delta: Vec3,
     sliding: bool,
 }
@@ -553,23 +598,79 @@ struct Touch {
 impl Contact {
     /// Contact of `model`'s boundary nodes with `obstacles`.
     pub fn new(model: &Model, obstacles: Vec<(Box<dyn Obstacle>, ContactSettings)>) -> Self {
-        let nodes = model.boundary_nodes();
-        let mean = mean_boundary_mass(model, &nodes);
+        Self::with_points(model, obstacles, ContactPoints::Nodes, None)
+    }
+
+    /// Contact of the chosen points with `obstacles`; `surface` is the
+    /// embedded surface, needed for [`ContactPoints::Surface`] and `Both`
+    /// (without it only the nodes touch). A surface vertex's stiffness is its
+    /// share of the nodes' (the boundary nodes over the surface vertices), so
+    /// a dense surface does not stiffen the contact.
+    pub fn with_points(
+        model: &Model,
+        obstacles: Vec<(Box<dyn Obstacle>, ContactSettings)>,
+        which: ContactPoints,
+        surface: Option<&hexmesh::Embedding>,
+    ) -> Self {
+        let boundary = model.boundary_nodes();
+        let mean = mean_boundary_mass(model, &boundary);
         let masses = model.masses();
-        let mass_ratio = nodes
+        let ratio = |m: f64| if mean > 0.0 { m / mean } else { 1.0 };
+        let mut points = Vec::new();
+        if which != ContactPoints::Surface || surface.is_none() {
+            for &n in &boundary {
+                let mut nodes = [0u32; 8];
+                let mut weights = [0.0; 8];
+                nodes[0] = n;
+                weights[0] = 1.0;
+                let m = masses[n as usize];
+                points.push(Point {
+                    nodes,
+                    weights,
+                    len: 1,
+                    mass: m,
+                    stiffness_ratio: ratio(m),
+                });
+            }
+        }
+        if let (Some(e), true) = (surface, which != ContactPoints::Nodes) {
+            let count = e.vertex_cells().len();
+            let share = boundary.len() as f64 / count.max(1) as f64;
+            for i in 0..count {
+                let (nodes, weights) = e.vertex_weights(i);
+                let m: f64 = nodes
+                    .iter()
+                    .zip(&weights)
+                    .map(|(&n, w)| masses[n as usize] * w.abs())
+                    .sum();
+                points.push(Point {
+                    nodes,
+                    weights,
+                    len: 8,
+                    mass: m,
+                    stiffness_ratio: ratio(m) * share.min(1.0),
+                });
+            }
+        }
+        // Gershgorin: a point of stiffness k couples its nodes a, b by
+        // w_a w_b k; node a's row sums |w_a| (sum_b |w_b|) k over its points.
+        let mut rows = vec![0.0f64; model.num_nodes()];
+        for p in &points {
+            let total: f64 = p.bound().map(|(_, w)| w.abs()).sum();
+            for (n, w) in p.bound() {
+                rows[n] += w.abs() * total * p.stiffness_ratio;
+            }
+        }
+        let omega_sq_per_stiffness = rows
             .iter()
-            .map(|&n| {
-                if mean > 0.0 {
-                    masses[n as usize] / mean
-                } else {
-                    1.0
-                }
-            })
-            .collect();
+            .zip(masses)
+            .filter(|(_, m)| **m > 0.0)
+            .map(|(r, m)| r / m)
+            .fold(0.0, f64::max);
         Self {
             obstacles,
-            nodes,
-            mass_ratio,
+            points,
+            omega_sq_per_stiffness,
         }
     }
 
@@ -578,42 +679,39 @@ impl Contact {
         self.obstacles.iter().map(|(o, s)| (&**o, s))
     }
 
-    /// The nodes that can touch.
-    pub fn nodes(&self) -> &[u32] {
-        &self.nodes
+    /// Number of points that can touch.
+    pub fn num_points(&self) -> usize {
+        self.points.len()
+    }
+
+    /// Positions of the points that can touch, for node positions `x`.
+    pub fn point_positions(&self, x: &[Vec3]) -> Vec<Vec3> {
+        self.points.iter().map(|p| p.position(x)).collect()
     }
 
     /// Entries of the anchor array of [`State::contact`](crate::solver::State):
-    /// one per contact node and obstacle.
+    /// one per contact point and obstacle.
     pub fn num_anchors(&self) -> usize {
-        self.nodes.len() * self.obstacles.len()
+        self.points.len() * self.obstacles.len()
     }
 
-    /// The largest contact stiffness over a node's mass (1/s^2): what
-    /// contact adds to `omega_max^2` (the same for every node, by the mass
-    /// scaling of [`ContactSettings::stiffness`]).
+    /// What contact adds to `omega_max^2` (1/s^2): a Gershgorin bound of
+    /// the contact stiffness over the nodes' masses.
     pub fn omega_sq(&self, model: &Model) -> f64 {
-        let mean = mean_boundary_mass(model, &self.nodes);
+        let _ = model;
         let k = self
             .obstacles
             .iter()
             .map(|(_, s)| s.stiffness)
             .fold(0.0, f64::max);
-        if mean > 0.0 { k / mean } else { 0.0 }
-    }
-
-    /// Contact node `i`'s stiffness for obstacle settings `s` (N/m).
-    fn stiffness(&self, i: usize, s: &ContactSettings) -> f64 {
-        s.stiffness * self.mass_ratio[i]
+        k * self.omega_sq_per_stiffness
     }
 
     #[allow(clippy::too_many_arguments)]
     fn touch(
         &self,
-        model: &Model,
         i: usize,
         j: usize,
-        node: u32,
         t: f64,
         x: Vec3,
         v: Vec3,
@@ -622,9 +720,9 @@ impl Contact {
         let (obstacle, s) = &self.obstacles[j];
         let pen = obstacle.penetration(t, x)?;
         let n = pen.normal;
-        let k = self.stiffness(i, s);
-        let m = model.masses()[node as usize];
-        let c = 2.0 * s.damping_ratio * (k * m).sqrt();
+        let point = &self.points[i];
+        let k = s.stiffness * point.stiffness_ratio;
+        let c = 2.0 * s.damping_ratio * (k * point.mass).sqrt();
         let v_rel = v - obstacle.velocity(t);
         let f_n = (k * pen.depth - c * v_rel.dot(&n)).max(0.0);
         // The anchor lives in the obstacle's frame; a new contact starts at x.
@@ -648,6 +746,7 @@ impl Contact {
             Touch {
                 force: n * f_n + friction,
                 normal: n,
+                offset: d,
                 delta,
                 sliding,
             },
@@ -671,22 +770,16 @@ impl Contact {
         anchors: &[Option<Vec3>],
         f: &mut [Vec3],
     ) {
+        let _ = model;
         let nobs = self.obstacles.len();
-        for (i, &node) in self.nodes.iter().enumerate() {
-            let n = node as usize;
+        for (i, point) in self.points.iter().enumerate() {
+            let (xp, vp) = (point.position(x), point.position(v));
             for j in 0..nobs {
                 let k = i * nobs + j;
-                if let Some((touch, _)) = self.touch(
-                    model,
-                    i,
-                    j,
-                    node,
-                    t,
-                    x[n],
-                    v[n],
-                    Self::anchor_of(anchors, k),
-                ) {
-                    f[n] += touch.force;
+                if let Some((touch, _)) = self.touch(i, j, t, xp, vp, Self::anchor_of(anchors, k)) {
+                    for (n, w) in point.bound() {
+                        f[n] += touch.force * w;
+                    }
                 }
             }
         }
@@ -706,55 +799,56 @@ impl Contact {
         dv_dx: f64,
         jac: &mut BlockCsr,
     ) {
+        let _ = model;
         let nobs = self.obstacles.len();
-        for (i, &node) in self.nodes.iter().enumerate() {
-            let n = node as usize;
+        for (i, point) in self.points.iter().enumerate() {
+            let (xp, vp) = (point.position(x), point.position(v));
             for j in 0..nobs {
                 let k = i * nobs + j;
-                let Some((touch, pen)) = self.touch(
-                    model,
-                    i,
-                    j,
-                    node,
-                    t,
-                    x[n],
-                    v[n],
-                    Self::anchor_of(anchors, k),
-                ) else {
+                let Some((touch, pen)) = self.touch(i, j, t, xp, vp, Self::anchor_of(anchors, k))
+                else {
                     continue;
                 };
                 let s = &self.obstacles[j].1;
-                let stiffness = self.stiffness(i, s);
+                let stiffness = s.stiffness * point.stiffness_ratio;
                 let nn = touch.normal * touch.normal.transpose();
-                let m = model.masses()[n];
-                let c = 2.0 * s.damping_ratio * (stiffness * m).sqrt();
+                let c = 2.0 * s.damping_ratio * (stiffness * point.mass).sqrt();
                 // Normal force: -k n n^T + k d dn/dx, damping -(c dv/dx) n n^T.
                 let mut block =
                     -nn * (stiffness + c * dv_dx) + pen.normal_gradient * (stiffness * pen.depth);
-                let tangent = Mat3::identity() - nn;
+                // d(delta)/dx for delta = d - n (n . d): the tangent
+                // projector, and the turning of n on a curved obstacle.
+                let (n, d) = (touch.normal, touch.offset);
+                let g = pen.normal_gradient;
+                let d_delta = Mat3::identity() - nn - g * n.dot(&d) - n * (d.transpose() * g);
                 if touch.sliding {
                     let len = touch.delta.norm();
                     if len > 0.0 {
                         let dir = touch.delta / len;
-                        let f_n = touch.force.dot(&touch.normal);
+                        let f_n = touch.force.dot(&n);
                         let mu = s.friction_kinetic;
                         // -mu f_n d(dir)/dx - mu dir (d f_n / dx).
                         block -=
-                            (Mat3::identity() - dir * dir.transpose()) * tangent * (mu * f_n / len);
-                        block += dir * touch.normal.transpose() * (mu * (stiffness + c * dv_dx));
+                            (Mat3::identity() - dir * dir.transpose()) * d_delta * (mu * f_n / len);
+                        block += dir * n.transpose() * (mu * (stiffness + c * dv_dx));
                     }
                 } else {
-                    block -= tangent * stiffness;
+                    block -= d_delta * stiffness;
                 }
-                if let Some(b) = jac.find(n, n) {
-                    jac.blocks[b] += block;
+                // The point moves with its nodes by their weights.
+                for (a, wa) in point.bound() {
+                    for (b, wb) in point.bound() {
+                        if let Some(idx) = jac.find(a, b) {
+                            jac.blocks[idx] += block * (wa * wb);
+                        }
+                    }
                 }
             }
         }
     }
 
     /// After a step: sets the anchors of new contacts, lets sliding ones
-    /// follow their node to the kinetic limit, and clears those of nodes
+    /// follow their point to the kinetic limit, and clears those of points
     /// that left. `anchors` is resized to [`Contact::num_anchors`] if needed.
     pub fn update_anchors(
         &self,
@@ -764,29 +858,31 @@ impl Contact {
         v: &[Vec3],
         anchors: &mut Vec<Option<Vec3>>,
     ) {
+        let _ = model;
         if anchors.len() != self.num_anchors() {
             *anchors = vec![None; self.num_anchors()];
         }
         let nobs = self.obstacles.len();
-        for (i, &node) in self.nodes.iter().enumerate() {
-            let n = node as usize;
+        for (i, point) in self.points.iter().enumerate() {
+            let (xp, vp) = (point.position(x), point.position(v));
             for j in 0..nobs {
                 let k = i * nobs + j;
                 let offset = self.obstacles[j].0.offset(t);
                 let anchor = Self::anchor_of(anchors, k);
-                anchors[k] = match self.touch(model, i, j, node, t, x[n], v[n], anchor) {
+                anchors[k] = match self.touch(i, j, t, xp, vp, anchor) {
                     None => None,
-                    Some(_) if anchor.is_none() => Some(x[n] - offset),
+                    Some(_) if anchor.is_none() => Some(xp - offset),
                     Some((touch, _)) if touch.sliding => {
                         let s = &self.obstacles[j].1;
                         let f_n = touch.force.dot(&touch.normal).max(0.0);
                         let len = touch.delta.norm();
+                        let k_p = s.stiffness * point.stiffness_ratio;
                         let back = if len > 0.0 {
-                            touch.delta * ((s.friction_kinetic * f_n / self.stiffness(i, s)) / len)
+                            touch.delta * ((s.friction_kinetic * f_n / k_p) / len)
                         } else {
                             Vec3::zeros()
                         };
-                        Some(x[n] - back - offset)
+                        Some(xp - back - offset)
                     }
                     // Sticking: the anchor stays.
                     Some(_) => anchors[k],
@@ -809,13 +905,14 @@ impl Contact {
         f
     }
 
-    /// Penalty energy `k d^2 / 2` summed over touching nodes (J), for energy checks.
+    /// Penalty energy `k d^2 / 2` summed over touching points (J), for energy checks.
     pub fn energy(&self, t: f64, x: &[Vec3]) -> f64 {
         let mut e = 0.0;
-        for (i, &node) in self.nodes.iter().enumerate() {
+        for point in &self.points {
+            let xp = point.position(x);
             for (o, s) in &self.obstacles {
-                if let Some(p) = o.penetration(t, x[node as usize]) {
-                    e += 0.5 * self.stiffness(i, s) * p.depth * p.depth;
+                if let Some(p) = o.penetration(t, xp) {
+                    e += 0.5 * s.stiffness * point.stiffness_ratio * p.depth * p.depth;
                 }
             }
         }

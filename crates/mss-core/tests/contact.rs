@@ -390,3 +390,79 @@ fn a_mesh_obstacle_agrees_with_the_box_it_is() {
     open.triangles.pop();
     assert!(MeshObstacle::new(&open).is_err());
 }
+
+/// The contact Jacobian is the derivative of the contact forces (finite
+/// differences), for nodes and embedded-surface vertices, sticking and
+/// sliding, on a tilted plane and a sphere.
+#[test]
+fn the_contact_jacobian_matches_finite_differences() {
+    use mss_core::contact::ContactPoints;
+    let lattice = Lattice::block([2, 2, 1], 0.05, [0.0, 0.0, -0.01]).unwrap();
+    let model = Model::new(
+        &lattice,
+        Material::new(1.0e5, 0.3, 1000.0).unwrap(),
+        &SpringsOnly,
+    )
+    .unwrap();
+    // A surface a little inside the block, so its vertices are embedded.
+    let surface = hexmesh::generate::box_mesh([0.005, 0.005, -0.008], [0.095, 0.095, 0.04]);
+    let embedding = hexmesh::Embedding::new(&lattice, &surface);
+    for (which, obstacle) in [
+        Box::new(Plane::new(Vec3::new(0.0, 0.0, 0.002), Vec3::new(0.1, -0.2, 1.0)).unwrap())
+            as Box<dyn Obstacle>,
+        Box::new(Sphere::new(Vec3::new(0.05, 0.05, -0.2), 0.203).unwrap()),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let s = ContactSettings::for_model(&model);
+        let contact = Contact::with_points(
+            &model,
+            vec![(obstacle, s)],
+            ContactPoints::Both,
+            Some(&embedding),
+        );
+        let x0: Vec<Vec3> = model.rest_positions().to_vec();
+        let v = vec![Vec3::zeros(); x0.len()];
+        // Anchors a little away: some points stick, some slide.
+        let anchors: Vec<Option<Vec3>> = contact
+            .point_positions(&x0)
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                // Beyond mu times the depth the point slides.
+                let far = if i % 3 == 0 { 0.02 } else { 1e-6 };
+                Some(p + Vec3::new(far, -0.5 * far * (i % 2) as f64, 0.0))
+            })
+            .collect();
+        let forces = |x: &[Vec3]| {
+            let mut f = vec![Vec3::zeros(); x.len()];
+            contact.add_forces(&model, 0.0, x, &v, &anchors, &mut f);
+            f
+        };
+        // Both regimes are exercised.
+        let f0 = forces(&x0);
+        assert!(f0.iter().any(|f| f.norm() > 0.0));
+        let mut jac = mss_core::BlockCsr::lattice_pattern(model.num_nodes(), model.cells());
+        contact.add_jacobian(&model, 0.0, &x0, &v, &anchors, 0.0, &mut jac);
+        let eps = 1e-9;
+        let mut worst = 0.0f64;
+        let scale = forces(&x0).iter().map(|f| f.norm()).fold(0.0, f64::max) / 1e-3;
+        for b in 0..x0.len() {
+            for d in 0..3 {
+                let (mut xp, mut xm) = (x0.clone(), x0.clone());
+                xp[b][d] += eps;
+                xm[b][d] -= eps;
+                let (fp, fm) = (forces(&xp), forces(&xm));
+                for a in 0..x0.len() {
+                    let fd = (fp[a] - fm[a]) / (2.0 * eps);
+                    let exact = jac
+                        .find(a, b)
+                        .map_or(Vec3::zeros(), |k| jac.blocks[k].column(d).into());
+                    worst = worst.max((fd - exact).norm());
+                }
+            }
+        }
+        assert!(worst < 1e-5 * scale, "obstacle {which}: {worst} vs {scale}");
+    }
+}

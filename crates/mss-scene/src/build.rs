@@ -92,15 +92,17 @@ impl SceneInput {
 
     /// The problem of the scene for a built model: constraints, loads, damping.
     pub fn problem(&self, model: mss_core::Model) -> Result<Problem, JobError> {
-        self.problem_with(model, &Loaders::default())
+        self.problem_with(model, &Loaders::default(), None)
     }
 
     /// [`SceneInput::problem`] with `loaders` for the meshes that
-    /// `[[obstacles]]` name (placed like `[mesh]`).
+    /// `[[obstacles]]` name (placed like `[mesh]`), and the embedded
+    /// `surface` whose vertices touch them when `[contact] points` asks.
     pub fn problem_with(
         &self,
         model: mss_core::Model,
         loaders: &Loaders,
+        surface: Option<&hexmesh::Embedding>,
     ) -> Result<Problem, JobError> {
         let scene = &self.scene;
         let n_fixed = scene.fixed.len();
@@ -113,8 +115,14 @@ impl SceneInput {
                 .map_err(|e| format!("{name}: {e}"))?;
             Ok(loaded.mesh)
         };
-        let contact = crate::obstacles::build_contact(&model, &scene.obstacles, &mesh_of)
-            .map_err(|(i, e)| self.setting(&format!("[[obstacles]] #{}", i + 1), e))?;
+        let contact = crate::obstacles::build_contact(
+            &model,
+            &scene.obstacles,
+            &mesh_of,
+            scene.contact.points.points(),
+            surface,
+        )
+        .map_err(|(i, e)| self.setting(&format!("[[obstacles]] #{}", i + 1), e))?;
         let problem = Problem::from_specs(
             model,
             &scene.constraint_specs(),

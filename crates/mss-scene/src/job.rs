@@ -335,7 +335,9 @@ impl Job {
             scene: scene_name.clone(),
             source,
         })?;
-        let problem = input.problem_with(model, &registry.loaders)?;
+        let surface = (scene.contact.points != crate::obstacles::PointsKey::Nodes)
+            .then(|| hexmesh::Embedding::new(&vox.lattice, &loaded.mesh));
+        let problem = input.problem_with(model, &registry.loaders, surface.as_ref())?;
         let plan = input.time_plan(&problem)?;
         // Refuse a bad integrator choice (unknown name, a dt above the
         // stability limit) here, before anything is written.

@@ -21,11 +21,13 @@
 //! scales with its mass; default: contact at 0.7 of the lattice's highest
 //! frequency), `damping_ratio` that of the
 //! contact spring (default 0.2), `motion` keyframes `[t, dx, dy, dz]` of the
-//! obstacle's offset (s, m), linear in between.
+//! obstacle's offset (s, m), linear in between. `[contact] points` chooses
+//! what touches: the lattice's boundary `"nodes"` (default), the embedded
+//! `"surface"`'s vertices, or `"both"`.
 
 use mss_core::contact::{
-    Capsule, Contact, ContactSettings, Cuboid, MeshObstacle, Obstacle, ObstacleError, Path, Plane,
-    Sphere,
+    Capsule, Contact, ContactPoints, ContactSettings, Cuboid, MeshObstacle, Obstacle,
+    ObstacleError, Path, Plane, Sphere,
 };
 use mss_core::{Model, Vec3};
 use serde::Deserialize;
@@ -76,6 +78,40 @@ pub enum ShapeSpec {
         /// Radius (m).
         radius: f64,
     },
+}
+
+/// `[contact]`: which points touch the obstacles.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct ContactSection {
+    /// `"nodes"` (the lattice's boundary nodes, default), `"surface"` (the
+    /// embedded input surface's vertices, what is rendered) or `"both"`.
+    #[serde(default)]
+    pub points: PointsKey,
+}
+
+/// `[contact] points`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum PointsKey {
+    /// The lattice's boundary nodes.
+    #[default]
+    Nodes,
+    /// The embedded surface's vertices.
+    Surface,
+    /// Both.
+    Both,
+}
+
+impl PointsKey {
+    /// The library's choice.
+    pub fn points(self) -> ContactPoints {
+        match self {
+            PointsKey::Nodes => ContactPoints::Nodes,
+            PointsKey::Surface => ContactPoints::Surface,
+            PointsKey::Both => ContactPoints::Both,
+        }
+    }
 }
 
 /// One `[[obstacles]]` table.
@@ -173,6 +209,8 @@ pub fn build_contact(
     model: &Model,
     specs: &[ObstacleSpec],
     mesh_of: &dyn Fn(&str) -> Result<hexmesh::TriMesh, String>,
+    points: ContactPoints,
+    surface: Option<&hexmesh::Embedding>,
 ) -> Result<Option<Contact>, (usize, ObstacleError)> {
     if specs.is_empty() {
         return Ok(None);
@@ -183,5 +221,7 @@ pub fn build_contact(
         let s = spec.settings(model).map_err(|e| (i, e))?;
         obstacles.push((o, s));
     }
-    Ok(Some(Contact::new(model, obstacles)))
+    Ok(Some(Contact::with_points(
+        model, obstacles, points, surface,
+    )))
 }

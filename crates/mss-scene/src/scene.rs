@@ -167,6 +167,9 @@ pub struct Scene {
     /// `[[obstacles]]`: rigid obstacles the body touches (see [`crate::obstacles`]).
     #[serde(default)]
     pub obstacles: Vec<crate::obstacles::ObstacleSpec>,
+    /// `[contact]`: which points touch them.
+    #[serde(default)]
+    pub contact: crate::obstacles::ContactSection,
 }
 
 /// `[mesh]`: the input surface (OBJ, STL, PLY, VTK) and where it is placed

@@ -196,10 +196,9 @@ pub fn solve_static(
     let anchors = match problem.contact() {
         Some(c) => {
             let offsets: Vec<Vec3> = c.obstacles().map(|(o, _)| o.offset(state.time)).collect();
-            let x = &state.x;
-            c.nodes()
-                .iter()
-                .flat_map(|&node| offsets.iter().map(move |o| Some(x[node as usize] - o)))
+            c.point_positions(&state.x)
+                .into_iter()
+                .flat_map(|p| offsets.iter().map(move |o| Some(p - o)))
                 .collect()
         }
         None => Vec::new(),
