@@ -164,6 +164,8 @@ pub struct Explicit {
     ws: ForceWorkspace,
     /// Conservative force (internal + external) at `cache_x`, `cache_time`.
     f_cons: Vec<Vec3>,
+    /// Contact forces (empty without obstacles).
+    f_contact: Vec<Vec3>,
     cache_x: Vec<Vec3>,
     cache_time: f64,
     cache_valid: bool,
@@ -241,6 +243,11 @@ impl Explicit {
             },
             ws: problem.model().workspace(),
             f_cons: vec![Vec3::zeros(); n],
+            f_contact: if problem.contact().is_some() {
+                vec![Vec3::zeros(); n]
+            } else {
+                Vec::new()
+            },
             cache_x: vec![Vec3::zeros(); n],
             cache_time: f64::NAN,
             cache_valid: false,
@@ -355,8 +362,7 @@ impl Explicit {
         self.dt_sub
     }
 
-    /// Internal, external and contact forces at `state` (contact damping and
-    /// friction use its velocities and anchors).
+    /// Internal and external forces at `state` (cached by position and time).
     fn conservative_forces(&mut self, problem: &Problem, state: &State) {
         let model = problem.model();
         let (x, t) = (&state.x, state.time);
@@ -364,8 +370,23 @@ impl Explicit {
         for l in problem.loads() {
             l.add_forces(model, t, x, 1.0, &mut self.f_cons);
         }
+    }
+
+    /// Contact forces at `state`, which depend on its velocities and friction
+    /// anchors too: evaluated at every kick, apart from the cached forces
+    /// (they cost the boundary points only).
+    fn contact_forces(&mut self, problem: &Problem, state: &State) {
         if let Some(c) = problem.contact() {
-            c.add_forces(model, t, x, &state.v, &state.contact, &mut self.f_cons);
+            let f = &mut self.f_contact;
+            f.iter_mut().for_each(|v| *v = Vec3::zeros());
+            c.add_forces(
+                problem.model(),
+                state.time,
+                &state.x,
+                &state.v,
+                &state.contact,
+                f,
+            );
         }
     }
 
@@ -383,6 +404,7 @@ impl Explicit {
         let cons = problem.constraints();
         let d = problem.damping();
         let f = &self.f_cons;
+        let fc = &self.f_contact;
         let kv = &self.kv;
         v.par_chunks_mut(CHUNK)
             .enumerate()
@@ -391,6 +413,9 @@ impl Explicit {
                 for (k, vi) in vc.iter_mut().enumerate() {
                     let i = ci * CHUNK + k;
                     let mut force = f[i] - *vi * (d.alpha * masses[i]);
+                    if !fc.is_empty() {
+                        force += fc[i];
+                    }
                     if !kv.is_empty() {
                         force -= kv[i] * d.beta;
                     }
@@ -441,18 +466,18 @@ impl Explicit {
                 if !cached {
                     self.conservative_forces(problem, state);
                 }
+                self.contact_forces(problem, state);
                 self.damping_product(problem, &state.v);
                 let mut ok = self.kick(problem, &mut state.v, 0.5 * dt);
                 ok &= Self::drift(problem, state, dt, t1);
                 state.time = t1;
                 self.conservative_forces(problem, state);
+                self.contact_forces(problem, state);
                 self.damping_product(problem, &state.v);
                 ok &= self.kick(problem, &mut state.v, 0.5 * dt);
                 self.cache_x.copy_from_slice(&state.x);
                 self.cache_time = t1;
-                // Friction anchors move after the step: the cached force,
-                // which used the old ones, is then not the force at t1.
-                self.cache_valid = ok && problem.contact().is_none();
+                self.cache_valid = ok;
                 problem.update_contact(state);
                 ok
             }
@@ -460,6 +485,7 @@ impl Explicit {
                 if !cached {
                     self.conservative_forces(problem, state);
                 }
+                self.contact_forces(problem, state);
                 self.damping_product(problem, &state.v);
                 let mut ok = self.kick(problem, &mut state.v, dt);
                 ok &= Self::drift(problem, state, dt, t1);
