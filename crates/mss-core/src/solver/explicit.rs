@@ -119,20 +119,26 @@ impl Default for ExplicitOptions {
 /// The largest stable explicit step (s) for `problem`, times `safety`
 /// (see the module docs).
 pub fn explicit_time_step_limit(problem: &Problem, safety: f64) -> f64 {
-    let model = problem.model();
-    let w_model = 2.0 / model.critical_time_step();
-    // A contact spring on the lightest boundary node adds k / m to omega^2
-    // (Gershgorin: it sits on that node's diagonal). Contact switches on and
-    // off within an oscillation, which Verlet integrates without energy
-    // drift only when it resolves it: that part counts CONTACT_RESOLUTION^2
-    // times (about 7 steps per contact period at safety 0.9).
-    let w_contact_sq = problem.contact().map_or(0.0, |c| {
-        c.omega_sq(model) * CONTACT_RESOLUTION * CONTACT_RESOLUTION
-    });
-    let w = (w_model * w_model + w_contact_sq).sqrt();
+    let (w_model_sq, w_contact_sq) = omega_sq_parts(problem);
+    let w = (w_model_sq + w_contact_sq).sqrt();
     let d = problem.damping();
     let c = d.alpha + d.beta * w * w;
     safety * 4.0 / ((c * c + 4.0 * w * w).sqrt() + c)
+}
+
+/// The lattice's and the contact's parts of the `omega_max^2` bound (1/s^2).
+fn omega_sq_parts(problem: &Problem) -> (f64, f64) {
+    let model = problem.model();
+    let w_model = 2.0 / model.critical_time_step();
+    // A contact spring on a boundary node adds k / m to omega^2 (Gershgorin:
+    // it sits on that node's diagonal). Contact switches on and off within
+    // an oscillation, which Verlet integrates without energy drift only when
+    // it resolves it: that part counts CONTACT_RESOLUTION^2 times (about 7
+    // steps per contact period at safety 0.9).
+    let w_contact_sq = problem.contact().map_or(0.0, |c| {
+        c.omega_sq(model) * CONTACT_RESOLUTION * CONTACT_RESOLUTION
+    });
+    (w_model * w_model, w_contact_sq)
 }
 
 /// The explicit integrator.
@@ -146,6 +152,9 @@ pub struct Explicit {
     base_substeps: u32,
     /// Stable sub-step at rest (s), with the safety factor.
     limit: f64,
+    /// Contact's share of `omega_max^2`: the part that does not grow with
+    /// the lattice's stiffness.
+    contact_share: f64,
     /// Halvings of the sub-step in force (see the module docs): the larger
     /// of `fail_halvings` and `growth_halvings`.
     halvings: u32,
@@ -197,6 +206,12 @@ impl Explicit {
             ));
         }
         let limit = explicit_time_step_limit(problem, opts.safety);
+        let (w_model_sq, w_contact_sq) = omega_sq_parts(problem);
+        let contact_share = if w_model_sq + w_contact_sq > 0.0 {
+            w_contact_sq / (w_model_sq + w_contact_sq)
+        } else {
+            0.0
+        };
         let dt = opts.dt.unwrap_or(limit);
         if !(dt.is_finite() && dt > 0.0) {
             return Err(SolverError::BadTimeStep(dt));
@@ -229,6 +244,7 @@ impl Explicit {
             substeps,
             base_substeps: substeps,
             limit,
+            contact_share,
             halvings: 0,
             fail_halvings: 0,
             growth_halvings: 0,
@@ -296,8 +312,9 @@ impl Explicit {
         // before the sub-step is halved, so that small vibrations, which
         // change the stiffness by their amplitude, do not halve it; a step
         // at the limit (safety 1) has no margin to give, beyond round-off.
-        let wanted =
-            self.limit / (model.stiffness_growth(x) * self.opts.safety).sqrt() * (1.0 + 1e-9);
+        // Only the lattice's part of omega^2 grows with its stiffness.
+        let growth = self.contact_share + (1.0 - self.contact_share) * model.stiffness_growth(x);
+        let wanted = self.limit / (growth * self.opts.safety).sqrt() * (1.0 + 1e-9);
         let base = self.dt / f64::from(self.base_substeps);
         (0..MAX_GROWTH_HALVINGS)
             .find(|&k| base / f64::from(1u32 << k) <= wanted)
