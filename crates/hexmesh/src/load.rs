@@ -513,6 +513,11 @@ pub struct Loaders {
     pub max_bytes: u64,
 }
 
+/// A message on one line (a parser's text may span several).
+pub(crate) fn one_line(s: &str) -> String {
+    s.split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
 /// A point as `[x, y, z]` with 4 significant digits.
 fn fmt3(p: &[f64; 3]) -> String {
     format!("[{:.3e}, {:.3e}, {:.3e}]", p[0], p[1], p[2])

@@ -33,7 +33,7 @@ use ply_rs_bw::parser::{Parser, Reader};
 use ply_rs_bw::ply::{Property, PropertyAccess, PropertyAccessResult, PropertyType};
 
 use crate::TriMesh;
-use crate::load::{LoadError, MeshLoader};
+use crate::load::{LoadError, MeshLoader, one_line};
 
 /// The built-in PLY loader (ASCII, binary little-endian, binary big-endian).
 #[derive(Debug, Clone, Copy, Default)]
@@ -277,8 +277,4 @@ fn is_float(t: &ply_rs_bw::ply::ScalarType) -> bool {
         t,
         ply_rs_bw::ply::ScalarType::Float | ply_rs_bw::ply::ScalarType::Double
     )
-}
-
-fn one_line(s: &str) -> String {
-    s.split_whitespace().collect::<Vec<_>>().join(" ")
 }

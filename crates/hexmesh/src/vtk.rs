@@ -38,7 +38,7 @@ use std::path::PathBuf;
 use vtkio::model::{CellType, DataSet, Piece, VertexNumbers, Vtk};
 
 use crate::TriMesh;
-use crate::load::{LoadError, MeshLoader};
+use crate::load::{LoadError, MeshLoader, one_line};
 
 /// The built-in VTK loader (`.vtk`, `.vtu`, `.vtp`).
 #[derive(Debug, Clone, Copy, Default)]
@@ -584,8 +584,4 @@ fn take_numbers(
         *at += 1;
     }
     Ok(())
-}
-
-fn one_line(s: &str) -> String {
-    s.split_whitespace().collect::<Vec<_>>().join(" ")
 }

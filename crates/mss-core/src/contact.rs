@@ -40,7 +40,7 @@
 //! // The bottom nodes are 1 mm deep in the ground: pushed up.
 //! let mut f = vec![Vec3::zeros(); model.num_nodes()];
 //! let v = vec![Vec3::zeros(); model.num_nodes()];
-//! contact.add_forces(&model, 0.0, model.rest_positions(), &v, &[], &mut f);
+//! contact.add_forces(0.0, model.rest_positions(), &v, &[], &mut f);
 //! assert!(f.iter().all(|fi| fi.z >= 0.0) && f.iter().any(|fi| fi.z > 0.0));
 //! ```
 
@@ -697,8 +697,7 @@ impl Contact {
 
     /// What contact adds to `omega_max^2` (1/s^2): a Gershgorin bound of
     /// the contact stiffness over the nodes' masses.
-    pub fn omega_sq(&self, model: &Model) -> f64 {
-        let _ = model;
+    pub fn omega_sq(&self) -> f64 {
         let k = self
             .obstacles
             .iter()
@@ -707,7 +706,6 @@ impl Contact {
         k * self.omega_sq_per_stiffness
     }
 
-    #[allow(clippy::too_many_arguments)]
     fn touch(
         &self,
         i: usize,
@@ -763,14 +761,12 @@ impl Contact {
     /// (empty: every contact is new).
     pub fn add_forces(
         &self,
-        model: &Model,
         t: f64,
         x: &[Vec3],
         v: &[Vec3],
         anchors: &[Option<Vec3>],
         f: &mut [Vec3],
     ) {
-        let _ = model;
         let nobs = self.obstacles.len();
         for (i, point) in self.points.iter().enumerate() {
             let (xp, vp) = (point.position(x), point.position(v));
@@ -791,7 +787,6 @@ impl Contact {
     #[allow(clippy::too_many_arguments)]
     pub fn add_jacobian(
         &self,
-        model: &Model,
         t: f64,
         x: &[Vec3],
         v: &[Vec3],
@@ -799,7 +794,6 @@ impl Contact {
         dv_dx: f64,
         jac: &mut BlockCsr,
     ) {
-        let _ = model;
         let nobs = self.obstacles.len();
         for (i, point) in self.points.iter().enumerate() {
             let (xp, vp) = (point.position(x), point.position(v));
@@ -850,15 +844,7 @@ impl Contact {
     /// After a step: sets the anchors of new contacts, lets sliding ones
     /// follow their point to the kinetic limit, and clears those of points
     /// that left. `anchors` is resized to [`Contact::num_anchors`] if needed.
-    pub fn update_anchors(
-        &self,
-        model: &Model,
-        t: f64,
-        x: &[Vec3],
-        v: &[Vec3],
-        anchors: &mut Vec<Option<Vec3>>,
-    ) {
-        let _ = model;
+    pub fn update_anchors(&self, t: f64, x: &[Vec3], v: &[Vec3], anchors: &mut Vec<Option<Vec3>>) {
         if anchors.len() != self.num_anchors() {
             *anchors = vec![None; self.num_anchors()];
         }
@@ -892,16 +878,9 @@ impl Contact {
     }
 
     /// Contact force per node (N) at a state (for output).
-    pub fn forces(
-        &self,
-        model: &Model,
-        t: f64,
-        x: &[Vec3],
-        v: &[Vec3],
-        anchors: &[Option<Vec3>],
-    ) -> Vec<Vec3> {
+    pub fn forces(&self, t: f64, x: &[Vec3], v: &[Vec3], anchors: &[Option<Vec3>]) -> Vec<Vec3> {
         let mut f = vec![Vec3::zeros(); x.len()];
-        self.add_forces(model, t, x, v, anchors, &mut f);
+        self.add_forces(t, x, v, anchors, &mut f);
         f
     }
 

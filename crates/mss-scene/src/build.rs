@@ -95,6 +95,24 @@ impl SceneInput {
         self.problem_with(model, &Loaders::default(), None)
     }
 
+    /// Loads a second mesh the scene names (a region's, an obstacle's),
+    /// resolved like `[mesh] path` and placed like the body's mesh; errors
+    /// as one line naming the file.
+    pub fn load_placed_mesh(
+        &self,
+        path: &str,
+        loaders: &Loaders,
+    ) -> Result<hexmesh::TriMesh, String> {
+        let source = Scene::source_of(path, &self.origin);
+        let (name, mut loaded) = load_mesh(&source, loaders).map_err(|e| e.to_string())?;
+        self.scene
+            .mesh
+            .placement()
+            .apply(&mut loaded.mesh)
+            .map_err(|e| format!("{name}: {e}"))?;
+        Ok(loaded.mesh)
+    }
+
     /// [`SceneInput::problem`] with `loaders` for the meshes that
     /// `[[obstacles]]` name (placed like `[mesh]`), and the embedded
     /// `surface` whose vertices touch them when `[contact] points` asks.
@@ -106,15 +124,7 @@ impl SceneInput {
     ) -> Result<Problem, JobError> {
         let scene = &self.scene;
         let n_fixed = scene.fixed.len();
-        let placement = scene.mesh.placement();
-        let mesh_of = |path: &str| -> Result<hexmesh::TriMesh, String> {
-            let source = Scene::source_of(path, &self.origin);
-            let (name, mut loaded) = load_mesh(&source, loaders).map_err(|e| e.to_string())?;
-            placement
-                .apply(&mut loaded.mesh)
-                .map_err(|e| format!("{name}: {e}"))?;
-            Ok(loaded.mesh)
-        };
+        let mesh_of = |path: &str| self.load_placed_mesh(path, loaders);
         let contact = crate::obstacles::build_contact(
             &model,
             &scene.obstacles,

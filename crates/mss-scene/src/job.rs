@@ -295,15 +295,7 @@ impl Job {
         let regions = if scene.regions.is_empty() {
             None
         } else {
-            let mesh_of = |path: &str| -> Result<hexmesh::TriMesh, String> {
-                let source = crate::scene::Scene::source_of(path, &input.origin);
-                let (name, mut loaded) =
-                    load_mesh(&source, &registry.loaders).map_err(|e| e.to_string())?;
-                placement
-                    .apply(&mut loaded.mesh)
-                    .map_err(|e| format!("{name}: {e}"))?;
-                Ok(loaded.mesh)
-            };
+            let mesh_of = |path: &str| input.load_placed_mesh(path, &registry.loaders);
             let a =
                 crate::regions::assign_regions(&vox.lattice, &material, &scene.regions, &mesh_of)
                     .map_err(|e| JobError::Setting {

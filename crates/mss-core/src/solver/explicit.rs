@@ -136,7 +136,7 @@ fn omega_sq_parts(problem: &Problem) -> (f64, f64) {
     // it resolves it: that part counts CONTACT_RESOLUTION^2 times (about 7
     // steps per contact period at safety 0.9).
     let w_contact_sq = problem.contact().map_or(0.0, |c| {
-        c.omega_sq(model) * CONTACT_RESOLUTION * CONTACT_RESOLUTION
+        c.omega_sq() * CONTACT_RESOLUTION * CONTACT_RESOLUTION
     });
     (w_model * w_model, w_contact_sq)
 }
@@ -396,14 +396,7 @@ impl Explicit {
         if let Some(c) = problem.contact() {
             let f = &mut self.f_contact;
             f.iter_mut().for_each(|v| *v = Vec3::zeros());
-            c.add_forces(
-                problem.model(),
-                state.time,
-                &state.x,
-                &state.v,
-                &state.contact,
-                f,
-            );
+            c.add_forces(state.time, &state.x, &state.v, &state.contact, f);
         }
     }
 

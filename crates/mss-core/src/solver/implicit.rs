@@ -248,7 +248,7 @@ impl NonlinearSystem for BackwardEuler<'_> {
             for i in 0..x.len() {
                 self.v1[i] = (x[i] - self.x0[i]) / dt;
             }
-            c.add_forces(model, self.t1, x, &self.v1, self.anchors, &mut self.scratch);
+            c.add_forces(self.t1, x, &self.v1, self.anchors, &mut self.scratch);
         }
         let (mut s_int, mut s_ext, mut s_in) = (0.0f64, 0.0f64, 0.0f64);
         for i in 0..x.len() {
@@ -288,7 +288,7 @@ impl NonlinearSystem for BackwardEuler<'_> {
             for i in 0..x.len() {
                 self.v1[i] = (x[i] - self.x0[i]) / dt;
             }
-            c.add_jacobian(model, self.t1, x, &self.v1, self.anchors, 1.0 / dt, &mut j);
+            c.add_jacobian(self.t1, x, &self.v1, self.anchors, 1.0 / dt, &mut j);
         }
         for (i, &m) in model.masses().iter().enumerate() {
             let k = j.find(i, i).expect("diagonal in the lattice pattern");

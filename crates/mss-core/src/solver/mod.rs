@@ -175,7 +175,7 @@ impl Problem {
     /// Contact forces at `state` (N per node; zero without obstacles).
     pub fn contact_forces(&self, state: &State) -> Vec<Vec3> {
         match &self.contact {
-            Some(c) => c.forces(&self.model, state.time, &state.x, &state.v, &state.contact),
+            Some(c) => c.forces(state.time, &state.x, &state.v, &state.contact),
             None => vec![Vec3::zeros(); state.x.len()],
         }
     }
@@ -184,13 +184,7 @@ impl Problem {
     /// [`Contact::update_anchors`]); nothing without obstacles.
     pub fn update_contact(&self, state: &mut State) {
         if let Some(c) = &self.contact {
-            c.update_anchors(
-                &self.model,
-                state.time,
-                &state.x,
-                &state.v,
-                &mut state.contact,
-            );
+            c.update_anchors(state.time, &state.x, &state.v, &mut state.contact);
         }
     }
 

@@ -95,14 +95,7 @@ impl NonlinearSystem for StaticSystem<'_> {
         p.model().internal_forces(x, r);
         p.external_forces(self.t, x, self.lambda, &mut self.scratch);
         if let Some(c) = p.contact() {
-            c.add_forces(
-                p.model(),
-                self.t,
-                x,
-                &self.still,
-                &self.anchors,
-                &mut self.scratch,
-            );
+            c.add_forces(self.t, x, &self.still, &self.anchors, &mut self.scratch);
         }
         let mut s = 0.0;
         for i in 0..x.len() {
@@ -126,15 +119,7 @@ impl NonlinearSystem for StaticSystem<'_> {
             l.add_jacobian(p.model(), self.t, x, self.lambda, &mut j);
         }
         if let Some(c) = p.contact() {
-            c.add_jacobian(
-                p.model(),
-                self.t,
-                x,
-                &self.still,
-                &self.anchors,
-                0.0,
-                &mut j,
-            );
+            c.add_jacobian(self.t, x, &self.still, &self.anchors, 0.0, &mut j);
         }
         j
     }
