@@ -349,6 +349,18 @@ impl Job {
         })
     }
 
+    /// A fresh copy of the job's problem, built as [`Job::prepare`] built it
+    /// (a front end that hands the problem to an owner, such as an
+    /// interactive [`Simulation`](mss_core::simulation::Simulation), keeps
+    /// the job's own for runs).
+    pub fn rebuild_problem(&self) -> Result<Problem, JobError> {
+        let model = self.problem.model().clone();
+        let surface = (self.input.scene.contact.points != crate::obstacles::PointsKey::Nodes)
+            .then(|| hexmesh::Embedding::new(&self.lattice, &self.mesh));
+        self.input
+            .problem_with(model, &self.registry.loaders, surface.as_ref())
+    }
+
     /// Time-steps (or statically solves) the job, writing frames into
     /// `out_dir` (created if missing). A set `cancel` flag stops the time loop
     /// between steps: the state reached is written as the last frame and the

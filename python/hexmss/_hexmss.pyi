@@ -1,0 +1,445 @@
+"""Type stubs of the extension module (re-exported by ``hexmss``).
+
+Units are SI: positions in m, time in s, mass in kg, forces in N, moduli in
+Pa, densities in kg/m^3. Arrays out are C-contiguous; positions are float64
+``(n, 3)``, indices uint32. Array arguments take anything numpy converts.
+"""
+
+import os
+from typing import Any, Callable, Literal, Mapping, Optional, Sequence, Union
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+
+PathLike = Union[str, os.PathLike[str]]
+Points = npt.ArrayLike
+"""An (n, 3) array-like of coordinates (m)."""
+FloatArray = npt.NDArray[np.float64]
+IndexArray = npt.NDArray[np.uint32]
+Progress = Callable[[str, int, int], Any]
+"""``progress(stage, done, total)``: stage is "voxelizing", "solving" or "stepping"."""
+SceneLike = Union["Scene", Mapping[str, Any], PathLike]
+"""A Scene, a dict with a scene file's tables, or the path of a scene file."""
+
+def set_threads(n: Optional[int] = None) -> None:
+    """Worker threads of later calls (None: one per core). Results do not depend on it."""
+
+def get_threads() -> int:
+    """The number of worker threads calls run on."""
+
+class Mesh:
+    """A closed triangle surface (m): what is voxelized."""
+
+    def __init__(self, vertices: Points, triangles: npt.ArrayLike, name: str = "arrays") -> None:
+        """A mesh from (n, 3) vertex positions (m) and (m, 3) vertex indices,
+        cleaned as files are (degenerate and repeated triangles dropped)."""
+    @property
+    def vertices(self) -> FloatArray:
+        """Vertex positions (n, 3), read-only, the same array on every access (m)."""
+    @property
+    def triangles(self) -> IndexArray:
+        """Triangles as vertex indices (m, 3), read-only."""
+    @property
+    def name(self) -> str:
+        """Where the mesh came from (a path, ``builtin:NAME`` or ``arrays``)."""
+    @property
+    def bounds(self) -> tuple[list[float], list[float]]:
+        """Bounding box as (min, max) corners (m)."""
+    @property
+    def volume(self) -> float:
+        """Enclosed volume (m^3), positive for outward winding."""
+    def place(
+        self,
+        *,
+        units: Literal["m", "cm", "mm"] = "m",
+        scale: Union[float, Sequence[float]] = 1.0,
+        up: Literal["x", "y", "z"] = "z",
+        rotate: Sequence[float] = (0.0, 0.0, 0.0),
+        translate: Sequence[float] = (0.0, 0.0, 0.0),
+    ) -> "Mesh":
+        """A placed copy (the keys of a scene's [mesh] table; rotate in degrees
+        about fixed x, y, z; translate in m), applied in that order."""
+    def __len__(self) -> int: ...
+
+def load_mesh(
+    path: PathLike,
+    *,
+    units: Literal["m", "cm", "mm"] = "m",
+    scale: Union[float, Sequence[float]] = 1.0,
+    up: Literal["x", "y", "z"] = "z",
+    rotate: Sequence[float] = (0.0, 0.0, 0.0),
+    translate: Sequence[float] = (0.0, 0.0, 0.0),
+) -> Mesh:
+    """Loads OBJ, STL, PLY or VTK (legacy, .vtu, .vtp; format told from the
+    content), or "builtin:critter", cleaned and placed."""
+
+def voxelize(
+    mesh: Mesh,
+    *,
+    progress: Optional[Progress] = None,
+    cells: Optional[int] = None,
+    cell_size: Optional[float] = None,
+    rule: Literal["centre", "any", "fraction"] = "centre",
+    fraction: float = 0.5,
+    components: Literal["largest", "all"] = "largest",
+    max_cells: int = 10_000_000,
+) -> "Lattice":
+    """The cubic lattice of a mesh (the keys of a scene's [voxelize] table):
+    ``cells`` along the longest axis (default 24) or ``cell_size`` (m)."""
+
+class Lattice:
+    """A cubic lattice of cells (hexahedra) and their corner nodes."""
+
+    @staticmethod
+    def block(n: Sequence[int], h: float, origin: Sequence[float] = (0.0, 0.0, 0.0)) -> "Lattice":
+        """A box of n = (nx, ny, nz) cells of edge h (m) from origin (m)."""
+    @property
+    def nodes(self) -> FloatArray:
+        """Rest positions (N, 3), read-only (m)."""
+    @property
+    def cells(self) -> IndexArray:
+        """Corner nodes of each cell (C, 8), read-only, VTK_HEXAHEDRON order."""
+    @property
+    def cell_coords(self) -> IndexArray:
+        """Integer grid coordinates of each cell (C, 3)."""
+    @property
+    def node_coords(self) -> IndexArray:
+        """Integer grid coordinates of each node (N, 3)."""
+    @property
+    def h(self) -> float:
+        """Cell edge (m)."""
+    @property
+    def origin(self) -> list[float]:
+        """Position of grid node (0, 0, 0) (m)."""
+    @property
+    def dims(self) -> list[int]:
+        """Grid dimensions in cells."""
+    @property
+    def num_nodes(self) -> int: ...
+    @property
+    def num_cells(self) -> int: ...
+    @property
+    def volume(self) -> float:
+        """Volume of the cells (m^3)."""
+    def skin(self) -> "Skin":
+        """The boundary faces as triangles bound to nodes."""
+    def embed(self, mesh: Mesh) -> "Embedding":
+        """Binds each vertex of ``mesh`` to its cell (trilinear weights)."""
+
+class Skin:
+    """The lattice's boundary as triangles whose vertices follow nodes."""
+
+    @property
+    def vertex_nodes(self) -> IndexArray:
+        """The node each skin vertex follows (V,)."""
+    @property
+    def triangles(self) -> IndexArray:
+        """Triangles as skin vertex indices (T, 3), outward."""
+    def positions(self, node_positions: Points) -> FloatArray:
+        """Skin vertex positions (V, 3) for node positions (N, 3) (m)."""
+
+class Embedding:
+    """A surface embedded in a lattice: it moves trilinearly with its cells."""
+
+    @property
+    def triangles(self) -> IndexArray: ...
+    def deform(self, node_positions: Points) -> FloatArray:
+        """Surface vertex positions (V, 3) for node positions (N, 3) (m)."""
+
+class Material:
+    """An isotropic linear elastic material."""
+
+    def __init__(self, young: float, poisson: float, density: float) -> None:
+        """Young's modulus E (Pa), Poisson's ratio nu, density (kg/m^3)."""
+    @property
+    def young(self) -> float: ...
+    @property
+    def poisson(self) -> float: ...
+    @property
+    def density(self) -> float: ...
+    @property
+    def shear_modulus(self) -> float:
+        """mu = E / (2 (1 + nu)) (Pa)."""
+    @property
+    def lame_lambda(self) -> float:
+        """Lame's first parameter (Pa)."""
+    @property
+    def bulk_modulus(self) -> float:
+        """K (Pa)."""
+
+def parameterizations() -> list[str]:
+    """Parameterization names a Model accepts (each also with "+hg")."""
+
+def integrators() -> list[str]:
+    """Integrator names an Integrator accepts."""
+
+class Model:
+    """A lattice turned into a mass-spring model."""
+
+    def __init__(
+        self,
+        lattice: Lattice,
+        material: Material,
+        parameterization: Optional[str] = None,
+        hourglass: Optional[float] = None,
+    ) -> None:
+        """``parameterization``: one of parameterizations(), optionally "+hg",
+        read as a scene's [model] table (``hourglass``: the factor of
+        hourglass control, dimensionless; "+hg" alone gets 0.05). Without
+        one: the bundled default scene's "volumetric-barrier+hg" with
+        hourglass 1.0."""
+    @property
+    def masses(self) -> FloatArray:
+        """Node masses (N,) (kg)."""
+    @property
+    def rest_positions(self) -> FloatArray:
+        """(N, 3) (m)."""
+    @property
+    def num_nodes(self) -> int: ...
+    @property
+    def num_cells(self) -> int: ...
+    @property
+    def num_springs(self) -> int: ...
+    @property
+    def total_mass(self) -> float:
+        """(kg)."""
+    @property
+    def h(self) -> float:
+        """Cell edge (m)."""
+    @property
+    def parameterization(self) -> str: ...
+    @property
+    def stable_time_step(self) -> float:
+        """Stable explicit step of the undamped model at rest (s)."""
+    def internal_forces(self, x: Points, out: Optional[FloatArray] = None) -> FloatArray:
+        """Internal forces (N, 3) at positions x (N); written into ``out``
+        (float64, C-contiguous) when given, with no allocation."""
+    def energy(self, x: Points) -> float:
+        """Energy of the springs and the volumetric term (J)."""
+    def inverted_cells(self, x: Points) -> list[int]:
+        """Cells turned inside out at positions x."""
+    def affine_deviation(self, x: Points) -> FloatArray:
+        """Per cell, distance of its nodes from the best affine map, / h."""
+
+class Problem:
+    """A model with boundary conditions, loads, damping and obstacles."""
+
+    def __init__(
+        self,
+        model: Model,
+        *,
+        fixed: Optional[Sequence[Mapping[str, Any]]] = None,
+        gravity: Optional[Sequence[float]] = None,
+        forces: Optional[Sequence[Mapping[str, Any]]] = None,
+        tractions: Optional[Sequence[Mapping[str, Any]]] = None,
+        drags: Optional[Sequence[Mapping[str, Any]]] = None,
+        motions: Optional[Sequence[Mapping[str, Any]]] = None,
+        motion_duration: float = 1.0,
+        damping: float = 0.0,
+        stiffness_damping: float = 0.0,
+        obstacles: Optional[Sequence[Mapping[str, Any]]] = None,
+        contact_points: Optional[Literal["nodes", "surface", "both"]] = None,
+        surface: Optional[Embedding] = None,
+    ) -> None:
+        """The keys follow a scene's tables: [[fixed]], [loads] (gravity in
+        m/s^2, forces, tractions, drags), [[motions]] (default end
+        ``motion_duration``, s), damping alpha (1/s) and beta (s),
+        [[obstacles]] and [contact] points."""
+    @property
+    def model(self) -> Model: ...
+    @property
+    def num_nodes(self) -> int: ...
+    @property
+    def num_held_dofs(self) -> int: ...
+    @property
+    def held_nodes(self) -> list[int]:
+        """Fully held nodes."""
+    @property
+    def stable_time_step(self) -> float:
+        """Stable explicit step with damping and contact, safety 1 (s)."""
+    def external_forces(self, x: Points, t: float = 0.0) -> FloatArray:
+        """Loads at positions x and time t (N), without contact."""
+    def contact_forces(self, state: "State") -> FloatArray:
+        """Obstacle forces on the nodes (N)."""
+
+class State:
+    """Positions, velocities and time of a problem's nodes."""
+
+    def __init__(self, problem: Problem) -> None:
+        """The rest state at t = 0 (held nodes on their motion)."""
+    x: FloatArray
+    """Node positions (N, 3) (m): reading gives a copy; assign to set."""
+    v: FloatArray
+    """Node velocities (N, 3) (m/s): reading gives a copy; assign to set."""
+    time: float
+    """(s)."""
+    def positions_into(self, out: FloatArray) -> FloatArray:
+        """Copies positions into ``out`` without allocating; returns it."""
+    def displacements(self, model: Model) -> FloatArray:
+        """Positions minus rest positions (N, 3) (m)."""
+    def kinetic_energy(self, model: Model) -> float:
+        """(J)."""
+    def copy(self) -> "State": ...
+
+def solve_static(
+    problem: Problem,
+    state: Optional[State] = None,
+    *,
+    rtol: Optional[float] = None,
+    max_newton: Optional[int] = None,
+    linear: bool = False,
+    accept_unstable: bool = False,
+    linear_solver: Literal["auto", "direct", "iterative"] = "auto",
+) -> tuple[State, dict[str, Any]]:
+    """Static equilibrium: (state, info) with newton_iterations, load_steps,
+    rejected_iterations, relative_residual, krylov_iterations and stable
+    (True, False or None: not tested). ``linear`` solves the small-strain
+    problem once. Raises MechanismError for zero-energy motions and for an
+    unstable equilibrium unless ``accept_unstable``."""
+
+class Integrator:
+    """A time integrator bound to a problem."""
+
+    def __init__(
+        self,
+        problem: Problem,
+        kind: str = "explicit",
+        *,
+        dt: Optional[float] = None,
+        safety: Optional[float] = None,
+        substep: bool = False,
+        rtol: Optional[float] = None,
+        max_newton: Optional[int] = None,
+        linear_solver: Literal["auto", "direct", "iterative"] = "auto",
+    ) -> None:
+        """``kind``: one of integrators(). Explicit schemes step at the stable
+        limit times ``safety`` unless ``dt`` (s) is given."""
+    @property
+    def dt(self) -> float:
+        """(s)."""
+    @property
+    def name(self) -> str: ...
+    def step(self, state: State, n: int = 1) -> dict[str, Any]:
+        """Advances ``state`` in place by n steps: {time, steps, substeps,
+        newton_iterations}. On DivergedError the state is the last good one."""
+
+class Simulation:
+    """An interactive simulation: stepped frame by frame, with a drag."""
+
+    def __init__(self, problem: Problem, surface: Optional[Embedding] = None) -> None:
+        """A simulation of a fresh copy of ``problem`` from rest."""
+    def step(self, dt: float) -> int:
+        """Advances by dt (s) in as many sub-steps as stability asks; returns them."""
+    @property
+    def time(self) -> float:
+        """(s)."""
+    @property
+    def positions(self) -> FloatArray:
+        """Node positions (N, 3), a copy (m)."""
+    def positions_into(self, out: FloatArray) -> FloatArray:
+        """Copies positions into ``out`` without allocating; returns it."""
+    @property
+    def velocities(self) -> FloatArray:
+        """(N, 3) (m/s)."""
+    @property
+    def state(self) -> State:
+        """A copy of the state reached."""
+    def nearest_node(self, point: Sequence[float]) -> int: ...
+    def pick(self, nodes: Sequence[int], stiffness: float) -> None:
+        """Holds nodes by zero-length springs of ``stiffness`` (N/m each)."""
+    def drag_to(self, point: Sequence[float]) -> None:
+        """Moves the picked nodes' target centroid (m)."""
+    def release(self) -> None: ...
+    def surface_positions(self) -> FloatArray:
+        """Vertex positions of the embedded surface (V, 3) (m)."""
+
+class Scene:
+    """A scene: the TOML schema of ``mss run`` (docs/scenes.md)."""
+
+    @staticmethod
+    def from_file(path: PathLike) -> "Scene": ...
+    @staticmethod
+    def from_toml(text: str, name: str = "<toml>") -> "Scene": ...
+    @staticmethod
+    def from_dict(d: Mapping[str, Any], name: str = "<dict>") -> "Scene": ...
+    @staticmethod
+    def default() -> "Scene":
+        """The bundled default scene (what ``mss run`` runs without arguments)."""
+    @property
+    def name(self) -> str: ...
+    @property
+    def duration(self) -> float:
+        """(s)."""
+    def with_duration(self, seconds: float) -> "Scene": ...
+    @property
+    def output_folder(self) -> str: ...
+
+class Job:
+    """A prepared scene: mesh voxelized, model and problem built."""
+
+    @property
+    def mesh(self) -> Mesh: ...
+    @property
+    def lattice(self) -> Lattice: ...
+    @property
+    def model(self) -> Model: ...
+    @property
+    def problem(self) -> Problem: ...
+    @property
+    def dt(self) -> float:
+        """(s)."""
+    @property
+    def steps(self) -> int: ...
+    @property
+    def is_static(self) -> bool: ...
+    @property
+    def stable_time_step(self) -> float:
+        """(s)."""
+    def run(self, out: Optional[PathLike] = None, *, progress: Optional[Progress] = None) -> dict[str, Any]:
+        """Runs the job into ``out``; returns the summary (summary.json's fields)."""
+    def simulation(self) -> Simulation:
+        """An interactive Simulation of the job's problem and mesh."""
+
+def prepare(
+    scene: SceneLike,
+    *,
+    max_memory: Optional[Union[int, str]] = None,
+    progress: Optional[Progress] = None,
+) -> Job:
+    """Loads, voxelizes and builds a scene, refusing jobs above max_memory
+    (bytes or "8GiB"; default 3/4 of the machine's memory)."""
+
+def run(
+    scene: SceneLike,
+    out: Optional[PathLike] = None,
+    *,
+    progress: Optional[Progress] = None,
+    max_memory: Optional[Union[int, str]] = None,
+) -> dict[str, Any]:
+    """Prepares and runs a scene as ``mss run`` does; returns the summary.
+    Ctrl-C stops it cleanly (frames written) and raises KeyboardInterrupt."""
+
+def write_vtu(
+    path: PathLike,
+    lattice: Lattice,
+    positions: Optional[Points] = None,
+    *,
+    point_data: Optional[Mapping[str, npt.ArrayLike]] = None,
+    cell_data: Optional[Mapping[str, npt.ArrayLike]] = None,
+    encoding: Literal["zlib", "base64", "ascii"] = "zlib",
+) -> None:
+    """Writes the lattice at ``positions`` as .vtu (atomically)."""
+
+def write_obj(
+    path: PathLike,
+    vertices: Points,
+    triangles: npt.ArrayLike,
+    *,
+    normals: Literal["smooth", "flat"] = "smooth",
+) -> None:
+    """Writes a triangle surface as Wavefront OBJ (atomically)."""
+
+def write_stl(path: PathLike, vertices: Points, triangles: npt.ArrayLike) -> None:
+    """Writes a triangle surface as binary STL (atomically)."""

@@ -1,0 +1,114 @@
+"""Errors arrive as typed exceptions with the CLI's one-line messages."""
+
+import subprocess
+
+import numpy as np
+import pytest
+
+import hexmss
+from conftest import small_scene
+
+
+def test_exception_hierarchy():
+    assert issubclass(hexmss.SceneError, hexmss.HexmssError)
+    assert issubclass(hexmss.SceneError, ValueError)
+    assert issubclass(hexmss.DivergedError, hexmss.SolverError)
+    assert issubclass(hexmss.MechanismError, hexmss.SolverError)
+    assert issubclass(hexmss.OutputError, OSError)
+
+
+def test_same_message_as_the_cli(tmp_path, mss_binary):
+    scene = tmp_path / "bad.toml"
+    scene.write_text(
+        '[mesh]\npath = "builtin:critter"\n[material]\nyoung = 1e5\npoisson = 0.3\ndensty = 1000\n'
+    )
+    cli = subprocess.run(
+        [str(mss_binary), "run", str(scene)], capture_output=True, text=True
+    )
+    assert cli.returncode == 1
+    with pytest.raises(hexmss.SceneError) as e:
+        hexmss.run(scene, out=tmp_path / "out")
+    assert cli.stderr.strip() == f"error: {e.value}"
+    assert "densty" in str(e.value) and ":6:" in str(e.value)
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize(
+    "call, kind, words",
+    [
+        (lambda: hexmss.Material(1e5, 0.5, 1000), hexmss.ModelError, "Poisson"),
+        (lambda: hexmss.Material(-1, 0.3, 1000), hexmss.ModelError, "Young"),
+        (lambda: hexmss.load_mesh("/no/such/mesh.obj"), hexmss.MeshError, "does not exist"),
+        (lambda: hexmss.load_mesh("builtin:nothing"), hexmss.MeshError, "builtin:critter"),
+        (lambda: hexmss.load_mesh("builtin:critter", up="w"), hexmss.SceneError, "up"),
+        (
+            lambda: hexmss.voxelize(hexmss.load_mesh("builtin:critter"), cells=0),
+            hexmss.VoxelizeError,
+            "0",
+        ),
+        (
+            lambda: hexmss.voxelize(hexmss.load_mesh("builtin:critter"), cels=4),
+            hexmss.SceneError,
+            "cels",
+        ),
+        (
+            lambda: hexmss.Model(
+                hexmss.Lattice.block((2, 2, 2), 0.1), hexmss.Material(1e5, 0.3, 1e3), "nope"
+            ),
+            hexmss.ModelError,
+            "nope",
+        ),
+        (lambda: hexmss.Scene.from_toml("[mesh]\npath = 3\n"), hexmss.SceneError, "path"),
+        (lambda: hexmss.run(small_scene(solver={"dt": -1.0})), hexmss.SceneError, "dt"),
+        (
+            lambda: hexmss.prepare(small_scene(), max_memory="1KiB"),
+            hexmss.ResourceError,
+            "memory",
+        ),
+    ],
+)
+def test_bad_values_raise_typed_errors(call, kind, words):
+    with pytest.raises(kind) as e:
+        call()
+    assert words.lower() in str(e.value).lower()
+    assert "\n" not in str(e.value)
+
+
+def test_free_static_problem_is_a_mechanism():
+    lattice = hexmss.Lattice.block((2, 2, 2), 0.05)
+    model = hexmss.Model(lattice, hexmss.Material(1e5, 0.3, 1000.0))
+    problem = hexmss.Problem(model, gravity=[0, 0, -9.81])
+    with pytest.raises(hexmss.MechanismError) as e:
+        hexmss.solve_static(problem)
+    assert "fix" in str(e.value)
+
+
+def test_array_arguments_are_checked():
+    lattice = hexmss.Lattice.block((2, 2, 2), 0.05)
+    with pytest.raises(ValueError):
+        hexmss.Mesh(np.zeros((4, 2)), [[0, 1, 2]])
+    with pytest.raises(ValueError):
+        hexmss.Mesh(np.zeros((3, 3)), [[0, 1, 3]])
+    with pytest.raises(ValueError):
+        hexmss.Mesh([[0, 0, 0], [1, 0, np.nan], [0, 1, 0]], [[0, 1, 2]])
+    with pytest.raises(TypeError):
+        hexmss.Mesh("vertices", [[0, 1, 2]])
+    with pytest.raises(ValueError):
+        hexmss.write_vtu("x.vtu", lattice, np.zeros((3, 3)))
+    model = hexmss.Model(lattice, hexmss.Material(1e5, 0.3, 1000.0))
+    sim = hexmss.Simulation(hexmss.Problem(model))
+    with pytest.raises(ValueError):
+        sim.pick([10_000], 10.0)
+    with pytest.raises(hexmss.SceneError):
+        sim.pick([0], -1.0)
+    with pytest.raises(hexmss.SceneError):
+        sim.step(0.0)
+    with pytest.raises(ValueError):
+        hexmss.set_threads(0)
+
+
+def test_unwritable_output_is_an_output_error(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    with pytest.raises(hexmss.OutputError):
+        hexmss.run(small_scene(), out=blocker / "out")
