@@ -397,8 +397,11 @@ class Job:
     @property
     def stable_time_step(self) -> float:
         """(s)."""
-    def run(self, out: Optional[PathLike] = None, *, progress: Optional[Progress] = None) -> dict[str, Any]:
-        """Runs the job into ``out``; returns the summary (summary.json's fields)."""
+    def run(
+        self, out: Optional[PathLike] = None, *, progress: Optional[Progress] = None, resume: bool = False
+    ) -> dict[str, Any]:
+        """Runs the job into ``out``; returns the summary (summary.json's fields).
+        ``resume`` continues the interrupted run in ``out`` from its checkpoint."""
     def simulation(self) -> Simulation:
         """An interactive Simulation of the job's problem and mesh."""
 
@@ -417,9 +420,12 @@ def run(
     *,
     progress: Optional[Progress] = None,
     max_memory: Optional[Union[int, str]] = None,
+    resume: bool = False,
 ) -> dict[str, Any]:
     """Prepares and runs a scene as ``mss run`` does; returns the summary.
-    Ctrl-C stops it cleanly (frames written) and raises KeyboardInterrupt."""
+    Ctrl-C stops it cleanly (frames and a checkpoint written) and raises
+    KeyboardInterrupt; ``resume=True`` continues it in ``out``, ending
+    bitwise as an uninterrupted run."""
 
 def write_vtu(
     path: PathLike,

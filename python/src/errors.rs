@@ -108,7 +108,7 @@ pub fn solver(e: SolverError) -> PyErr {
 /// A job error as its exception.
 pub fn job(e: JobError) -> PyErr {
     let kind = match &e {
-        JobError::Scene(_) | JobError::Setting { .. } => Kind::Scene,
+        JobError::Scene(_) | JobError::Setting { .. } | JobError::Resume { .. } => Kind::Scene,
         JobError::Mesh { .. } => Kind::Mesh,
         JobError::Voxelize { .. } => Kind::Voxelize,
         JobError::Model { .. } => Kind::Model,

@@ -278,12 +278,18 @@ fn run_job<'py>(
     job: &Arc<Job>,
     out: Option<PathBuf>,
     progress: Option<Py<PyAny>>,
+    resume: bool,
 ) -> PyResult<Bound<'py, PyAny>> {
     let out_dir = mss_scene::build::output_folder(&job.input.scene, out.as_deref());
     let reporter = Reporter::new(progress);
     let j = Arc::clone(job);
     let result = detached(py, || {
-        let summary = j.run(&out_dir, &|p| reporter.progress(p), &reporter.cancel)?;
+        let report = |p| reporter.progress(p);
+        let summary = if resume {
+            j.resume(&out_dir, &report, &reporter.cancel)?
+        } else {
+            j.run(&out_dir, &report, &reporter.cancel)?
+        };
         mss_scene::write_summary(&out_dir, &summary)?;
         Ok::<_, mss_scene::JobError>(summary)
     });
@@ -346,18 +352,20 @@ impl PyJob {
         self.job.plan.stable_dt
     }
 
-    /// run(out=None, *, progress=None)
+    /// run(out=None, *, progress=None, resume=False)
     ///
     /// Runs the job, writing its frames and summary.json into `out` (default
-    /// the scene's `[output] folder`); returns the summary as a dict.
-    #[pyo3(signature = (out = None, *, progress = None))]
+    /// the scene's `[output] folder`); returns the summary as a dict. With
+    /// `resume`, continues the interrupted run in `out` from its checkpoint.
+    #[pyo3(signature = (out = None, *, progress = None, resume = false))]
     fn run<'py>(
         &self,
         py: Python<'py>,
         out: Option<PathBuf>,
         progress: Option<Py<PyAny>>,
+        resume: bool,
     ) -> PyResult<Bound<'py, PyAny>> {
-        run_job(py, &self.job, out, progress)
+        run_job(py, &self.job, out, progress, resume)
     }
 
     /// simulation()
@@ -378,7 +386,7 @@ impl PyJob {
     }
 }
 
-/// run(scene, out=None, *, progress=None, max_memory=None)
+/// run(scene, out=None, *, progress=None, max_memory=None, resume=False)
 /// --
 ///
 /// Prepares and runs a scene (a `Scene`, a dict or a path) as `mss run`
@@ -386,17 +394,20 @@ impl PyJob {
 /// scene's `[output] folder`); returns the summary as a dict.
 /// `progress(stage, done, total)` is called during voxelizing and stepping.
 /// Ctrl-C stops the run after the step under way, with the state reached
-/// written, and raises KeyboardInterrupt.
+/// and a checkpoint written, and raises KeyboardInterrupt; `resume=True`
+/// then continues it in the same `out`, ending bitwise as an uninterrupted
+/// run (as `mss run --resume`).
 #[pyfunction]
-#[pyo3(signature = (scene, out = None, *, progress = None, max_memory = None))]
+#[pyo3(signature = (scene, out = None, *, progress = None, max_memory = None, resume = false))]
 fn run<'py>(
     py: Python<'py>,
     scene: &Bound<'py, PyAny>,
     out: Option<PathBuf>,
     progress: Option<Py<PyAny>>,
     max_memory: Option<&Bound<'py, PyAny>>,
+    resume: bool,
 ) -> PyResult<Bound<'py, PyAny>> {
     let cb = progress.as_ref().map(|p| p.clone_ref(py));
     let job = prepare(py, scene, max_memory, cb)?;
-    run_job(py, &job.job, out, progress)
+    run_job(py, &job.job, out, progress, resume)
 }

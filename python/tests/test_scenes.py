@@ -204,3 +204,30 @@ def test_the_sag_example_runs(tmp_path):
     )
     assert "static equilibrium: top sinks" in done.stdout
     assert "inverted cells: 0" in done.stdout
+
+
+def test_an_interrupted_run_resumes_to_the_uninterrupted_files(tmp_path):
+    scene = small_scene(solver={"duration": 0.5}, output={"every_time": 0.05, "pc2": True})
+    whole = tmp_path / "whole"
+    reference = hexmss.run(scene, out=whole)
+
+    class Stop(Exception):
+        pass
+
+    def stop(stage, done, total):
+        if stage == "stepping" and done > total // 3:
+            raise Stop
+
+    cut = tmp_path / "cut"
+    with pytest.raises(Stop):
+        hexmss.run(scene, out=cut, progress=stop)
+    assert (cut / "checkpoint.mss").exists()
+    resumed = hexmss.run(scene, out=cut, resume=True)
+    assert physics(resumed) == physics(reference)
+    names = sorted(p.name for p in whole.iterdir())
+    assert sorted(p.name for p in cut.iterdir()) == names
+    for name in names:
+        if name != "summary.json":
+            assert (cut / name).read_bytes() == (whole / name).read_bytes(), name
+    with pytest.raises(hexmss.SceneError, match="cannot resume"):
+        hexmss.run(scene, out=cut, resume=True)

@@ -715,6 +715,35 @@ fn check_warns_about_mechanisms() {
     assert!(face.contains("mechanisms       none expected"), "{face}");
 }
 
+/// Runs `scene.toml` in `dir` into `out`, sends SIGINT once `marker` is
+/// written there, and returns what `mss` printed on stderr (it must exit 1).
+fn interrupt_run(dir: &Path, out: &str, marker: &str) -> String {
+    let mut child = Command::new(MSS)
+        .args(["-q", "run", "scene.toml", "--out", out])
+        .current_dir(dir)
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let start = std::time::Instant::now();
+    while !dir.join(out).join(marker).exists() {
+        assert!(
+            start.elapsed().as_secs() < 120,
+            "the run did not write frames"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    let killed = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(killed.success());
+    let status = child.wait().unwrap();
+    let mut stderr = String::new();
+    std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut stderr).unwrap();
+    assert_eq!(status.code(), Some(1), "{stderr}");
+    stderr
+}
+
 /// SIGINT stops a run after the step under way: the frames so far, the state
 /// reached and a summary marked interrupted are written, no temporary file is
 /// left, and the exit code is 1.
@@ -730,30 +759,8 @@ fn sigint_finishes_the_frame_and_writes_an_interrupted_summary() {
          [output]\nevery_steps = 200\n",
     )
     .unwrap();
-    let mut child = Command::new(MSS)
-        .args(["-q", "run", "scene.toml", "--out", "out"])
-        .current_dir(d)
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
     let out = d.join("out");
-    let start = std::time::Instant::now();
-    while !out.join("lattice_0002.vtu").exists() {
-        assert!(
-            start.elapsed().as_secs() < 120,
-            "the run did not write frames"
-        );
-        std::thread::sleep(std::time::Duration::from_millis(20));
-    }
-    let killed = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(killed.success());
-    let status = child.wait().unwrap();
-    let mut stderr = String::new();
-    std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut stderr).unwrap();
-    assert_eq!(status.code(), Some(1), "{stderr}");
+    let stderr = interrupt_run(d, "out", "lattice_0002.vtu");
     assert!(stderr.contains("interrupted"), "{stderr}");
     let summary = std::fs::read_to_string(out.join("summary.json")).unwrap();
     assert!(summary.contains("\"interrupted\": true"), "{summary}");
@@ -765,4 +772,75 @@ fn sigint_finishes_the_frame_and_writes_an_interrupted_summary() {
         .filter(|n| n.starts_with('.'))
         .collect();
     assert!(leftovers.is_empty(), "{leftovers:?}");
+}
+
+/// A run stopped by SIGINT and continued with `--resume` ends with exactly
+/// the files of a run that was never stopped.
+#[test]
+fn a_run_stopped_by_sigint_resumes_to_the_uninterrupted_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(
+        d.join("scene.toml"),
+        "[mesh]\npath = \"builtin:critter\"\n[voxelize]\ncells = 12\n[material]\n\
+         young = 1.0e5\npoisson = 0.3\ndensity = 1000.0\n[[fixed]]\nkind = \"lowest_layer\"\n\
+         [loads]\ngravity = [0, 0, -9.81]\n[solver]\nduration = 20.0\ndamping = 5.0\n\
+         [output]\nevery_time = 0.25\npc2 = true\n",
+    )
+    .unwrap();
+    let whole = Command::new(MSS)
+        .args(["-q", "run", "scene.toml", "--out", "whole"])
+        .current_dir(d)
+        .output()
+        .unwrap();
+    assert!(
+        whole.status.success(),
+        "{}",
+        String::from_utf8_lossy(&whole.stderr)
+    );
+    let cut = d.join("cut");
+    let stderr = interrupt_run(d, "cut", "lattice_0003.vtu");
+    assert!(stderr.contains("--resume"), "{stderr}");
+    assert!(cut.join("checkpoint.mss").exists());
+    let resumed = Command::new(MSS)
+        .args(["-q", "run", "scene.toml", "--resume", "cut"])
+        .current_dir(d)
+        .output()
+        .unwrap();
+    assert!(
+        resumed.status.success(),
+        "{}",
+        String::from_utf8_lossy(&resumed.stderr)
+    );
+    let names = |p: &std::path::Path| {
+        let mut v: Vec<String> = std::fs::read_dir(p)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().into_string().unwrap())
+            .collect();
+        v.sort();
+        v
+    };
+    assert_eq!(names(&cut), names(&d.join("whole")));
+    for name in names(&cut) {
+        if name == "summary.json" {
+            continue;
+        }
+        assert!(
+            std::fs::read(cut.join(&name)).unwrap()
+                == std::fs::read(d.join("whole").join(&name)).unwrap(),
+            "{name} differs"
+        );
+    }
+    // Nothing is left to resume once the run completed.
+    let again = Command::new(MSS)
+        .args(["-q", "run", "scene.toml", "--resume", "cut"])
+        .current_dir(d)
+        .output()
+        .unwrap();
+    assert_eq!(again.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&again.stderr);
+    assert!(
+        err.starts_with("error: ") && err.contains("cannot resume") && err.lines().count() == 1,
+        "{err}"
+    );
 }

@@ -97,3 +97,44 @@ fn the_controlled_step_does_not_depend_on_the_thread_count() {
     assert_eq!(a.x, b.x);
     assert_eq!(a.v, b.v);
 }
+
+#[test]
+fn a_restored_memory_continues_bitwise() {
+    // Mid-recovery, while the step control has halved the sub-step: an
+    // integrator built afresh and given the first one's memory takes the same
+    // steps, bit for bit (what checkpoints rely on).
+    let (problem, mut state) = compressed_block();
+    let opts = ExplicitOptions::default();
+    let mut first = Explicit::new(&problem, opts).unwrap();
+    let steps = (0.2 / first.dt()).ceil() as usize;
+    let mut substeps = Vec::new();
+    for k in 0..steps {
+        if k == steps / 3 {
+            let memory = first.memory();
+            assert!(!memory.is_empty());
+            let mut resumed_state = state.clone();
+            let mut second = Explicit::new(&problem, opts).unwrap();
+            second.restore(&memory).unwrap();
+            for _ in k..steps {
+                first.step(&problem, &mut state).unwrap();
+                second.step(&problem, &mut resumed_state).unwrap();
+            }
+            assert_eq!(state.x, resumed_state.x);
+            assert_eq!(state.v, resumed_state.v);
+            assert_eq!(state.time.to_bits(), resumed_state.time.to_bits());
+            assert_eq!(first.memory(), second.memory());
+            break;
+        }
+        substeps.push(first.step(&problem, &mut state).unwrap().substeps);
+    }
+    // The memory was taken while the control was at work.
+    assert!(substeps.iter().any(|&s| s != substeps[0]), "{substeps:?}");
+    // A memory that does not fit is refused, not used.
+    let mut other = Explicit::new(&problem, opts).unwrap();
+    let mut bad = first.memory();
+    bad.counters.pop();
+    assert!(other.restore(&bad).is_err());
+    let mut bad = first.memory();
+    bad.states.clear();
+    assert!(other.restore(&bad).is_err());
+}

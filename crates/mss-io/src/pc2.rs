@@ -31,7 +31,7 @@
 //! ```
 
 use std::fs::{self, File};
-use std::io::{BufWriter, Seek, SeekFrom, Write};
+use std::io::{BufWriter, Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
 use crate::IoError;
@@ -68,17 +68,7 @@ impl Pc2Writer {
         let points = i32::try_from(num_points).map_err(|_| {
             IoError::invalid(path, format!("{num_points} points exceed the PC2 limit"))
         })?;
-        let file_name = path
-            .file_name()
-            .ok_or_else(|| IoError::invalid(path, "the output path has no file name"))?;
-        let (temp, file) = create_temporary(path, file_name)?;
-        let mut writer = Pc2Writer {
-            path: path.to_path_buf(),
-            temp,
-            file: Some(BufWriter::with_capacity(1 << 20, file)),
-            num_points,
-            samples: 0,
-        };
+        let mut writer = Self::start(path, num_points, 0)?;
         let mut header = Vec::with_capacity(HEADER_BYTES as usize);
         header.extend_from_slice(MAGIC);
         header.extend_from_slice(&1i32.to_le_bytes());
@@ -88,6 +78,62 @@ impl Pc2Writer {
         header.extend_from_slice(&0i32.to_le_bytes());
         writer.with_file(|f| f.write_all(&header))?;
         Ok(writer)
+    }
+
+    /// Continues the cache at `path` (a finished file of a run resumed from
+    /// a checkpoint) after its first `samples` frames: they are copied into
+    /// a new temporary file, the rest is dropped, and later frames are
+    /// appended as by [`create`](Self::create)'s writer. The file must hold
+    /// `num_points` points and at least `samples` frames.
+    pub fn resume(path: &Path, num_points: usize, samples: u32) -> Result<Self, IoError> {
+        let bad = |why: String| IoError::invalid(path, why);
+        let mut old = File::open(path).map_err(|e| IoError::io(path, e))?;
+        let mut header = [0u8; HEADER_BYTES as usize];
+        old.read_exact(&mut header)
+            .map_err(|_| bad("too short for a PC2 header".into()))?;
+        if &header[..12] != MAGIC {
+            return Err(bad("not a PC2 point cache".into()));
+        }
+        let field = |at: usize| i32::from_le_bytes(header[at..at + 4].try_into().unwrap_or([0; 4]));
+        let (points, have) = (field(16), field(SAMPLES_OFFSET as usize));
+        if usize::try_from(points).ok() != Some(num_points) {
+            return Err(bad(format!(
+                "holds {points} points per frame, the run {num_points}"
+            )));
+        }
+        if u32::try_from(have).map_or(true, |h| h < samples) {
+            return Err(bad(format!(
+                "holds {have} frames, the checkpoint needs {samples}"
+            )));
+        }
+        let frame_bytes = 12 * num_points as u64;
+        let mut writer = Self::start(path, num_points, samples)?;
+        header[SAMPLES_OFFSET as usize..].copy_from_slice(&(samples as i32).to_le_bytes());
+        writer.with_file(|f| {
+            f.write_all(&header)?;
+            let copied = std::io::copy(&mut (&mut old).take(frame_bytes * u64::from(samples)), f)?;
+            if copied != frame_bytes * u64::from(samples) {
+                return Err(std::io::Error::other("the file ends inside a frame"));
+            }
+            f.flush()
+        })?;
+        Ok(writer)
+    }
+
+    /// A writer on a new temporary file beside `path`, counting `samples`
+    /// frames already in it.
+    fn start(path: &Path, num_points: usize, samples: u32) -> Result<Self, IoError> {
+        let file_name = path
+            .file_name()
+            .ok_or_else(|| IoError::invalid(path, "the output path has no file name"))?;
+        let (temp, file) = create_temporary(path, file_name)?;
+        Ok(Pc2Writer {
+            path: path.to_path_buf(),
+            temp,
+            file: Some(BufWriter::with_capacity(1 << 20, file)),
+            num_points,
+            samples,
+        })
     }
 
     fn with_file(
@@ -262,6 +308,34 @@ mod tests {
         assert_eq!(w.samples(), 1);
         drop(w);
         assert!(!temp.exists() && !path.exists());
+    }
+
+    #[test]
+    fn a_resumed_cache_keeps_its_first_frames_and_appends() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("r.pc2");
+        let mut w = Pc2Writer::create(&path, 2, 0.0, 1.0).unwrap();
+        for k in 0..3 {
+            w.append(&[[k as f64, 0.0, 0.0], [0.0, k as f64, 1.0]])
+                .unwrap();
+        }
+        w.finish().unwrap();
+        let mut r = Pc2Writer::resume(&path, 2, 2).unwrap();
+        assert_eq!(r.samples(), 2);
+        r.append(&[[9.0, 9.0, 9.0], [8.0, 8.0, 8.0]]).unwrap();
+        r.finish().unwrap();
+        let back = read_pc2(&path).unwrap();
+        assert_eq!(back.frames.len(), 3);
+        assert_eq!(back.frames[1], vec![[1.0, 0.0, 0.0], [0.0, 1.0, 1.0]]);
+        assert_eq!(back.frames[2], vec![[9.0, 9.0, 9.0], [8.0, 8.0, 8.0]]);
+        // Too few frames, another point count, or no cache: refused.
+        assert!(Pc2Writer::resume(&path, 2, 4).is_err());
+        assert!(Pc2Writer::resume(&path, 3, 1).is_err());
+        assert!(Pc2Writer::resume(&dir.path().join("none.pc2"), 2, 1).is_err());
+        std::fs::write(&path, b"POINTCACHE2\0 short").unwrap();
+        assert!(Pc2Writer::resume(&path, 2, 1).is_err());
+        let leftovers = std::fs::read_dir(dir.path()).unwrap().count();
+        assert_eq!(leftovers, 1, "no temporary file is left");
     }
 
     #[test]

@@ -304,6 +304,14 @@ pub trait SkinExporter: Send {
     ) -> Result<(), IoError>;
     /// Completes the series. Idempotent.
     fn finish(&mut self) -> Result<(), IoError>;
+    /// Continues a series of which frames `0..frame_times.len()` are on disk
+    /// already (a run resumed from a checkpoint): the next
+    /// [`write_skin`](Self::write_skin) has index `frame_times.len()`. The
+    /// default does nothing.
+    fn resume(&mut self, frame_times: &[f64]) -> Result<(), IoError> {
+        let _ = frame_times;
+        Ok(())
+    }
 }
 
 /// The built-in skin exporter: OBJ or STL files, every frame or the last one.
@@ -379,6 +387,11 @@ impl SkinExporter for SkinSeries {
     }
 
     fn finish(&mut self) -> Result<(), IoError> {
+        Ok(())
+    }
+
+    fn resume(&mut self, frame_times: &[f64]) -> Result<(), IoError> {
+        self.last_index = frame_times.len().checked_sub(1);
         Ok(())
     }
 }

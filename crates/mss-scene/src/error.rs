@@ -77,6 +77,16 @@ pub enum JobError {
     /// Writing an output file failed.
     #[error(transparent)]
     Output(#[from] mss_io::IoError),
+    /// A run cannot be resumed from the checkpoint in its folder.
+    #[error("{scene}: cannot resume the run in {}: {message}", folder.display())]
+    Resume {
+        /// Scene name.
+        scene: String,
+        /// The output folder.
+        folder: PathBuf,
+        /// Why.
+        message: String,
+    },
     /// The job would need more memory than the limit.
     #[error(
         "{scene}: {what} would need about {} of memory, more than the limit of {} ({}); use a coarser resolution{}",

@@ -9,10 +9,11 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use mss_core::Model;
-use mss_core::solver::{Problem, State, StaticOptions, solve_static};
+use mss_core::solver::{Integrator, Problem, State, StaticOptions, solve_static};
 use serde::Serialize;
 
 use crate::build::{SceneInput, TimePlan, load_mesh, prepare_output_folder};
+use crate::checkpoint::{CHECKPOINT_FILE, Checkpoint};
 use crate::error::JobError;
 use crate::limits::{Limits, run_memory_estimate};
 use crate::output::{FrameWriter, remove_previous_run};
@@ -376,6 +377,60 @@ impl Job {
         progress: ProgressFn<'_>,
         cancel: &Cancel,
     ) -> Result<RunSummary, JobError> {
+        self.run_from(out_dir, progress, cancel, None)
+    }
+
+    /// Continues the run whose checkpoint (`checkpoint.mss`, written at an
+    /// interruption and every `[output] checkpoint_every` seconds) is in
+    /// `out_dir`: the frames and the summary are then bitwise those of a run
+    /// that was never interrupted (timings aside). Refused if the scene has
+    /// changed since, or for a static solve.
+    pub fn resume(
+        &self,
+        out_dir: &Path,
+        progress: ProgressFn<'_>,
+        cancel: &Cancel,
+    ) -> Result<RunSummary, JobError> {
+        let resume_error = |message: String| JobError::Resume {
+            scene: self.input.name(),
+            folder: out_dir.to_path_buf(),
+            message,
+        };
+        if self.plan.is_static {
+            return Err(resume_error(
+                "a static solve is one step: there is nothing to resume; run it again".into(),
+            ));
+        }
+        let fingerprint = crate::checkpoint::fingerprint(&self.input.scene);
+        let checkpoint = Checkpoint::read(out_dir, fingerprint, self.problem.model().num_nodes())
+            .map_err(|e| {
+                resume_error(match &e {
+                    crate::checkpoint::CheckpointError::Io { source, .. }
+                        if source.kind() == std::io::ErrorKind::NotFound =>
+                    {
+                        format!(
+                            "{e}; a run leaves one when it is interrupted, or every [output] checkpoint_every seconds, and removes it when it completes"
+                        )
+                    }
+                    _ => e.to_string(),
+                })
+            })?;
+        if checkpoint.step >= self.plan.steps {
+            return Err(resume_error(format!(
+                "the checkpoint is at step {} of {}: the run is complete",
+                checkpoint.step, self.plan.steps
+            )));
+        }
+        self.run_from(out_dir, progress, cancel, Some(checkpoint))
+    }
+
+    fn run_from(
+        &self,
+        out_dir: &Path,
+        progress: ProgressFn<'_>,
+        cancel: &Cancel,
+        resume: Option<Checkpoint>,
+    ) -> Result<RunSummary, JobError> {
         let start = Instant::now();
         let name = self.input.name();
         let scene = &self.input.scene;
@@ -431,14 +486,64 @@ impl Job {
             Some(mut integrator) => {
                 // Fail on an unwritable folder before the long part.
                 prepare_output_folder(out_dir)?;
-                remove_previous_run(out_dir)?;
-                writer = self.writer(out_dir)?;
-                if !plan.last_only {
-                    writer.write(problem, &state)?;
-                }
-                for k in 1..=plan.steps {
+                let first_step = match &resume {
+                    None => {
+                        remove_previous_run(out_dir)?;
+                        writer = self.writer(out_dir)?;
+                        if !plan.last_only {
+                            writer.write(problem, &state)?;
+                        }
+                        1
+                    }
+                    Some(c) => {
+                        writer = self.writer(out_dir)?;
+                        writer.resume(&c.frame_times, c.files, c.bytes)?;
+                        integrator
+                            .restore(&c.memory)
+                            .map_err(|source| JobError::Resume {
+                                scene: name.clone(),
+                                folder: out_dir.to_path_buf(),
+                                message: source.to_string(),
+                            })?;
+                        state = c.state.clone();
+                        steps_done = c.step;
+                        log::info!(
+                            "{name}: resumed at step {} (t = {:.3e} s) from {}",
+                            c.step,
+                            state.time,
+                            out_dir.join(CHECKPOINT_FILE).display()
+                        );
+                        c.step + 1
+                    }
+                };
+                let checkpoint_steps = scene
+                    .output
+                    .checkpoint_every
+                    .map(|t| ((t / plan.dt).round() as u64).max(1));
+                let fingerprint = crate::checkpoint::fingerprint(scene);
+                let checkpoint = |step: u64,
+                                  state: &State,
+                                  integrator: &dyn Integrator,
+                                  writer: &FrameWriter| {
+                    let (files, bytes) = writer.files_and_bytes();
+                    Checkpoint {
+                        fingerprint,
+                        step,
+                        state: state.clone(),
+                        memory: integrator.memory(),
+                        frame_times: writer.frame_times().to_vec(),
+                        files,
+                        bytes,
+                    }
+                    .write(out_dir)
+                };
+                for k in first_step..=plan.steps {
                     if cancel.is_cancelled() {
-                        // Keep what was simulated: the state reached is a frame.
+                        // The state reached can be resumed from, and it is a
+                        // frame (written after the checkpoint, which does not
+                        // count it: the resumed run writes that frame's index
+                        // again when its time comes).
+                        checkpoint(steps_done, &state, integrator.as_ref(), &writer)?;
                         if steps_done > 0 && !plan.frame_after(steps_done) {
                             writer.write(problem, &state)?;
                         }
@@ -473,12 +578,22 @@ impl Job {
                     if plan.frame_after(k) {
                         writer.write(problem, &state)?;
                     }
+                    if checkpoint_steps.is_some_and(|n| k % n == 0) && k < plan.steps {
+                        checkpoint(k, &state, integrator.as_ref(), &writer)?;
+                    }
                     progress(Progress::Stepping {
                         done: k,
                         total: plan.steps,
                     });
                 }
                 progress(Progress::StageDone);
+                if !interrupted {
+                    // A complete run has nothing to resume.
+                    let path = out_dir.join(CHECKPOINT_FILE);
+                    if path.exists() {
+                        std::fs::remove_file(&path).map_err(|e| mss_io::IoError::io(&path, e))?;
+                    }
+                }
             }
         }
         writer.finish()?;

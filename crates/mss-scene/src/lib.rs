@@ -17,6 +17,8 @@
 //! - [`check`]: size, memory and output estimates and the mechanism warning
 //!   of a prepared job; [`limits`]: the memory and disk guards that refuse a
 //!   job before it allocates or writes too much.
+//! - [`checkpoint`]: the state of a run in one file, so that an interrupted
+//!   run resumes ([`Job::resume`]) bitwise as if it had not stopped.
 //! - [`obstacles`]: the rigid obstacles of `[[obstacles]]` (contact with
 //!   friction).
 //! - [`regions`]: materials per region (`[[regions]]`: box, sphere or a
@@ -59,6 +61,7 @@
 
 pub mod build;
 pub mod check;
+pub mod checkpoint;
 pub mod error;
 pub mod job;
 pub mod limits;

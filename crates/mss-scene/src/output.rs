@@ -35,7 +35,8 @@ const SERIES: [(&str, &[&str]); 4] = [
 ];
 
 /// Single files a run writes.
-const RUN_FILES: [&str; 7] = [
+const RUN_FILES: [&str; 8] = [
+    crate::checkpoint::CHECKPOINT_FILE,
     "lattice.pvd",
     "springs.pvd",
     "summary.json",
@@ -162,8 +163,8 @@ pub struct FrameWriter {
     embedded: Option<EmbeddedOutput>,
     springs: Option<SpringsOutput>,
     cells: Vec<[u32; 8]>,
-    next_index: usize,
-    last_time: Option<f64>,
+    /// Times of the frames written, in order (a checkpoint keeps them).
+    times: Vec<f64>,
     files: usize,
     bytes: u64,
 }
@@ -256,8 +257,7 @@ impl FrameWriter {
             embedded,
             springs,
             cells: lattice.cells().to_vec(),
-            next_index: 0,
-            last_time: None,
+            times: Vec::new(),
             files: 0,
             bytes: 0,
         })
@@ -265,12 +265,64 @@ impl FrameWriter {
 
     /// Frames written so far.
     pub fn frames(&self) -> usize {
-        self.next_index
+        self.times.len()
     }
 
     /// Time of the last frame written (s), if any.
     pub fn last_time(&self) -> Option<f64> {
-        self.last_time
+        self.times.last().copied()
+    }
+
+    /// Times of the frames written so far (s).
+    pub fn frame_times(&self) -> &[f64] {
+        &self.times
+    }
+
+    /// Continues the series of a run resumed from a checkpoint: frames at
+    /// `frame_times` are on disk, and `files` files of `bytes` bytes were
+    /// written. Every exporter resumes after them; point caches keep their
+    /// first `frame_times.len()` samples (they must be in the folder: a run
+    /// that stopped cleanly leaves them).
+    pub fn resume(
+        &mut self,
+        frame_times: &[f64],
+        files: usize,
+        bytes: u64,
+    ) -> Result<(), JobError> {
+        for (exporter, _) in &mut self.lattice {
+            exporter.resume(frame_times)?;
+        }
+        for (exporter, _) in &mut self.skin_exporters {
+            exporter.resume(frame_times)?;
+        }
+        let samples = u32::try_from(frame_times.len())
+            .map_err(|_| IoError::invalid(&self.dir, "too many frames for a point cache"))?;
+        if let Some(cache) = &mut self.skin_cache {
+            *cache = Pc2Writer::resume(
+                cache.path(),
+                self.skin.as_ref().map_or(0, |s| s.vertex_nodes.len()),
+                samples,
+            )?;
+        }
+        if let Some(e) = &mut self.embedded {
+            e.exporter.resume(frame_times)?;
+            if let Some(cache) = &mut e.cache {
+                let points = e.embedding.vertex_coords().len();
+                *cache = Pc2Writer::resume(cache.path(), points, samples)?;
+            }
+        }
+        if let Some(pvd) = self.springs.as_mut().and_then(|s| s.pvd.as_mut()) {
+            let entries = frame_times
+                .iter()
+                .enumerate()
+                .map(|(i, &t)| (t, format!("{SPRINGS_PREFIX}_{i:04}.vtu")))
+                .collect();
+            pvd.set_frames(entries)?;
+        }
+        self.times = frame_times.to_vec();
+        self.files = files;
+        self.bytes = bytes;
+        Ok(())
     }
 
     /// Files written so far and their total size (bytes).
@@ -287,7 +339,7 @@ impl FrameWriter {
     pub fn write(&mut self, problem: &Problem, state: &State) -> Result<(), JobError> {
         let model = problem.model();
         let n = model.num_nodes();
-        let index = self.next_index;
+        let index = self.times.len();
         let points = to_arr(&state.x);
         let rest = model.rest_positions();
         let displacement: Vec<[f64; 3]> = state
@@ -375,8 +427,7 @@ impl FrameWriter {
         if self.springs.is_some() {
             self.write_springs(index, problem, state, &points)?;
         }
-        self.next_index += 1;
-        self.last_time = Some(state.time);
+        self.times.push(state.time);
         Ok(())
     }
 

@@ -830,6 +830,10 @@ pub struct OutputSection {
     /// Write only the final state (default false).
     #[serde(default)]
     pub last_only: bool,
+    /// Write `checkpoint.mss`, the whole state of the run, every this many
+    /// simulated seconds (default: never, but at an interruption), so that
+    /// `mss run --resume FOLDER` continues it (time-stepping solvers only).
+    pub checkpoint_every: Option<f64>,
     /// More lattice frame exporters, by the names a program registered in its
     /// [`Registry`](crate::Registry) (default none).
     #[serde(default)]
@@ -893,6 +897,7 @@ impl Default for OutputSection {
             every_steps: None,
             every_time: None,
             last_only: false,
+            checkpoint_every: None,
             exporters: Vec::new(),
         }
     }
@@ -1326,6 +1331,20 @@ impl Scene {
                 );
             }
             _ => {}
+        }
+        if let Some(t) = o.checkpoint_every {
+            if !(t.is_finite() && t > 0.0) {
+                return bad(
+                    "[output] checkpoint_every",
+                    format!("= {t}; must be a positive time (s)"),
+                );
+            }
+            if self.solver.is_static() {
+                return bad(
+                    "[output] checkpoint_every",
+                    "a static solve is one step and has nothing to resume; remove the key or use a time-stepping solver".into(),
+                );
+            }
         }
         Ok(())
     }

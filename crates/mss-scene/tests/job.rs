@@ -579,3 +579,177 @@ fn a_rebuilt_problem_is_the_jobs_problem() {
             .any(|(p, r)| (p - r).norm() > 1e-6)
     );
 }
+
+/// Every file of a run folder by name, with summary.json's timings and
+/// folder name removed.
+fn folder_contents(dir: &std::path::Path) -> Vec<(String, Vec<u8>)> {
+    let mut files: Vec<(String, Vec<u8>)> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .map(|p| {
+            let name = p.file_name().unwrap().to_string_lossy().into_owned();
+            let mut bytes = std::fs::read(&p).unwrap();
+            if name == "summary.json" {
+                let mut v: serde_json::Value = serde_json::from_slice(&bytes).unwrap();
+                for key in [
+                    "voxelize_seconds",
+                    "simulate_seconds",
+                    "wall_seconds",
+                    "peak_memory_bytes",
+                    "output_folder",
+                ] {
+                    v.as_object_mut().unwrap().remove(key);
+                }
+                bytes = v.to_string().into_bytes();
+            }
+            (name, bytes)
+        })
+        .collect();
+    files.sort();
+    files
+}
+
+/// A scene whose every output kind is on and whose step control works:
+/// a soft critter dropped onto the ground with friction.
+fn resumable_scene() -> SceneInput {
+    let text = scene(
+        "[model]\nparameterization = \"volumetric-barrier+hg\"\nhourglass = 1.0\n\
+         [[obstacles]]\nshape = { kind = \"ground\", gap = 0.03 }\nfriction = 0.5\n\
+         [solver]\nduration = 0.2\ndamping = 1.0\n\
+         [output]\nevery_time = 0.02\npc2 = true\nsprings = true\nvtk = true\nskin_stl = true\n\
+         checkpoint_every = 0.03\n",
+    )
+    .replace("young = 1.0e5", "young = 4.0e3")
+    .replace("[[fixed]]\nkind = \"lowest_layer\"\n", "");
+    SceneInput::from_toml(&text, "test.toml").unwrap()
+}
+
+fn run_whole(job: &Job, dir: &std::path::Path) -> mss_scene::RunSummary {
+    let s = job.run(dir, &no_progress, &Cancel::new()).unwrap();
+    mss_scene::write_summary(dir, &s).unwrap();
+    s
+}
+
+#[test]
+fn an_interrupted_run_resumed_is_bitwise_the_uninterrupted_one() {
+    let job = Job::prepare(resumable_scene(), Registry::default(), &no_progress).unwrap();
+    let whole = tempfile::tempdir().unwrap();
+    let reference = run_whole(&job, whole.path());
+    assert!(!whole.path().join("checkpoint.mss").exists());
+
+    // Interrupted between two frames, then resumed: early, at the landing
+    // (where the step control halves the sub-step) and late.
+    for fifth in 1..5 {
+        let cut = tempfile::tempdir().unwrap();
+        let cancel = Cancel::new();
+        let stop_at = job.plan.steps * fifth / 5 + 3;
+        let progress = |p: Progress| {
+            if let Progress::Stepping { done, .. } = p
+                && done == stop_at
+            {
+                cancel.cancel();
+            }
+        };
+        let first = job.run(cut.path(), &progress, &cancel).unwrap();
+        assert!(first.interrupted && first.steps == stop_at);
+        assert!(cut.path().join("checkpoint.mss").exists());
+        let resumed = job
+            .resume(cut.path(), &no_progress, &Cancel::new())
+            .unwrap();
+        mss_scene::write_summary(cut.path(), &resumed).unwrap();
+        assert!(!resumed.interrupted);
+        assert_eq!(
+            folder_contents(cut.path()),
+            folder_contents(whole.path()),
+            "stopped at step {stop_at}"
+        );
+        assert_eq!(resumed.frames, reference.frames);
+        assert_eq!(resumed.bytes_written, reference.bytes_written);
+    }
+}
+
+#[test]
+fn a_periodic_checkpoint_resumes_bitwise_after_a_crash() {
+    let job = Job::prepare(resumable_scene(), Registry::default(), &no_progress).unwrap();
+    let whole = tempfile::tempdir().unwrap();
+    run_whole(&job, whole.path());
+
+    // Keep the periodic checkpoint as a crash would leave it, let the run
+    // finish (which removes it and finishes the point caches), put it back.
+    let crashed = tempfile::tempdir().unwrap();
+    let kept = tempfile::tempdir().unwrap();
+    let total = job.plan.steps;
+    let copy_at = total * 3 / 4;
+    let progress = |p: Progress| {
+        if let Progress::Stepping { done, .. } = p
+            && done == copy_at
+        {
+            std::fs::copy(
+                crashed.path().join("checkpoint.mss"),
+                kept.path().join("checkpoint.mss"),
+            )
+            .unwrap();
+        }
+    };
+    job.run(crashed.path(), &progress, &Cancel::new()).unwrap();
+    std::fs::copy(
+        kept.path().join("checkpoint.mss"),
+        crashed.path().join("checkpoint.mss"),
+    )
+    .unwrap();
+    let resumed = job
+        .resume(crashed.path(), &no_progress, &Cancel::new())
+        .unwrap();
+    mss_scene::write_summary(crashed.path(), &resumed).unwrap();
+    assert_eq!(
+        folder_contents(crashed.path()),
+        folder_contents(whole.path())
+    );
+}
+
+#[test]
+fn resuming_refuses_a_changed_scene_a_missing_checkpoint_and_a_static_solve() {
+    let job = Job::prepare(resumable_scene(), Registry::default(), &no_progress).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let e = job
+        .resume(dir.path(), &no_progress, &Cancel::new())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("cannot resume") && e.contains("checkpoint_every"),
+        "{e}"
+    );
+    let cancel = Cancel::new();
+    cancel.cancel();
+    job.run(dir.path(), &no_progress, &cancel).unwrap();
+    let mut changed = resumable_scene();
+    changed.scene.material.young *= 1.01;
+    let other = Job::prepare(changed, Registry::default(), &no_progress).unwrap();
+    let e = other
+        .resume(dir.path(), &no_progress, &Cancel::new())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("another scene"), "{e}");
+    let statics = Job::prepare(
+        input("[solver]\nkind = \"static\"\n"),
+        Registry::default(),
+        &no_progress,
+    )
+    .unwrap();
+    let e = statics
+        .resume(dir.path(), &no_progress, &Cancel::new())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("nothing to resume"), "{e}");
+    let bad = SceneInput::from_toml(
+        &scene("[solver]\nkind = \"static\"\n[output]\ncheckpoint_every = 0.1\n"),
+        "t.toml",
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(bad.contains("checkpoint_every"), "{bad}");
+    let bad = SceneInput::from_toml(&scene("[output]\ncheckpoint_every = -1.0\n"), "t.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(bad.contains("checkpoint_every"), "{bad}");
+}

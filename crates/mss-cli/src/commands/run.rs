@@ -20,6 +20,11 @@ pub struct RunArgs {
     /// Simulated duration in seconds, overriding the scene's `[solver] duration`.
     #[arg(long, value_name = "SECONDS")]
     pub duration: Option<f64>,
+    /// Continue the interrupted run in FOLDER from its checkpoint (written
+    /// at Ctrl-C and every `[output] checkpoint_every` seconds), with the
+    /// same scene; its frames end bitwise as an uninterrupted run's.
+    #[arg(long, value_name = "FOLDER", conflicts_with = "duration")]
+    pub resume: Option<PathBuf>,
 }
 
 /// Reads the scene of `mss run`/`mss check` and prepares its job behind
@@ -55,7 +60,17 @@ pub fn run(args: &RunArgs, global: &GlobalArgs) -> anyhow::Result<()> {
     // Everything is checked before the output folder is created, so that bad
     // input leaves no file behind.
     let job = prepare(args.scene.as_deref(), args.duration, global.limits(), &bars)?;
-    let out_dir = mss_scene::build::output_folder(&job.input.scene, global.out.as_deref());
+    let out_dir = match (&args.resume, &global.out) {
+        (Some(folder), Some(out)) if folder != out => {
+            bail!(
+                "--resume {} --out {}: a resumed run continues in its own folder; give one of them",
+                folder.display(),
+                out.display()
+            )
+        }
+        (Some(folder), _) => folder.clone(),
+        (None, out) => mss_scene::build::output_folder(&job.input.scene, out.as_deref()),
+    };
     // A static solve reports mechanisms itself, as its one-line error; dynamic
     // runs go on, so they get the warning.
     if !job.plan.is_static
@@ -66,7 +81,10 @@ pub fn run(args: &RunArgs, global: &GlobalArgs) -> anyhow::Result<()> {
     }
     let cancel = Cancel::new();
     interrupt_on_signals(&cancel)?;
-    let result = job.run(&out_dir, &|p| bars.report(p), &cancel);
+    let result = match &args.resume {
+        None => job.run(&out_dir, &|p| bars.report(p), &cancel),
+        Some(_) => job.resume(&out_dir, &|p| bars.report(p), &cancel),
+    };
     bars.clear();
     let summary = result?;
     write_summary(&out_dir, &summary)?;
@@ -75,12 +93,17 @@ pub fn run(args: &RunArgs, global: &GlobalArgs) -> anyhow::Result<()> {
     }
     if summary.interrupted {
         bail!(
-            "{}: interrupted at t = {:.3e} s after {} steps; the {} frames written so far and \
-             summary.json (\"interrupted\": true) are in {}",
+            "{}: interrupted at t = {:.3e} s after {} steps; the {} frames written so far, \
+             summary.json (\"interrupted\": true) and a checkpoint are in {}; `mss run{} \
+             --resume {}` continues",
             summary.scene,
             summary.simulated_time,
             summary.steps,
             summary.frames,
+            summary.output_folder,
+            args.scene
+                .as_ref()
+                .map_or(String::new(), |p| format!(" {}", p.display())),
             summary.output_folder
         );
     }

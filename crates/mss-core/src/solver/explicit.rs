@@ -527,6 +527,10 @@ impl Explicit {
     }
 }
 
+/// Layout of [`Explicit`]'s [`IntegratorMemory`](super::IntegratorMemory)
+/// (changed whenever its counters change).
+const EXPLICIT_MEMORY_VERSION: u64 = 1;
+
 impl Integrator for Explicit {
     fn name(&self) -> &'static str {
         match self.opts.scheme {
@@ -541,6 +545,112 @@ impl Integrator for Explicit {
 
     fn check_next_step(&mut self) {
         self.check_at_end = true;
+    }
+
+    fn memory(&self) -> super::IntegratorMemory {
+        let mut values = Vec::new();
+        if self.cache_valid {
+            values.reserve(6 * self.f_cons.len());
+            values.extend(self.f_cons.iter().flat_map(|f| [f.x, f.y, f.z]));
+            values.extend(self.cache_x.iter().flat_map(|p| [p.x, p.y, p.z]));
+        }
+        super::IntegratorMemory {
+            counters: vec![
+                EXPLICIT_MEMORY_VERSION,
+                self.steps,
+                u64::from(self.halvings),
+                u64::from(self.fail_halvings),
+                u64::from(self.growth_halvings),
+                u64::from(self.calm_checks),
+                self.good_substeps,
+                self.relax_after,
+                u64::from(self.since_check),
+                u64::from(self.good_valid),
+                u64::from(self.cache_valid),
+                self.last_time.to_bits(),
+                self.cache_time.to_bits(),
+            ],
+            values,
+            states: vec![self.good.clone()],
+        }
+    }
+
+    fn restore(&mut self, memory: &super::IntegratorMemory) -> Result<(), SolverError> {
+        let bad = |why: &str| {
+            SolverError::BadOption(format!(
+                "the checkpoint's integrator memory does not fit this explicit integrator: {why}"
+            ))
+        };
+        let &[
+            version,
+            steps,
+            halvings,
+            fail_halvings,
+            growth_halvings,
+            calm_checks,
+            good_substeps,
+            relax_after,
+            since_check,
+            good_valid,
+            cache_valid,
+            last_time,
+            cache_time,
+        ] = memory.counters.as_slice()
+        else {
+            return Err(bad("wrong number of counters"));
+        };
+        if version != EXPLICIT_MEMORY_VERSION {
+            return Err(bad("written by another version"));
+        }
+        let n = self.f_cons.len();
+        let small = |v: u64, max: u32| u32::try_from(v).ok().filter(|&v| v <= max);
+        let (Some(halvings), Some(fail_halvings), Some(growth_halvings)) = (
+            small(halvings, MAX_HALVINGS.max(MAX_GROWTH_HALVINGS)),
+            small(fail_halvings, MAX_HALVINGS),
+            small(growth_halvings, MAX_GROWTH_HALVINGS),
+        ) else {
+            return Err(bad("halvings out of range"));
+        };
+        if halvings != fail_halvings.max(growth_halvings) {
+            return Err(bad("inconsistent halvings"));
+        }
+        let cache_valid = cache_valid != 0;
+        let expected_values = if cache_valid { 6 * n } else { 0 };
+        if memory.values.len() != expected_values {
+            return Err(bad("wrong number of cached values"));
+        }
+        let [good] = memory.states.as_slice() else {
+            return Err(bad("no fallback state"));
+        };
+        if good.x.len() != n || good.v.len() != n {
+            return Err(bad("a fallback state of another size"));
+        }
+        self.steps = steps;
+        self.halvings = halvings;
+        self.fail_halvings = fail_halvings;
+        self.growth_halvings = growth_halvings;
+        self.calm_checks = u32::try_from(calm_checks).map_err(|_| bad("calm checks"))?;
+        self.good_substeps = good_substeps;
+        self.relax_after = relax_after;
+        self.since_check = u32::try_from(since_check).map_err(|_| bad("checks"))?;
+        self.good_valid = good_valid != 0;
+        self.cache_valid = cache_valid;
+        self.last_time = f64::from_bits(last_time);
+        self.cache_time = f64::from_bits(cache_time);
+        self.substeps = self.base_substeps << halvings;
+        self.dt_sub = self.dt / f64::from(self.substeps);
+        self.good.clone_from(good);
+        if cache_valid {
+            let (f, x) = memory.values.split_at(3 * n);
+            for (dst, c) in self.f_cons.iter_mut().zip(f.chunks_exact(3)) {
+                *dst = Vec3::new(c[0], c[1], c[2]);
+            }
+            for (dst, c) in self.cache_x.iter_mut().zip(x.chunks_exact(3)) {
+                *dst = Vec3::new(c[0], c[1], c[2]);
+            }
+        }
+        self.check_at_end = false;
+        Ok(())
     }
 
     fn step(&mut self, problem: &Problem, state: &mut State) -> Result<StepInfo, SolverError> {

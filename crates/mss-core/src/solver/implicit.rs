@@ -194,6 +194,28 @@ impl Integrator for Implicit {
         self.opts.dt
     }
 
+    fn memory(&self) -> super::IntegratorMemory {
+        // Only the step count (in messages): every step starts from the
+        // state alone, and the linear solver's reused structure does not
+        // change its results.
+        super::IntegratorMemory {
+            counters: vec![self.steps],
+            ..Default::default()
+        }
+    }
+
+    fn restore(&mut self, memory: &super::IntegratorMemory) -> Result<(), SolverError> {
+        match memory.counters.as_slice() {
+            [steps] if memory.values.is_empty() && memory.states.is_empty() => {
+                self.steps = *steps;
+                Ok(())
+            }
+            _ => Err(SolverError::BadOption(
+                "the checkpoint's integrator memory is not the implicit integrator's".into(),
+            )),
+        }
+    }
+
     fn step(&mut self, problem: &Problem, state: &mut State) -> Result<StepInfo, SolverError> {
         state.check_size(problem.model())?;
         self.steps += 1;

@@ -612,6 +612,47 @@ pub trait Integrator: Send {
     /// that the state it returns can be written as a frame. The default does
     /// nothing: an integrator that checks every step needs nothing more.
     fn check_next_step(&mut self) {}
+    /// What the integrator carries from one step to the next beyond the
+    /// [`State`] (step control, counters, cached forces), for checkpoints.
+    /// The default is nothing: right for an integrator whose steps depend
+    /// on the state alone.
+    fn memory(&self) -> IntegratorMemory {
+        IntegratorMemory::default()
+    }
+    /// Puts back what [`Integrator::memory`] took, into an integrator built
+    /// for the same problem with the same settings: the steps that follow
+    /// are then bitwise those that followed when the memory was taken. A
+    /// memory that does not fit is refused ([`SolverError::BadOption`]).
+    fn restore(&mut self, memory: &IntegratorMemory) -> Result<(), SolverError> {
+        if memory.is_empty() {
+            Ok(())
+        } else {
+            Err(SolverError::BadOption(format!(
+                "the {} integrator keeps no memory between steps, but the checkpoint carries some: it was written by another integrator",
+                self.name()
+            )))
+        }
+    }
+}
+
+/// An integrator's memory between steps ([`Integrator::memory`]): counters,
+/// values and states, in an order only the integrator that took it knows.
+/// Checkpoint files store it as it is.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct IntegratorMemory {
+    /// Integer counters and flags (and `f64`s kept bit for bit, as `to_bits`).
+    pub counters: Vec<u64>,
+    /// Floating-point values (cached forces, positions).
+    pub values: Vec<f64>,
+    /// Whole states (a fallback state).
+    pub states: Vec<State>,
+}
+
+impl IntegratorMemory {
+    /// Whether it holds nothing.
+    pub fn is_empty(&self) -> bool {
+        self.counters.is_empty() && self.values.is_empty() && self.states.is_empty()
+    }
 }
 
 /// Newton iteration limit per step or load increment of the implicit and

@@ -77,6 +77,23 @@ impl PvdWriter {
         Ok(())
     }
 
+    /// Replaces the frames recorded by `frames` (time, file) and rewrites the
+    /// `.pvd` (a series resumed from a checkpoint). A non-finite time is
+    /// refused.
+    pub fn set_frames(&mut self, frames: Vec<(f64, String)>) -> Result<(), IoError> {
+        if let Some((t, _)) = frames.iter().find(|(t, _)| !t.is_finite()) {
+            return Err(IoError::invalid(
+                &self.path,
+                format!("frame time {t} is not finite"),
+            ));
+        }
+        self.entries = frames
+            .into_iter()
+            .map(|(time, file)| PvdEntry { time, file })
+            .collect();
+        self.write()
+    }
+
     /// Rewrites the `.pvd` with the frames recorded so far.
     pub fn write(&self) -> Result<(), IoError> {
         write_atomic(&self.path, |w| {

@@ -24,6 +24,15 @@ pub trait FrameExporter: Send {
     ) -> Result<(), IoError>;
     /// Completes the series (e.g. final index files). Idempotent.
     fn finish(&mut self) -> Result<(), IoError>;
+    /// Continues a series of which frames `0..frame_times.len()`, at those
+    /// times, are on disk already (a run resumed from a checkpoint): the
+    /// next [`write_frame`](Self::write_frame) has index
+    /// `frame_times.len()`, and index files list the earlier frames. The
+    /// default does nothing, right for a series that keeps no index.
+    fn resume(&mut self, frame_times: &[f64]) -> Result<(), IoError> {
+        let _ = frame_times;
+        Ok(())
+    }
 }
 
 /// Refuses frame indices that do not increase, which would list a frame twice
@@ -117,6 +126,19 @@ impl FrameExporter for VtuSeries {
         Ok(())
     }
 
+    fn resume(&mut self, frame_times: &[f64]) -> Result<(), IoError> {
+        let entries = frame_times
+            .iter()
+            .enumerate()
+            .map(|(i, &time)| (time, self.frame_file_name(i)))
+            .collect::<Vec<_>>();
+        if self.write_pvd {
+            self.pvd.set_frames(entries)?;
+        }
+        self.last_index = frame_times.len().checked_sub(1);
+        Ok(())
+    }
+
     fn finish(&mut self) -> Result<(), IoError> {
         if self.write_pvd && self.pvd.entries().is_empty() {
             log::warn!(
@@ -177,6 +199,11 @@ impl FrameExporter for LegacyVtkSeries {
         let title = format!("hexahedral MSS frame {frame_index} time {time}");
         write_legacy_vtk(&path, frame, self.format, &title)?;
         self.last_index = Some(frame_index);
+        Ok(())
+    }
+
+    fn resume(&mut self, frame_times: &[f64]) -> Result<(), IoError> {
+        self.last_index = frame_times.len().checked_sub(1);
         Ok(())
     }
 
