@@ -3,67 +3,13 @@
 //! `cargo bench -p mss-core --bench step`; throughput is reported in cells
 //! ("elements") per second.
 
+#[path = "../examples/common/baseline.rs"]
+mod baseline;
+use baseline::{merged_springs, perturbed, spring_loop};
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use hexmesh::Lattice;
 use mss_core::model::{HourglassControl, PaperModel, SpringsOnly, Volumetric};
 use mss_core::{Material, Model, Parameterization, Vec3};
-
-fn perturbed(model: &Model) -> Vec<Vec3> {
-    let h = model.h();
-    model
-        .rest_positions()
-        .iter()
-        .enumerate()
-        .map(|(i, p)| {
-            let s = ((i as f64) * 0.618).fract() - 0.5;
-            Vec3::new(
-                1.01 * p.x + 0.05 * s * h,
-                p.y - 0.03 * s * h,
-                p.z + 0.02 * p.x,
-            )
-        })
-        .collect()
-}
-
-/// Merged springs `(a, b, k, rest)` of the springs-only model: the
-/// straightforward spring-loop baseline.
-fn merged_springs(lattice: &Lattice, model: &Model) -> Vec<(u32, u32, f64, f64)> {
-    let co = model.cell_coefficients(0);
-    let h = model.h();
-    let mut edges: Vec<(u32, u32)> = Vec::new();
-    let mut springs = Vec::new();
-    for cell in lattice.cells() {
-        for &(a, b, _) in &hexmesh::CELL_EDGES {
-            edges.push((cell[a], cell[b]));
-        }
-        for &(a, b) in &hexmesh::CELL_DIAGONALS {
-            springs.push((cell[a], cell[b], co.k_diag, 3f64.sqrt() * h));
-        }
-    }
-    edges.sort_unstable();
-    let mut i = 0;
-    while i < edges.len() {
-        let mut j = i;
-        while j < edges.len() && edges[j] == edges[i] {
-            j += 1;
-        }
-        springs.push((edges[i].0, edges[i].1, (j - i) as f64 * co.k_edge, h));
-        i = j;
-    }
-    springs.sort_unstable_by_key(|s| (s.0, s.1));
-    springs
-}
-
-fn spring_loop(springs: &[(u32, u32, f64, f64)], x: &[Vec3], out: &mut [Vec3]) {
-    out.fill(Vec3::zeros());
-    for &(a, b, k, rest) in springs {
-        let d = x[b as usize] - x[a as usize];
-        let l = d.norm();
-        let f = d * (k * (1.0 - rest / l));
-        out[a as usize] += f;
-        out[b as usize] -= f;
-    }
-}
 
 fn bench(c: &mut Criterion) {
     let mut group = c.benchmark_group("internal_forces");

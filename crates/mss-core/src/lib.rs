@@ -10,6 +10,20 @@
 //! Knows nothing of file formats: it takes a [`hexmesh::Lattice`].
 
 pub mod constraints;
+
+/// Runs `f` on a thread of the current rayon pool (the global one outside
+/// any pool), waiting for it. A step makes a dozen parallel passes; called
+/// from a thread outside the pool, each of them would hand its work to the
+/// pool and sleep until it is done, which costs more than the pass itself on
+/// small models. On a worker they run without those hand-offs; inside a
+/// pool already, `f` just runs.
+pub fn on_worker<R: Send>(f: impl FnOnce() -> R + Send) -> R {
+    if rayon::current_thread_index().is_some() {
+        f()
+    } else {
+        rayon::scope(|_| f())
+    }
+}
 pub mod contact;
 pub mod loads;
 pub mod material;

@@ -458,19 +458,67 @@ pub struct CellDiagnostics {
     pub correction_force: f64,
 }
 
-/// Scratch memory for [`Model::internal_forces_with`]: one force per cell
-/// corner. Reuse it across calls to keep the hot path free of allocation.
+/// Scratch memory of [`Model::internal_forces_with`]. The force pass
+/// writes each cell's corner forces straight into the nodes' sums (see
+/// [`Model::internal_forces_with`]), so it holds nothing today; it stays in
+/// the signature so that a future pass may keep scratch without an API change.
 #[derive(Debug, Clone, Default)]
 pub struct ForceWorkspace {
-    corner_forces: Vec<[f64; 3]>,
+    _reserved: (),
 }
 
 impl ForceWorkspace {
-    /// Bytes held.
+    /// Bytes held (none).
     pub fn memory_bytes(&self) -> usize {
-        self.corner_forces.capacity() * std::mem::size_of::<[f64; 3]>()
+        0
     }
 }
+
+/// The cells of a lattice by layer along z: the lattice sorts its cells
+/// z-major, so layer `l` is the range `offsets[l]..offsets[l + 1]`. Cells of
+/// layers two or more apart share no node.
+#[derive(Debug, Clone, Default)]
+struct Layers {
+    offsets: Vec<u32>,
+}
+
+impl Layers {
+    fn of(cell_coords: &[[u32; 3]]) -> Self {
+        let mut offsets = vec![0u32];
+        for (c, w) in cell_coords.windows(2).enumerate() {
+            debug_assert!(w[0][2] <= w[1][2], "cells sorted by layer");
+            if w[1][2] != w[0][2] {
+                // A missing layer in between would be an empty range; the
+                // parity of the layer index is what matters, so keep gaps.
+                for _ in w[0][2]..w[1][2] {
+                    offsets.push(c as u32 + 1);
+                }
+            }
+        }
+        offsets.push(cell_coords.len() as u32);
+        Self { offsets }
+    }
+
+    fn count(&self) -> usize {
+        self.offsets.len() - 1
+    }
+
+    fn range(&self, l: usize) -> std::ops::Range<usize> {
+        self.offsets[l] as usize..self.offsets[l + 1] as usize
+    }
+}
+
+/// Node force sums written from several threads at once, each to nodes no
+/// other thread touches in the same phase (see [`Model::internal_forces_with`]).
+#[derive(Clone, Copy)]
+struct SharedForces(*mut Vec3);
+// SAFETY: the force pass hands disjoint node sets to the threads of a phase.
+unsafe impl Send for SharedForces {}
+unsafe impl Sync for SharedForces {}
+
+/// Cells whose corner forces are computed together before being added to
+/// the nodes (the buffer stays in L1).
+const FORCE_BATCH: usize = 32;
 
 /// Cells per parallel task: large enough to amortize scheduling, small enough
 /// to balance 2-16 threads on 10^4-cell models.
@@ -494,8 +542,8 @@ pub struct Model {
     /// Material of each cell; empty when there is a single material.
     cell_material: Vec<u32>,
     /// CSR node -> cell corners `8 * cell + corner`, ascending.
-    adj_offsets: Vec<u32>,
-    adj: Vec<u32>,
+    /// The cells by lattice layer, for the force pass.
+    layers: Layers,
     num_springs: usize,
     param_name: String,
     /// Upper bound of omega_max^2 (1/s^2) at rest.
@@ -617,38 +665,19 @@ impl Model {
             .collect();
         let cells = lattice.cells().to_vec();
         let n = rest.len();
-        // Node -> corner adjacency by counting sort, so entries are ascending.
-        let mut adj_offsets = vec![0u32; n + 1];
-        for cell in &cells {
-            for &v in cell {
-                adj_offsets[v as usize + 1] += 1;
-            }
-        }
-        for i in 0..n {
-            adj_offsets[i + 1] += adj_offsets[i];
-        }
-        let mut fill = adj_offsets.clone();
-        let mut adj = vec![0u32; cells.len() * 8];
-        for (c, cell) in cells.iter().enumerate() {
-            for (k, &v) in cell.iter().enumerate() {
-                adj[fill[v as usize] as usize] = (8 * c + k) as u32;
-                fill[v as usize] += 1;
-            }
-        }
         let cell_material: Vec<u32> = match cell_material {
             Some(cm) if materials.len() > 1 => cm.to_vec(),
             _ => Vec::new(),
         };
         let mat_of = |c: usize| cell_material.get(c).map_or(0, |&m| m as usize);
-        let masses: Vec<f64> = (0..n)
-            .map(|v| {
-                let (lo, hi) = (adj_offsets[v] as usize, adj_offsets[v + 1] as usize);
-                adj[lo..hi]
-                    .iter()
-                    .map(|&e| materials[mat_of(e as usize / 8)].density * h * h * h / 8.0)
-                    .sum()
-            })
-            .collect();
+        // Per-node sums accumulate in ascending (cell, corner) order.
+        let mut masses = vec![0.0f64; n];
+        for (c, cell) in cells.iter().enumerate() {
+            let m = materials[mat_of(c)].density * h * h * h / 8.0;
+            for &v in cell {
+                masses[v as usize] += m;
+            }
+        }
         // Gershgorin on M^-1 K at rest: the row sums of |K| are bounded by the sum of
         // the cells' row sums, and every cell of a material has the same rest matrix.
         let row_abs: Vec<[f64; 24]> = params
@@ -660,17 +689,22 @@ impl Model {
                 std::array::from_fn(|r| jac[r].iter().map(|v| v.abs()).sum())
             })
             .collect();
-        let mut omega_max_sq = 0.0f64;
-        for v in 0..n {
-            let (lo, hi) = (adj_offsets[v] as usize, adj_offsets[v + 1] as usize);
-            for d in 0..3 {
-                let s: f64 = adj[lo..hi]
-                    .iter()
-                    .map(|&e| row_abs[mat_of(e as usize / 8)][3 * (e as usize % 8) + d])
-                    .sum();
-                omega_max_sq = omega_max_sq.max(s / masses[v]);
+        let mut row_sums = vec![[0.0f64; 3]; n];
+        for (c, cell) in cells.iter().enumerate() {
+            let r = &row_abs[mat_of(c)];
+            for (k, &v) in cell.iter().enumerate() {
+                for d in 0..3 {
+                    row_sums[v as usize][d] += r[3 * k + d];
+                }
             }
         }
+        let omega_max_sq = row_sums
+            .iter()
+            .zip(&masses)
+            .flat_map(|(s, m)| s.map(|s| s / m))
+            .fold(0.0f64, f64::max);
+        drop(row_sums);
+        let layers = Layers::of(lattice.cell_coords());
         let num_springs = lattice.num_unique_edges() + 4 * cells.len();
         Ok(Self {
             rest,
@@ -682,8 +716,7 @@ impl Model {
             coefficients,
             materials: materials.to_vec(),
             cell_material,
-            adj_offsets,
-            adj,
+            layers,
             num_springs,
             param_name: param.name(),
             omega_max_sq,
@@ -741,8 +774,14 @@ impl Model {
     /// Nodes on the lattice's boundary (outer surface and cavities): those
     /// with fewer than 8 cells around them, ascending.
     pub fn boundary_nodes(&self) -> Vec<u32> {
+        let mut count = vec![0u8; self.num_nodes()];
+        for cell in &self.cells {
+            for &v in cell {
+                count[v as usize] += 1;
+            }
+        }
         (0..self.num_nodes())
-            .filter(|&n| self.adj_offsets[n + 1] - self.adj_offsets[n] < 8)
+            .filter(|&n| count[n] < 8)
             .map(|n| n as u32)
             .collect()
     }
@@ -754,8 +793,7 @@ impl Model {
             + self.masses.capacity() * 8
             + self.volumetric_share.capacity() * 8
             + self.cell_material.capacity() * 4
-            + self.adj_offsets.capacity() * 4
-            + self.adj.capacity() * 4
+            + self.layers.offsets.capacity() * 4
     }
 
     #[inline(always)]
@@ -776,9 +814,7 @@ impl Model {
 
     /// A workspace sized for this model.
     pub fn workspace(&self) -> ForceWorkspace {
-        ForceWorkspace {
-            corner_forces: vec![[0.0; 3]; 8 * self.cells.len()],
-        }
+        ForceWorkspace::default()
     }
 
     /// Internal forces at positions `x` (N), written to `out` (allocating
@@ -808,51 +844,63 @@ impl Model {
     }
 
     fn forces_impl(&self, x: &[Vec3], ws: &mut ForceWorkspace, out: &mut [Vec3], batched: bool) {
+        let _ = ws;
         assert_eq!(x.len(), self.num_nodes(), "positions: one per node");
         assert_eq!(out.len(), self.num_nodes(), "forces: one per node");
-        ws.corner_forces.resize(8 * self.cells.len(), [0.0; 3]);
         // SAFETY: Vector3<f64> is a repr(C) wrapper of [[f64; 3]; 1], so the slice
         // has the layout of a slice of [f64; 3] of the same length.
         let xs: &[[f64; 3]] =
             unsafe { std::slice::from_raw_parts(x.as_ptr().cast::<[f64; 3]>(), x.len()) };
-        ws.corner_forces
-            .par_chunks_mut(8 * CHUNK)
-            .enumerate()
-            .for_each(|(ci, chunk)| {
-                let first = ci * CHUNK;
-                let cells = &self.cells[first..first + chunk.len() / 8];
-                if batched && self.cell_material.is_empty() {
-                    kernel::forces_batch(&self.params[0], cells, xs, chunk);
-                } else {
-                    for (k, f) in chunk.chunks_exact_mut(8).enumerate() {
-                        let cell = first + k;
-                        let xc = self.corners(x, cell);
-                        let mut fc = [[0.0; 3]; 8];
-                        kernel::cell_forces(self.params_of(cell), &xc, &mut fc);
-                        f.copy_from_slice(&fc);
-                    }
-                }
-            });
-        let cf = &ws.corner_forces;
         out.par_chunks_mut(4 * CHUNK)
-            .enumerate()
-            .for_each(|(ci, chunk)| {
-                for (k, o) in chunk.iter_mut().enumerate() {
-                    let v = ci * 4 * CHUNK + k;
-                    let (lo, hi) = (
-                        self.adj_offsets[v] as usize,
-                        self.adj_offsets[v + 1] as usize,
-                    );
-                    let mut acc = [0.0; 3];
-                    for &e in &self.adj[lo..hi] {
-                        let f = cf[e as usize];
-                        acc[0] += f[0];
-                        acc[1] += f[1];
-                        acc[2] += f[2];
+            .for_each(|c| c.fill(Vec3::zeros()));
+        let shared = SharedForces(out.as_mut_ptr());
+        let one_material = self.cell_material.is_empty();
+        // Two phases: the even layers, then the odd ones. A layer's cells
+        // touch the node planes z and z + 1 only, so within a phase no two
+        // layers share a node and each layer is one task, adding its cells'
+        // corner forces in cell order. Every node thus sums its (at most 8)
+        // cell contributions in one fixed order, whatever the thread count.
+        for parity in 0..2 {
+            (parity..self.layers.count())
+                .into_par_iter()
+                .step_by(2)
+                .for_each(|l| {
+                    let range = self.layers.range(l);
+                    let mut buf = [[0.0f64; 3]; 8 * FORCE_BATCH];
+                    let mut first = range.start;
+                    while first < range.end {
+                        let last = (first + FORCE_BATCH).min(range.end);
+                        let cells = &self.cells[first..last];
+                        let fc = &mut buf[..8 * cells.len()];
+                        if batched && one_material {
+                            kernel::forces_batch(&self.params[0], cells, xs, fc);
+                        } else {
+                            for (k, f) in fc.chunks_exact_mut(8).enumerate() {
+                                let cell = first + k;
+                                let xc = self.corners(x, cell);
+                                let mut out8 = [[0.0; 3]; 8];
+                                kernel::cell_forces(self.params_of(cell), &xc, &mut out8);
+                                f.copy_from_slice(&out8);
+                            }
+                        }
+                        let s = shared;
+                        for (cell, f) in cells.iter().zip(fc.chunks_exact(8)) {
+                            for (&v, fv) in cell.iter().zip(f) {
+                                // SAFETY: `v` is a node of a layer of this
+                                // phase's parity, which no other task of the
+                                // phase touches; `out` has one entry per node.
+                                unsafe {
+                                    let o = &mut *s.0.add(v as usize);
+                                    o.x += fv[0];
+                                    o.y += fv[1];
+                                    o.z += fv[2];
+                                }
+                            }
+                        }
+                        first = last;
                     }
-                    *o = Vec3::new(acc[0], acc[1], acc[2]);
-                }
-            });
+                });
+        }
     }
 
     /// The 8 corner forces of one cell at positions `x` (N).

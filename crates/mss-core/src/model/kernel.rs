@@ -259,7 +259,11 @@ fn finish_cell<T: Scalar>(
     if let (Some(corr), Some((axes, _))) = (&p.correction, &axes) {
         // T_i = 1/2 sum_n s_i(n) (f_n . a_i) = 1/2 a_i . sum_n s_i(n) f_n, with
         // s_i = +1 on the -i face and -1 on the +i face.
-        let t: [T; 3] = std::array::from_fn(|i| {
+        // Loops rather than `array::from_fn` throughout the kernel: the
+        // closures would be functions of their own, not inlined into the
+        // AVX2 entry point.
+        let mut t = [T::cst(0.0); 3];
+        for (i, ti) in t.iter_mut().enumerate() {
             let mut acc = [T::cst(0.0); 3];
             for (n, fn_) in f.iter().enumerate() {
                 if CORNER_OFFSETS[n][i] == 0 {
@@ -268,16 +272,20 @@ fn finish_cell<T: Scalar>(
                     sub_from(&mut acc, *fn_);
                 }
             }
-            dot(acc, axes[i]).scale(0.5)
-        });
+            *ti = dot(acc, axes[i]).scale(0.5);
+        }
         let m = &corr.minv;
-        let nf: [T; 3] = std::array::from_fn(|i| {
-            t[0].scale(m[i][0]) + t[1].scale(m[i][1]) + t[2].scale(m[i][2])
-        });
+        let mut nf = [T::cst(0.0); 3];
+        for (i, ni) in nf.iter_mut().enumerate() {
+            *ni = t[0].scale(m[i][0]) + t[1].scale(m[i][1]) + t[2].scale(m[i][2]);
+        }
         let sum = nf[0] + nf[1] + nf[2];
         // Node on the +j face gets -(c/4) (sum_{i != j} N_i) a_j, on the -j face the opposite.
         let q = -corr.c / 4.0;
-        let g: [V3<T>; 3] = std::array::from_fn(|j| mul_s(axes[j], (sum - nf[j]).scale(q)));
+        let mut g = [[T::cst(0.0); 3]; 3];
+        for (j, gj) in g.iter_mut().enumerate() {
+            *gj = mul_s(axes[j], (sum - nf[j]).scale(q));
+        }
         for (n, fn_) in f.iter_mut().enumerate() {
             for j in 0..3 {
                 if CORNER_OFFSETS[n][j] == 1 {
@@ -301,7 +309,11 @@ fn finish_cell<T: Scalar>(
             jac - T::cst(1.0)
         };
         let coef = slope.scale(-p.vol_lambda_h3 * p.grad_scale);
-        let cs = cof.map(|c| mul_s(c, coef));
+        let cs = [
+            mul_s(cof[0], coef),
+            mul_s(cof[1], coef),
+            mul_s(cof[2], coef),
+        ];
         for (n, fn_) in f.iter_mut().enumerate() {
             for (j, c) in cs.iter().enumerate() {
                 if CORNER_OFFSETS[n][j] == 1 {
@@ -396,8 +408,13 @@ fn hourglass_sign(n: usize, i: usize) -> f64 {
 /// and `1 / |axis_sum[i]|`.
 #[inline(always)]
 fn cell_axes<T: Scalar>(axis_sum: &[V3<T>; 3]) -> ([V3<T>; 3], [T; 3]) {
-    let inv: [T; 3] = std::array::from_fn(|i| T::cst(1.0) / dot(axis_sum[i], axis_sum[i]).sqrt());
-    (std::array::from_fn(|i| mul_s(axis_sum[i], inv[i])), inv)
+    let mut inv = [T::cst(0.0); 3];
+    let mut axes = [[T::cst(0.0); 3]; 3];
+    for i in 0..3 {
+        inv[i] = T::cst(1.0) / dot(axis_sum[i], axis_sum[i]).sqrt();
+        axes[i] = mul_s(axis_sum[i], inv[i]);
+    }
+    (axes, inv)
 }
 
 /// The hourglass vectors `g_i = 1/8 sum_n s_j s_k(n) x_n` and amplitudes
@@ -407,18 +424,20 @@ fn cell_axes<T: Scalar>(axis_sum: &[V3<T>; 3]) -> ([V3<T>; 3], [T; 3]) {
 /// motions.
 #[inline(always)]
 fn hourglass_amplitudes<T: Scalar>(x: &[V3<T>; 8], axes: &[V3<T>; 3]) -> ([V3<T>; 3], [T; 3]) {
-    let g: [V3<T>; 3] = std::array::from_fn(|i| {
-        let mut g = [T::cst(0.0); 3];
+    let mut g = [[T::cst(0.0); 3]; 3];
+    let mut q = [T::cst(0.0); 3];
+    for i in 0..3 {
+        let mut gi = [T::cst(0.0); 3];
         for (n, xn) in x.iter().enumerate() {
             if hourglass_sign(n, i) > 0.0 {
-                add_to(&mut g, *xn);
+                add_to(&mut gi, *xn);
             } else {
-                sub_from(&mut g, *xn);
+                sub_from(&mut gi, *xn);
             }
         }
-        g.map(|v| v.scale(0.125))
-    });
-    let q = std::array::from_fn(|i| dot(axes[i], g[i]));
+        g[i] = [gi[0].scale(0.125), gi[1].scale(0.125), gi[2].scale(0.125)];
+        q[i] = dot(axes[i], g[i]);
+    }
     (g, q)
 }
 
@@ -467,7 +486,11 @@ pub(crate) fn deformation_gradient<T: Scalar>(x: &[V3<T>; 8], grad_scale: f64) -
             }
         }
     }
-    let cols = cols.map(|c| c.map(|v| v.scale(grad_scale)));
+    for col in &mut cols {
+        for v in col.iter_mut() {
+            *v = v.scale(grad_scale);
+        }
+    }
     let jac = dot(cols[0], cross(cols[1], cols[2]));
     (cols, jac)
 }
@@ -546,7 +569,14 @@ macro_rules! lanes_op {
             type Output = Self;
             #[inline(always)]
             fn $f(self, o: Self) -> Self {
-                Self(std::array::from_fn(|i| self.0[i] $op o.0[i]))
+                // Plain loops, not `array::from_fn`/`map`: their closures are
+                // separate functions that the AVX2 entry point does not
+                // inline, which costs calls and copies per operation.
+                let mut r = [0.0; L];
+                for ((r, a), b) in r.iter_mut().zip(self.0).zip(o.0) {
+                    *r = a $op b;
+                }
+                Self(r)
             }
         }
     };
@@ -560,7 +590,11 @@ impl<const L: usize> Neg for Lanes<L> {
     type Output = Self;
     #[inline(always)]
     fn neg(self) -> Self {
-        Self(self.0.map(|v| -v))
+        let mut r = self.0;
+        for v in &mut r {
+            *v = -*v;
+        }
+        Self(r)
     }
 }
 impl<const L: usize> AddAssign for Lanes<L> {
@@ -582,15 +616,27 @@ impl<const L: usize> Scalar for Lanes<L> {
     }
     #[inline(always)]
     fn scale(self, k: f64) -> Self {
-        Self(self.0.map(|v| v * k))
+        let mut r = self.0;
+        for v in &mut r {
+            *v *= k;
+        }
+        Self(r)
     }
     #[inline(always)]
     fn sqrt(self) -> Self {
-        Self(self.0.map(f64::sqrt))
+        let mut r = self.0;
+        for v in &mut r {
+            *v = v.sqrt();
+        }
+        Self(r)
     }
     #[inline(always)]
     fn apply(self, f: fn(f64) -> (f64, f64)) -> Self {
-        Self(self.0.map(|v| f(v).0))
+        let mut r = self.0;
+        for v in &mut r {
+            *v = f(*v).0;
+        }
+        Self(r)
     }
 }
 
@@ -608,10 +654,15 @@ fn forces_batch_body(p: &CellParams, cells: &[[u32; 8]], x: &[[f64; 3]], out: &m
         .enumerate()
     {
         let _ = g;
-        let xl: [V3<Lanes<LANES>>; 8] = std::array::from_fn(|k| {
-            let rows: [[f64; 3]; LANES] = std::array::from_fn(|l| x[cg[l][k] as usize]);
-            std::array::from_fn(|d| Lanes(std::array::from_fn(|l| rows[l][d])))
-        });
+        let mut xl: [V3<Lanes<LANES>>; 8] = [[Lanes::cst(0.0); 3]; 8];
+        for (k, xk) in xl.iter_mut().enumerate() {
+            for (l, cell) in cg.iter().enumerate() {
+                let p = x[cell[k] as usize];
+                xk[0].0[l] = p[0];
+                xk[1].0[l] = p[1];
+                xk[2].0[l] = p[2];
+            }
+        }
         let mut f = [[Lanes::cst(0.0); 3]; 8];
         cell_forces(p, &xl, &mut f);
         for l in 0..LANES {

@@ -654,6 +654,13 @@ impl Integrator for Explicit {
     }
 
     fn step(&mut self, problem: &Problem, state: &mut State) -> Result<StepInfo, SolverError> {
+        crate::on_worker(|| self.step_here(problem, state))
+    }
+}
+
+impl Explicit {
+    /// [`Integrator::step`], on the thread it is called on.
+    fn step_here(&mut self, problem: &Problem, state: &mut State) -> Result<StepInfo, SolverError> {
         state.check_size(problem.model())?;
         if !self.good_valid || self.last_time != state.time {
             // A new or externally changed state: it is the reference to fall

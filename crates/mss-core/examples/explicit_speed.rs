@@ -1,0 +1,135 @@
+//! The explicit step's speed against a naive springs-only kernel, measured
+//! in one run on the same lattice (issue: explicit step at the memory
+//! bandwidth limit).
+//!
+//!     cargo run --release -p mss-core --example explicit_speed [CELLS_PER_SIDE] [REPEATS]
+//!
+//! For each model: the force pass alone and a whole explicit step (velocity
+//! Verlet at the stable step, one sub-step), on 1 and 2 threads, as the
+//! minimum over REPEATS timings (noise only adds time), with the ratio to
+//! the baseline measured in the same run: a merged-spring scatter loop (each
+//! lattice edge and body diagonal once, 7 springs per cell, f64). The second
+//! ratio is to the bandwidth bound: the bytes a step's arrays move, divided
+//! by the copy bandwidth measured here.
+
+use std::time::Instant;
+
+#[path = "common/baseline.rs"]
+mod baseline;
+use baseline::{merged_springs, perturbed, spring_loop};
+
+use hexmesh::Lattice;
+use mss_core::model::{HourglassControl, PaperModel, SpringsOnly, Volumetric, VolumetricBarrier};
+use mss_core::solver::{Explicit, ExplicitOptions, Integrator, Problem, State};
+use mss_core::{Material, Model, Parameterization, Vec3};
+
+/// Minimum wall time of `f` over `repeats` runs (s).
+fn best(repeats: usize, mut f: impl FnMut()) -> f64 {
+    f();
+    (0..repeats)
+        .map(|_| {
+            let t = Instant::now();
+            f();
+            t.elapsed().as_secs_f64()
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let n: u32 = args.get(1).and_then(|a| a.parse().ok()).unwrap_or(64);
+    let repeats: usize = args.get(2).and_then(|a| a.parse().ok()).unwrap_or(7);
+    let lattice = Lattice::block([n; 3], 1.0 / f64::from(n), [0.0; 3]).expect("block");
+    let material = Material::new(1.0e4, 0.3, 1000.0).expect("material");
+    let cells = lattice.num_cells();
+    let nodes = lattice.num_nodes();
+
+    // Copy bandwidth: read + write of a buffer far larger than the caches.
+    let len = 32 << 20; // 256 MiB of f64
+    let src = vec![1.0f64; len];
+    let mut dst = vec![0.0f64; len];
+    let copy = best(3, || {
+        dst.copy_from_slice(std::hint::black_box(&src));
+        std::hint::black_box(&mut dst);
+    });
+    let bandwidth = 2.0 * 8.0 * len as f64 / copy;
+    drop((src, dst));
+
+    let models: Vec<(&str, Box<dyn Parameterization>)> = vec![
+        ("paper", Box::new(PaperModel)),
+        ("springs", Box::new(SpringsOnly)),
+        ("volumetric", Box::new(Volumetric)),
+        ("volumetric-barrier", Box::new(VolumetricBarrier)),
+        (
+            "paper+hg",
+            Box::new(HourglassControl::new(Box::new(PaperModel), 1.0).expect("hg")),
+        ),
+        (
+            "volumetric-barrier+hg",
+            Box::new(HourglassControl::new(Box::new(VolumetricBarrier), 1.0).expect("hg")),
+        ),
+    ];
+    // Arrays one explicit step (velocity Verlet, one sub-step) reads and
+    // writes, per node and per cell (bytes): the force pass reads the cells
+    // (32) and positions (24), zeroes and adds into the forces (24 + 48);
+    // two kicks read forces and masses and update velocities (2 x 80); the
+    // drift updates positions from velocities and rest positions (96); the
+    // force cache copies positions (48).
+    let step_bytes = 32.0 * cells as f64 + (24.0 + 72.0 + 160.0 + 96.0 + 48.0) * nodes as f64;
+    let bound = step_bytes / bandwidth;
+    println!(
+        "lattice {n}^3: {cells} cells, {nodes} nodes; copy bandwidth {:.1} GB/s; \
+         bandwidth bound of a step {:.2} ms ({:.0} B/cell)",
+        bandwidth / 1e9,
+        bound * 1e3,
+        step_bytes / cells as f64
+    );
+    for threads in [1usize, 2] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("pool");
+        pool.install(|| {
+            let base_model = Model::new(&lattice, material, &SpringsOnly).expect("model");
+            let springs = merged_springs(&lattice, &base_model);
+            let x = perturbed(&base_model);
+            let mut f = vec![Vec3::zeros(); nodes];
+            let baseline = best(repeats, || spring_loop(&springs, &x, &mut f));
+            println!(
+                "\n{threads} thread(s): baseline (naive merged springs, {} springs, 1 thread) {:.2} ms \
+                 = {:.0} Mcell/s",
+                springs.len(),
+                baseline * 1e3,
+                cells as f64 / baseline / 1e6
+            );
+            println!(
+                "{:<22} {:>10} {:>10} {:>10} {:>10} {:>12}",
+                "model", "force ms", "/baseline", "step ms", "/baseline", "/bandwidth"
+            );
+            for (name, param) in &models {
+                let model = Model::new(&lattice, material, param.as_ref()).expect("model");
+                let x = perturbed(&model);
+                let mut ws = model.workspace();
+                let mut f = vec![Vec3::zeros(); nodes];
+                let force = best(repeats, || model.internal_forces_with(&x, &mut ws, &mut f));
+                let problem = Problem::new(model);
+                let mut integ =
+                    Explicit::new(&problem, ExplicitOptions::default()).expect("explicit");
+                let mut state = State::at_rest(problem.model());
+                state.x = x.clone();
+                let step = best(repeats, || {
+                    integ.step(&problem, &mut state).expect("step");
+                }) / f64::from(integ.substeps());
+                println!(
+                    "{:<22} {:>10.2} {:>10.2} {:>10.2} {:>10.2} {:>12.2}",
+                    name,
+                    force * 1e3,
+                    force / baseline,
+                    step * 1e3,
+                    step / baseline,
+                    step / bound
+                );
+            }
+        });
+    }
+}
