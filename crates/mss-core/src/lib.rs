@@ -11,6 +11,14 @@
 
 pub mod constraints;
 
+/// Vectors as plain coordinate triples, without copying (for writers and
+/// bindings that take `[f64; 3]`).
+pub fn as_arrays(v: &[Vec3]) -> &[[f64; 3]] {
+    // SAFETY: Vector3<f64> is a repr(C) wrapper of [[f64; 3]; 1], so the
+    // slice has the layout of a slice of [f64; 3] of the same length.
+    unsafe { std::slice::from_raw_parts(v.as_ptr().cast::<[f64; 3]>(), v.len()) }
+}
+
 /// Runs `f` on a thread of the current rayon pool (the global one outside
 /// any pool), waiting for it. A step makes a dozen parallel passes; called
 /// from a thread outside the pool, each of them would hand its work to the

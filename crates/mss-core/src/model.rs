@@ -985,6 +985,13 @@ impl Model {
 
     /// Per-cell strain measures and correction-force magnitude at `x`.
     pub fn cell_diagnostics(&self, x: &[Vec3]) -> Vec<CellDiagnostics> {
+        let mut out = Vec::new();
+        self.cell_diagnostics_into(x, &mut out);
+        out
+    }
+
+    /// [`Model::cell_diagnostics`] into `out`, reusing its allocation.
+    pub fn cell_diagnostics_into(&self, x: &[Vec3], out: &mut Vec<CellDiagnostics>) {
         assert_eq!(x.len(), self.num_nodes(), "positions: one per node");
         (0..self.cells.len())
             .into_par_iter()
@@ -1039,7 +1046,7 @@ impl Model {
                     correction_force,
                 }
             })
-            .collect()
+            .collect_into_vec(out);
     }
 
     /// Per cell, how far its corners are from the best affine map of the

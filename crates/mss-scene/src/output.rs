@@ -149,6 +149,37 @@ fn start_cache(
     Pc2Writer::create(&dir.join(format!("{stem}.pc2")), rest.len(), 0.0, 1.0)
 }
 
+/// The arrays of one frame, kept between frames.
+#[derive(Default)]
+struct FrameScratch {
+    displacement: Vec<[f64; 3]>,
+    f_int: Vec<Vec3>,
+    f_ext: Vec<Vec3>,
+    /// Constant over a run: filled at the first frame.
+    fixed: Vec<bool>,
+    material: Vec<u32>,
+    diag: Vec<mss_core::CellDiagnostics>,
+    vol: Vec<f64>,
+    shear: Vec<f64>,
+    corr: Vec<f64>,
+    ws: mss_core::ForceWorkspace,
+}
+
+/// The point and cell arrays of the frame being written.
+struct FrameArrays<'a> {
+    points: &'a [[f64; 3]],
+    displacement: &'a [[f64; 3]],
+    velocity: &'a [[f64; 3]],
+    f_int: &'a [[f64; 3]],
+    f_ext: &'a [[f64; 3]],
+    fixed: &'a [bool],
+    vol: &'a [f64],
+    shear: &'a [f64],
+    corr: &'a [f64],
+    material: &'a [u32],
+    contact_force: Option<&'a [[f64; 3]]>,
+}
+
 /// Writes the frames of one run into one folder.
 pub struct FrameWriter {
     dir: PathBuf,
@@ -162,15 +193,12 @@ pub struct FrameWriter {
     skin_cache: Option<Pc2Writer>,
     embedded: Option<EmbeddedOutput>,
     springs: Option<SpringsOutput>,
-    cells: Vec<[u32; 8]>,
     /// Times of the frames written, in order (a checkpoint keeps them).
     times: Vec<f64>,
+    /// The frame arrays, reused from frame to frame.
+    scratch: FrameScratch,
     files: usize,
     bytes: u64,
-}
-
-fn to_arr(v: &[Vec3]) -> Vec<[f64; 3]> {
-    v.iter().map(|p| [p.x, p.y, p.z]).collect()
 }
 
 impl FrameWriter {
@@ -256,8 +284,8 @@ impl FrameWriter {
             skin_cache,
             embedded,
             springs,
-            cells: lattice.cells().to_vec(),
             times: Vec::new(),
+            scratch: FrameScratch::default(),
             files: 0,
             bytes: 0,
         })
@@ -340,53 +368,108 @@ impl FrameWriter {
         let model = problem.model();
         let n = model.num_nodes();
         let index = self.times.len();
-        let points = to_arr(&state.x);
+        // The frame's arrays live in `scratch` and are refilled in place: a
+        // frame allocates nothing of the lattice's size once the first is
+        // written.
+        let mut scratch = std::mem::take(&mut self.scratch);
+        let sc = &mut scratch;
+        let points = mss_core::as_arrays(&state.x);
+        let velocity = mss_core::as_arrays(&state.v);
         let rest = model.rest_positions();
-        let displacement: Vec<[f64; 3]> = state
-            .x
-            .iter()
-            .zip(rest)
-            .map(|(x, r)| [x.x - r.x, x.y - r.y, x.z - r.z])
-            .collect();
-        let velocity = to_arr(&state.v);
-        let mut f_int = vec![Vec3::zeros(); n];
-        model.internal_forces(&state.x, &mut f_int);
-        let mut f_ext = vec![Vec3::zeros(); n];
-        problem.external_forces(state.time, &state.x, 1.0, &mut f_ext);
-        let f_int = to_arr(&f_int);
-        let f_ext = to_arr(&f_ext);
-        let constraints = problem.constraints();
-        let fixed: Vec<bool> = (0..n)
-            .map(|i| constraints.mask(i).iter().any(|&h| h))
-            .collect();
-        let diag = model.cell_diagnostics(&state.x);
-        let vol: Vec<f64> = diag.iter().map(|d| d.volumetric_strain).collect();
-        let shear: Vec<f64> = diag.iter().map(|d| d.shear_strain).collect();
-        let corr: Vec<f64> = diag.iter().map(|d| d.correction_force).collect();
-        let contact_force = problem
-            .contact()
-            .map(|_| to_arr(&problem.contact_forces(state)));
-        let material: Vec<u32> = if model.materials().len() > 1 {
-            (0..model.num_cells())
-                .map(|c| model.cell_material(c))
-                .collect()
-        } else {
-            Vec::new()
-        };
+        sc.displacement.clear();
+        sc.displacement.extend(
+            state
+                .x
+                .iter()
+                .zip(rest)
+                .map(|(x, r)| [x.x - r.x, x.y - r.y, x.z - r.z]),
+        );
+        sc.f_int.resize(n, Vec3::zeros());
+        model.internal_forces_with(&state.x, &mut sc.ws, &mut sc.f_int);
+        sc.f_ext.clear();
+        sc.f_ext.resize(n, Vec3::zeros());
+        problem.external_forces(state.time, &state.x, 1.0, &mut sc.f_ext);
+        if sc.fixed.len() != n {
+            let constraints = problem.constraints();
+            sc.fixed = (0..n)
+                .map(|i| constraints.mask(i).iter().any(|&h| h))
+                .collect();
+            sc.material = if model.materials().len() > 1 {
+                (0..model.num_cells())
+                    .map(|c| model.cell_material(c))
+                    .collect()
+            } else {
+                Vec::new()
+            };
+        }
+        model.cell_diagnostics_into(&state.x, &mut sc.diag);
+        sc.vol.clear();
+        sc.vol.extend(sc.diag.iter().map(|d| d.volumetric_strain));
+        sc.shear.clear();
+        sc.shear.extend(sc.diag.iter().map(|d| d.shear_strain));
+        sc.corr.clear();
+        sc.corr.extend(sc.diag.iter().map(|d| d.correction_force));
+        let contact_force = problem.contact().map(|_| problem.contact_forces(state));
+        let f_int = mss_core::as_arrays(&sc.f_int);
+        let f_ext = mss_core::as_arrays(&sc.f_ext);
+        let (displacement, fixed, material) = (&sc.displacement, &sc.fixed, &sc.material);
+        let (vol, shear, corr) = (&sc.vol, &sc.shear, &sc.corr);
+        let result = self.write_frame(
+            problem,
+            state,
+            index,
+            FrameArrays {
+                points,
+                displacement,
+                velocity,
+                f_int,
+                f_ext,
+                fixed,
+                vol,
+                shear,
+                corr,
+                material,
+                contact_force: contact_force.as_deref().map(mss_core::as_arrays),
+            },
+        );
+        self.scratch = scratch;
+        result
+    }
+
+    fn write_frame(
+        &mut self,
+        problem: &Problem,
+        state: &State,
+        index: usize,
+        a: FrameArrays<'_>,
+    ) -> Result<(), JobError> {
+        let FrameArrays {
+            points,
+            displacement,
+            velocity,
+            f_int,
+            f_ext,
+            fixed,
+            vol,
+            shear,
+            corr,
+            material,
+            contact_force,
+        } = a;
         if !self.lattice.is_empty() {
-            let mut frame = LatticeFrame::new(&points, &self.cells)
-                .with_point_field(Field::vectors("displacement", &displacement))
-                .with_point_field(Field::vectors("velocity", &velocity))
-                .with_point_field(Field::vectors("internal_force", &f_int))
-                .with_point_field(Field::vectors("external_force", &f_ext))
-                .with_point_field(Field::flags("fixed", &fixed))
-                .with_cell_field(Field::scalars("volumetric_strain", &vol))
-                .with_cell_field(Field::scalars("shear_strain", &shear))
-                .with_cell_field(Field::scalars("correction_force", &corr));
+            let mut frame = LatticeFrame::new(points, problem.model().cells())
+                .with_point_field(Field::vectors("displacement", displacement))
+                .with_point_field(Field::vectors("velocity", velocity))
+                .with_point_field(Field::vectors("internal_force", f_int))
+                .with_point_field(Field::vectors("external_force", f_ext))
+                .with_point_field(Field::flags("fixed", fixed))
+                .with_cell_field(Field::scalars("volumetric_strain", vol))
+                .with_cell_field(Field::scalars("shear_strain", shear))
+                .with_cell_field(Field::scalars("correction_force", corr));
             if !material.is_empty() {
-                frame = frame.with_cell_field(Field::ids("material", &material));
+                frame = frame.with_cell_field(Field::ids("material", material));
             }
-            if let Some(f) = &contact_force {
+            if let Some(f) = contact_force {
                 frame = frame.with_point_field(Field::vectors("contact_force", f));
             }
             let mut written = Vec::new();
@@ -401,7 +484,7 @@ impl FrameWriter {
             }
         }
         if let Some(skin) = &self.skin {
-            let pos = skin.positions(&points);
+            let pos = skin.positions(points);
             let mut written = Vec::new();
             for (exporter, ext) in &mut self.skin_exporters {
                 exporter.write_skin(index, state.time, &pos, &skin.triangles)?;
@@ -415,7 +498,7 @@ impl FrameWriter {
             }
         }
         if let Some(e) = &mut self.embedded {
-            let pos = e.embedding.deform(&points);
+            let pos = e.embedding.deform(points);
             e.exporter
                 .write_skin(index, state.time, &pos, &e.triangles)?;
             if let Some(cache) = &mut e.cache {
@@ -425,7 +508,7 @@ impl FrameWriter {
             self.count(&p);
         }
         if self.springs.is_some() {
-            self.write_springs(index, problem, state, &points)?;
+            self.write_springs(index, problem, state, points)?;
         }
         self.times.push(state.time);
         Ok(())

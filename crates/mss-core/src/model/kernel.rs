@@ -640,21 +640,21 @@ impl<const L: usize> Scalar for Lanes<L> {
     }
 }
 
-/// Cells evaluated together by [`forces_batch`].
+/// Cells evaluated together by [`forces_batch`] with AVX2.
 pub(crate) const LANES: usize = 4;
 
 /// Forces of consecutive cells `cells` (all with parameters `p`) at positions
-/// `x`, into `out` (8 corner forces per cell).
+/// `x`, into `out` (8 corner forces per cell), `L` cells per pass.
 #[inline(always)]
-fn forces_batch_body(p: &CellParams, cells: &[[u32; 8]], x: &[[f64; 3]], out: &mut [[f64; 3]]) {
-    let groups = cells.len() / LANES;
-    for (g, (cg, og)) in cells
-        .chunks_exact(LANES)
-        .zip(out.chunks_exact_mut(8 * LANES))
-        .enumerate()
-    {
-        let _ = g;
-        let mut xl: [V3<Lanes<LANES>>; 8] = [[Lanes::cst(0.0); 3]; 8];
+fn forces_batch_body<const L: usize>(
+    p: &CellParams,
+    cells: &[[u32; 8]],
+    x: &[[f64; 3]],
+    out: &mut [[f64; 3]],
+) {
+    let groups = cells.len() / L;
+    for (cg, og) in cells.chunks_exact(L).zip(out.chunks_exact_mut(8 * L)) {
+        let mut xl: [V3<Lanes<L>>; 8] = [[Lanes::cst(0.0); 3]; 8];
         for (k, xk) in xl.iter_mut().enumerate() {
             for (l, cell) in cg.iter().enumerate() {
                 let p = x[cell[k] as usize];
@@ -665,15 +665,15 @@ fn forces_batch_body(p: &CellParams, cells: &[[u32; 8]], x: &[[f64; 3]], out: &m
         }
         let mut f = [[Lanes::cst(0.0); 3]; 8];
         cell_forces(p, &xl, &mut f);
-        for l in 0..LANES {
+        for l in 0..L {
             for k in 0..8 {
                 og[8 * l + k] = [f[k][0].0[l], f[k][1].0[l], f[k][2].0[l]];
             }
         }
     }
-    for (c, o) in cells[groups * LANES..]
+    for (c, o) in cells[groups * L..]
         .iter()
-        .zip(out[8 * groups * LANES..].chunks_exact_mut(8))
+        .zip(out[8 * groups * L..].chunks_exact_mut(8))
     {
         let xc: [V3<f64>; 8] = std::array::from_fn(|k| x[c[k] as usize]);
         let mut f = [[0.0; 3]; 8];
@@ -685,7 +685,7 @@ fn forces_batch_body(p: &CellParams, cells: &[[u32; 8]], x: &[[f64; 3]], out: &m
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 fn forces_batch_avx2(p: &CellParams, cells: &[[u32; 8]], x: &[[f64; 3]], out: &mut [[f64; 3]]) {
-    forces_batch_body(p, cells, x, out);
+    forces_batch_body::<LANES>(p, cells, x, out);
 }
 
 /// Forces of consecutive cells sharing the parameters `p`, several cells per
@@ -705,5 +705,5 @@ pub(crate) fn forces_batch(
             return;
         }
     }
-    forces_batch_body(p, cells, x, out);
+    forces_batch_body::<LANES>(p, cells, x, out);
 }

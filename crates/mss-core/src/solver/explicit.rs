@@ -171,11 +171,12 @@ pub struct Explicit {
     /// The state at the start of the step being taken (to retry it).
     start: State,
     ws: ForceWorkspace,
-    /// Conservative force (internal + external) at `cache_x`, `cache_time`.
+    /// Conservative force (internal + external) at the positions whose
+    /// [`positions_key`] is `cache_key`, at `cache_time`.
     f_cons: Vec<Vec3>,
     /// Contact forces (empty without obstacles).
     f_contact: Vec<Vec3>,
-    cache_x: Vec<Vec3>,
+    cache_key: u64,
     cache_time: f64,
     cache_valid: bool,
     /// `K0 v` for stiffness-proportional damping.
@@ -264,7 +265,7 @@ impl Explicit {
             } else {
                 Vec::new()
             },
-            cache_x: vec![Vec3::zeros(); n],
+            cache_key: 0,
             cache_time: f64::NAN,
             cache_valid: false,
             kv: if problem.damping().beta > 0.0 {
@@ -470,7 +471,9 @@ impl Explicit {
         let dt = self.dt_sub;
         let t0 = state.time;
         let t1 = t0 + dt;
-        let cached = self.cache_valid && self.cache_time == t0 && self.cache_x == state.x;
+        // Between the sub-steps of one call nothing else moves the state; at
+        // the start of a call `step_here` has checked the positions' key.
+        let cached = self.cache_valid && self.cache_time == t0;
         match self.opts.scheme {
             ExplicitScheme::VelocityVerlet => {
                 if !cached {
@@ -485,7 +488,6 @@ impl Explicit {
                 self.contact_forces(problem, state);
                 self.damping_product(problem, &state.v);
                 ok &= self.kick(problem, &mut state.v, 0.5 * dt);
-                self.cache_x.copy_from_slice(&state.x);
                 self.cache_time = t1;
                 self.cache_valid = ok;
                 problem.update_contact(state);
@@ -527,9 +529,34 @@ impl Explicit {
     }
 }
 
+/// A key of the positions' bits, to notice a state changed from outside
+/// between two steps: a wrapping sum of every coordinate's bits times an odd
+/// number that depends on its index, so that any change of one coordinate
+/// changes it; wrapping addition is associative, so it is the same for any
+/// split among threads.
+fn positions_key(x: &[Vec3]) -> u64 {
+    x.par_chunks(CHUNK)
+        .enumerate()
+        .map(|(ci, c)| {
+            let mut h = 0u64;
+            for (k, p) in c.iter().enumerate() {
+                let i = (ci * CHUNK + k) as u64;
+                let m = i.wrapping_mul(0x9e37_79b9_7f4a_7c16) | 1;
+                h = h.wrapping_add(
+                    p.x.to_bits()
+                        .wrapping_add(p.y.to_bits().rotate_left(21))
+                        .wrapping_add(p.z.to_bits().rotate_left(42))
+                        .wrapping_mul(m),
+                );
+            }
+            h
+        })
+        .reduce(|| 0, u64::wrapping_add)
+}
+
 /// Layout of [`Explicit`]'s [`IntegratorMemory`](super::IntegratorMemory)
 /// (changed whenever its counters change).
-const EXPLICIT_MEMORY_VERSION: u64 = 1;
+const EXPLICIT_MEMORY_VERSION: u64 = 2;
 
 impl Integrator for Explicit {
     fn name(&self) -> &'static str {
@@ -550,9 +577,8 @@ impl Integrator for Explicit {
     fn memory(&self) -> super::IntegratorMemory {
         let mut values = Vec::new();
         if self.cache_valid {
-            values.reserve(6 * self.f_cons.len());
+            values.reserve(3 * self.f_cons.len());
             values.extend(self.f_cons.iter().flat_map(|f| [f.x, f.y, f.z]));
-            values.extend(self.cache_x.iter().flat_map(|p| [p.x, p.y, p.z]));
         }
         super::IntegratorMemory {
             counters: vec![
@@ -569,6 +595,7 @@ impl Integrator for Explicit {
                 u64::from(self.cache_valid),
                 self.last_time.to_bits(),
                 self.cache_time.to_bits(),
+                self.cache_key,
             ],
             values,
             states: vec![self.good.clone()],
@@ -595,6 +622,7 @@ impl Integrator for Explicit {
             cache_valid,
             last_time,
             cache_time,
+            cache_key,
         ] = memory.counters.as_slice()
         else {
             return Err(bad("wrong number of counters"));
@@ -615,7 +643,7 @@ impl Integrator for Explicit {
             return Err(bad("inconsistent halvings"));
         }
         let cache_valid = cache_valid != 0;
-        let expected_values = if cache_valid { 6 * n } else { 0 };
+        let expected_values = if cache_valid { 3 * n } else { 0 };
         if memory.values.len() != expected_values {
             return Err(bad("wrong number of cached values"));
         }
@@ -637,15 +665,12 @@ impl Integrator for Explicit {
         self.cache_valid = cache_valid;
         self.last_time = f64::from_bits(last_time);
         self.cache_time = f64::from_bits(cache_time);
+        self.cache_key = cache_key;
         self.substeps = self.base_substeps << halvings;
         self.dt_sub = self.dt / f64::from(self.substeps);
         self.good.clone_from(good);
         if cache_valid {
-            let (f, x) = memory.values.split_at(3 * n);
-            for (dst, c) in self.f_cons.iter_mut().zip(f.chunks_exact(3)) {
-                *dst = Vec3::new(c[0], c[1], c[2]);
-            }
-            for (dst, c) in self.cache_x.iter_mut().zip(x.chunks_exact(3)) {
+            for (dst, c) in self.f_cons.iter_mut().zip(memory.values.chunks_exact(3)) {
                 *dst = Vec3::new(c[0], c[1], c[2]);
             }
         }
@@ -662,6 +687,12 @@ impl Explicit {
     /// [`Integrator::step`], on the thread it is called on.
     fn step_here(&mut self, problem: &Problem, state: &mut State) -> Result<StepInfo, SolverError> {
         state.check_size(problem.model())?;
+        if self.cache_valid
+            && (self.cache_time != state.time || self.cache_key != positions_key(&state.x))
+        {
+            // The state was changed from outside since the forces were cached.
+            self.cache_valid = false;
+        }
         if !self.good_valid || self.last_time != state.time {
             // A new or externally changed state: it is the reference to fall
             // back on, and it may already be far from rest.
@@ -738,6 +769,7 @@ impl Explicit {
         self.last_time = t_end;
         if self.cache_valid {
             self.cache_time = t_end;
+            self.cache_key = positions_key(&state.x);
         }
         Ok(StepInfo {
             time: state.time,
