@@ -443,33 +443,21 @@ impl FrameWriter {
         index: usize,
         a: FrameArrays<'_>,
     ) -> Result<(), JobError> {
-        let FrameArrays {
-            points,
-            displacement,
-            velocity,
-            f_int,
-            f_ext,
-            fixed,
-            vol,
-            shear,
-            corr,
-            material,
-            contact_force,
-        } = a;
+        let (points, velocity) = (a.points, a.velocity);
         if !self.lattice.is_empty() {
             let mut frame = LatticeFrame::new(points, problem.model().cells())
-                .with_point_field(Field::vectors("displacement", displacement))
+                .with_point_field(Field::vectors("displacement", a.displacement))
                 .with_point_field(Field::vectors("velocity", velocity))
-                .with_point_field(Field::vectors("internal_force", f_int))
-                .with_point_field(Field::vectors("external_force", f_ext))
-                .with_point_field(Field::flags("fixed", fixed))
-                .with_cell_field(Field::scalars("volumetric_strain", vol))
-                .with_cell_field(Field::scalars("shear_strain", shear))
-                .with_cell_field(Field::scalars("correction_force", corr));
-            if !material.is_empty() {
-                frame = frame.with_cell_field(Field::ids("material", material));
+                .with_point_field(Field::vectors("internal_force", a.f_int))
+                .with_point_field(Field::vectors("external_force", a.f_ext))
+                .with_point_field(Field::flags("fixed", a.fixed))
+                .with_cell_field(Field::scalars("volumetric_strain", a.vol))
+                .with_cell_field(Field::scalars("shear_strain", a.shear))
+                .with_cell_field(Field::scalars("correction_force", a.corr));
+            if !a.material.is_empty() {
+                frame = frame.with_cell_field(Field::ids("material", a.material));
             }
-            if let Some(f) = contact_force {
+            if let Some(f) = a.contact_force {
                 frame = frame.with_point_field(Field::vectors("contact_force", f));
             }
             let mut written = Vec::new();
