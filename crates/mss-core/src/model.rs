@@ -1,10 +1,13 @@
 //! The model: per-cell springs, lumped masses, correction forces (docs/model.md).
 //!
 //! Forces are computed per cell (the cell's 16 springs, then its correction
-//! forces from those springs' forces, then the optional volumetric term) into a
-//! per-cell buffer of 8 corner forces, and then gathered per node over a fixed
-//! node -> (cell, corner) adjacency. The gather order does not depend on the
-//! number of threads, so the forces are bitwise reproducible.
+//! forces from those springs' forces, then the optional volumetric term and
+//! hourglass control) and added into the node sums directly. Cells are
+//! visited z-layer by z-layer in two phases, the even layers and then the odd
+//! ones: a layer touches only its two node planes, so the layers of a phase
+//! run in parallel without sharing a node, and each node receives its cells'
+//! contributions in one fixed order. The forces are therefore bitwise
+//! reproducible for any number of threads.
 //!
 //! The kernel is written once over a scalar type (`model/kernel.rs`); the Jacobian is
 //! that same kernel evaluated with forward-mode dual numbers, hence exact
