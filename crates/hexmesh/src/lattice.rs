@@ -288,15 +288,16 @@ impl Lattice {
 
     /// Number of distinct cell edges (each shared edge counted once).
     pub fn num_unique_edges(&self) -> usize {
-        let mut edges: Vec<(u32, u32)> = self
-            .cells
-            .iter()
-            .flat_map(|c| CELL_EDGES.iter().map(move |&(a, b, _)| (c[a], c[b])))
-            .map(|(a, b)| (a.min(b), a.max(b)))
-            .collect();
-        edges.sort_unstable();
-        edges.dedup();
-        edges.len()
+        // An edge is its lower node and its axis: one flag bit per node and
+        // axis (a byte per node), not a sorted list of the 12 edges of every
+        // cell (96 bytes per cell, and a sort).
+        let mut flags = vec![0u8; self.nodes.len()];
+        for c in &self.cells {
+            for &(a, _, axis) in &CELL_EDGES {
+                flags[c[a] as usize] |= 1 << axis;
+            }
+        }
+        flags.iter().map(|f| f.count_ones() as usize).sum()
     }
 }
 
@@ -338,19 +339,37 @@ impl BoundaryFace {
 impl Lattice {
     /// Every cell face not shared by two cells, in cell order then face order.
     pub fn boundary_faces(&self) -> Vec<BoundaryFace> {
+        let dims = self.dims;
+        let n = self.cells.len();
+        // Keys of cells are unique and ascend with the cells, so the key a
+        // neighbour would have (this cell's key minus or plus the axis
+        // stride) ascends too: one cursor per direction walks the cells once
+        // beside the loop (a merge), instead of a search per face.
+        let strides = [1u64, dims[0] as u64, dims[0] as u64 * dims[1] as u64];
+        let key_of = |i: usize| cell_key(self.cell_coords[i], dims);
+        let mut cursor = [0usize; 6];
         let mut out = Vec::new();
         for (c, (&cell, &cc)) in self.cells.iter().zip(&self.cell_coords).enumerate() {
+            let key = cell_key(cc, dims);
             for (f, corners) in CELL_FACES.iter().enumerate() {
                 let axis = f / 2;
-                let mut neighbour = cc;
-                let has_neighbour = if f % 2 == 0 {
-                    cc[axis] > 0 && {
-                        neighbour[axis] -= 1;
-                        self.cell_at(neighbour).is_some()
-                    }
+                let lower = f % 2 == 0;
+                let inside = if lower {
+                    cc[axis] > 0
                 } else {
-                    neighbour[axis] += 1;
-                    self.cell_at(neighbour).is_some()
+                    cc[axis] + 1 < dims[axis]
+                };
+                let has_neighbour = inside && {
+                    let target = if lower {
+                        key - strides[axis]
+                    } else {
+                        key + strides[axis]
+                    };
+                    let j = &mut cursor[f];
+                    while *j < n && key_of(*j) < target {
+                        *j += 1;
+                    }
+                    *j < n && key_of(*j) == target
                 };
                 if !has_neighbour {
                     out.push(BoundaryFace {

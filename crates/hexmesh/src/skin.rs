@@ -119,21 +119,23 @@ pub fn boundary_skin(lattice: &Lattice) -> Skin {
     // Corner slot (face, corner 0..4) -> id 4 f + k.
     let n = faces.len() * 4;
     let mut parent: Vec<u32> = (0..n as u32).collect();
-    // Undirected node edge -> (face, local edge k from corner k to k+1).
-    let mut by_edge: HashMap<(u32, u32), Vec<(u32, u8)>> = HashMap::with_capacity(2 * faces.len());
+    // (undirected node edge, face, local edge k from corner k to k + 1),
+    // sorted: each edge's faces form one run, in face order. (A map of
+    // small vectors cost an allocation per edge.)
+    let mut by_edge: Vec<((u32, u32), (u32, u8))> = Vec::with_capacity(4 * faces.len());
     for (f, face) in faces.iter().enumerate() {
         for k in 0..4 {
             let (a, b) = (face.nodes[k], face.nodes[(k + 1) % 4]);
-            by_edge
-                .entry((a.min(b), a.max(b)))
-                .or_default()
-                .push((f as u32, k as u8));
+            by_edge.push(((a.min(b), a.max(b)), (f as u32, k as u8)));
         }
     }
-    let mut keys: Vec<(u32, u32)> = by_edge.keys().copied().collect();
-    keys.sort_unstable();
-    for key in keys {
-        let users = &by_edge[&key];
+    by_edge.sort_unstable();
+    let mut users: Vec<(u32, u8)> = Vec::with_capacity(4);
+    for run in by_edge.chunk_by(|x, y| x.0 == y.0) {
+        let key = run[0].0;
+        users.clear();
+        users.extend(run.iter().map(|e| e.1));
+        let users = &users;
         let pairs: Vec<((u32, u8), (u32, u8))> = match users.len() {
             2 => vec![(users[0], users[1])],
             4 => {

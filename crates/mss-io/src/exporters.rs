@@ -60,6 +60,7 @@ pub type SkinExporterFactory =
 /// | `vtu` | XML `.vtu`, ZLib-compressed, and a `.pvd` listing the frames with their times |
 /// | `vtu-no-pvd` | the same frames without the `.pvd` |
 /// | `vtu-base64` | uncompressed `.vtu` and `.pvd` |
+/// | `vtu-base64-no-pvd` | uncompressed `.vtu` frames only |
 /// | `vtu-ascii` | text `.vtu` and `.pvd` |
 /// | `vtk` | legacy binary `.vtk` |
 /// | `vtk-ascii` | legacy text `.vtk` |
@@ -100,6 +101,7 @@ impl Default for Exporters {
         e.register_frames("vtu", vtu(VtuEncoding::Base64Zlib, true));
         e.register_frames("vtu-no-pvd", vtu(VtuEncoding::Base64Zlib, false));
         e.register_frames("vtu-base64", vtu(VtuEncoding::Base64, true));
+        e.register_frames("vtu-base64-no-pvd", vtu(VtuEncoding::Base64, false));
         e.register_frames("vtu-ascii", vtu(VtuEncoding::Ascii, true));
         e.register_frames("vtk", legacy(LegacyFormat::Binary));
         e.register_frames("vtk-ascii", legacy(LegacyFormat::Ascii));

@@ -111,10 +111,14 @@ pub fn parse_size(text: &str) -> Result<u64, String> {
 
 /// Bytes of a process before any lattice (program, runtime, thread stacks).
 const BASE_BYTES: u64 = 16 << 20;
-/// Bytes per cell of an explicit run at its peak, output included (measured:
-/// 1250 on a 53,000-cell critter; the model, the state, the force workspace
-/// and one frame being written).
-const EXPLICIT_BYTES_PER_CELL: u64 = 1300;
+/// Bytes per cell of an explicit run at its peak, output included, beyond
+/// [`BASE_BYTES`] (measured with the layered force pass and reused frame
+/// arrays: 475 on the critter and the bunny at 53,000 cells, 523 on the bunny
+/// at 419,000, 483 on a 128^3 block; the lattice, the model, the state, the
+/// integrator and one frame being written). The mode check that `mss run`
+/// makes on lattices of at most 20,000 nodes is not counted (it is bounded
+/// by that size).
+const EXPLICIT_BYTES_PER_CELL: u64 = 560;
 /// Bytes per node that Newton solves add (tangent, multigrid hierarchy,
 /// Krylov vectors; measured: 28,000 implicit and 30,000 static with the
 /// stability test on 8,800 nodes).

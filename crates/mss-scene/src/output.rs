@@ -122,6 +122,8 @@ struct SpringsOutput {
     set: Option<SpringSet>,
     /// The `.pvd` of the spring frames; `None` when only the last state is written.
     pvd: Option<PvdWriter>,
+    /// `[output] compression`.
+    encoding: VtuEncoding,
 }
 
 /// The input surface carried by the lattice, and its exporter.
@@ -213,7 +215,7 @@ impl FrameWriter {
     ) -> Result<Self, JobError> {
         let mut lattice_exporters = Vec::new();
         if out.vtu {
-            let name = if out.pvd { "vtu" } else { "vtu-no-pvd" };
+            let name = out.compression.vtu_exporter(out.pvd);
             lattice_exporters.push((exporters.frames(name, dir, LATTICE_PREFIX)?, Some("vtu")));
         }
         if out.vtk {
@@ -274,6 +276,7 @@ impl FrameWriter {
             set: None,
             pvd: (out.pvd && !out.last_only)
                 .then(|| PvdWriter::new(dir.join(format!("{SPRINGS_PREFIX}.pvd")))),
+            encoding: out.compression.encoding(),
         });
         Ok(Self {
             dir: dir.to_path_buf(),
@@ -531,7 +534,7 @@ impl FrameWriter {
                 Field::scalars("rest_length", &set.rest_length),
                 Field::flags("diagonal", &set.topology.diagonal),
             ],
-            VtuEncoding::default(),
+            out.encoding,
         )?;
         // `add_frame` rewrites the .pvd, like the lattice's, so that an
         // interrupted run still has a collection of what it wrote.

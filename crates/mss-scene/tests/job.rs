@@ -753,3 +753,36 @@ fn resuming_refuses_a_changed_scene_a_missing_checkpoint_and_a_static_solve() {
         .to_string();
     assert!(bad.contains("checkpoint_every"), "{bad}");
 }
+
+#[test]
+fn uncompressed_frames_hold_the_same_lattice() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut sizes = Vec::new();
+    for compression in ["zlib", "none"] {
+        let out = dir.path().join(compression);
+        let job = Job::prepare(
+            input(&format!(
+                "[solver]\nduration = 0.01\n[output]\nlast_only = true\ncompression = \"{compression}\"\n"
+            )),
+            Registry::default(),
+            &no_progress,
+        )
+        .unwrap();
+        job.run(&out, &no_progress, &Cancel::new()).unwrap();
+        let path = out.join("lattice_0000.vtu");
+        let text = std::fs::read_to_string(&path).unwrap();
+        assert_eq!(
+            text.contains("vtkZLibDataCompressor"),
+            compression == "zlib"
+        );
+        // Read back: the boundary of its hexahedra.
+        let surface = hexmesh::load::Loaders::default().load(&path).unwrap();
+        sizes.push((surface.mesh.triangles.len(), text.len()));
+    }
+    assert_eq!(sizes[0].0, sizes[1].0);
+    assert!(sizes[1].1 > sizes[0].1, "{sizes:?}");
+    let bad = SceneInput::from_toml(&scene("[output]\ncompression = \"lzma\"\n"), "t.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(bad.contains("lzma") && bad.contains("zlib"), "{bad}");
+}
