@@ -50,7 +50,7 @@ pub struct VoxelizeArgs {
     #[arg(long, value_name = "AXIS", default_value = "z", value_parser = ["x", "y", "z"])]
     pub up: String,
     /// How the .vtu files store their arrays: zlib (compressed, about 4 times
-    /// smaller) or none (uncompressed, written about 6 times faster).
+    /// smaller) or none (uncompressed: no compression work, larger files).
     #[arg(long, value_name = "KIND", default_value = "zlib", value_parser = ["zlib", "none"])]
     pub compression: String,
     /// Also write the springs as lines: springs.vtu (rest_length, diagonal).
