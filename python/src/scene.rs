@@ -33,7 +33,8 @@ const REPORT_INTERVAL: Duration = Duration::from_millis(50);
 /// a clean stop through [`Cancel`].
 pub struct Reporter {
     callback: Option<Py<PyAny>>,
-    last: Mutex<Option<Instant>>,
+    /// The stage and time of the last event passed on.
+    last: Mutex<Option<(String, Instant)>>,
     error: Mutex<Option<PyErr>>,
     pub cancel: Cancel,
 }
@@ -54,11 +55,17 @@ impl Reporter {
         let now = Instant::now();
         {
             let mut last = self.last.lock().unwrap_or_else(|e| e.into_inner());
-            let due = last.is_none_or(|t| now - t >= REPORT_INTERVAL) || done == total;
+            // The first event of a stage and its end are always reported.
+            let new_stage = last.as_ref().is_none_or(|(s, _)| *s != stage);
+            let due = new_stage
+                || last
+                    .as_ref()
+                    .is_some_and(|(_, t)| now - *t >= REPORT_INTERVAL)
+                || done == total;
             if !due {
                 return;
             }
-            *last = Some(now);
+            *last = Some((stage.to_owned(), now));
         }
         if self.cancel.is_cancelled() {
             return;
