@@ -213,3 +213,20 @@ pub fn from_py<T: DeserializeOwned>(what: &str, v: &Bound<'_, PyAny>) -> PyResul
 pub fn kwargs_dict<'py>(py: Python<'py>, kw: Option<&Bound<'py, PyDict>>) -> Bound<'py, PyDict> {
     kw.cloned().unwrap_or_else(|| PyDict::new(py))
 }
+
+/// The Python object in `cell`, made by `make` at the first call: a getter
+/// that hands out a large value (a model, a lattice) builds it once.
+pub fn cached_object<T>(
+    py: Python<'_>,
+    cell: &std::sync::OnceLock<Py<T>>,
+    make: impl FnOnce() -> T,
+) -> PyResult<Py<T>>
+where
+    T: pyo3::PyClass + Into<pyo3::PyClassInitializer<T>>,
+{
+    if let Some(o) = cell.get() {
+        return Ok(o.clone_ref(py));
+    }
+    let o = Py::new(py, make())?;
+    Ok(cell.get_or_init(|| o).clone_ref(py))
+}

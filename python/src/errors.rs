@@ -2,9 +2,8 @@
 //!
 //! The exception classes are defined in Python (so that they can also
 //! derive from `ValueError`, `OSError`, ...) and looked up when raised. The
-//! message is the line the `mss` CLI prints after `error: `: the error and
-//! its causes joined by ": ", a cause dropped when the text before already
-//! says it.
+//! message is the line the `mss` CLI prints after `error: `
+//! ([`mss_scene::error::one_line`]).
 
 use mss_core::SolverError;
 use mss_scene::JobError;
@@ -49,21 +48,6 @@ impl Kind {
     }
 }
 
-/// The one-line message of `e` with its causes.
-pub fn one_line(e: &(dyn std::error::Error + 'static)) -> String {
-    let flat = |s: String| s.split_whitespace().collect::<Vec<_>>().join(" ");
-    let mut parts: Vec<String> = Vec::new();
-    let mut cause: Option<&(dyn std::error::Error + 'static)> = Some(e);
-    while let Some(c) = cause {
-        let text = flat(c.to_string());
-        if !parts.last().is_some_and(|prev| prev.contains(&text)) {
-            parts.push(text);
-        }
-        cause = c.source();
-    }
-    parts.join(": ")
-}
-
 /// An exception of class `kind` with `message`.
 pub fn raise(kind: Kind, message: impl Into<String>) -> PyErr {
     let message = message.into();
@@ -84,7 +68,7 @@ pub fn raise(kind: Kind, message: impl Into<String>) -> PyErr {
 
 /// A typed error of the library as its exception.
 pub fn from_error(kind: Kind, e: &(dyn std::error::Error + 'static)) -> PyErr {
-    raise(kind, one_line(e))
+    raise(kind, mss_scene::error::one_line(e))
 }
 
 /// The class of a solver error.

@@ -378,6 +378,8 @@ impl Recipe {
 pub struct PyProblem {
     pub recipe: Recipe,
     pub problem: Arc<ProblemRef>,
+    /// The model handed to Python, made once.
+    model: std::sync::OnceLock<Py<PyModel>>,
 }
 
 /// The problem itself, owned or inside a prepared job.
@@ -400,6 +402,7 @@ impl PyProblem {
         Self {
             recipe: Recipe::Job(Arc::clone(&job)),
             problem: Arc::new(ProblemRef::Job(job)),
+            model: std::sync::OnceLock::new(),
         }
     }
 }
@@ -496,15 +499,20 @@ impl PyProblem {
         Ok(Self {
             recipe,
             problem: Arc::new(ProblemRef::Owned(Box::new(problem))),
+            model: std::sync::OnceLock::new(),
         })
     }
 
     /// The model.
     #[getter]
-    fn model(&self) -> PyModel {
-        PyModel {
-            model: Arc::new(self.problem.get().model().clone()),
-        }
+    fn model(&self, py: Python<'_>) -> PyResult<Py<PyModel>> {
+        crate::convert::cached_object(py, &self.model, || PyModel {
+            model: match &self.recipe {
+                // The model the problem was built from, shared.
+                Recipe::Specs { model, .. } => Arc::clone(model),
+                Recipe::Job(job) => Arc::new(job.problem.model().clone()),
+            },
+        })
     }
 
     /// Number of nodes.

@@ -10,7 +10,7 @@ use mss_scene::{Cancel, Job, Progress, Registry, SceneInput};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use crate::convert::to_json;
+use crate::convert::{cached_object, to_json};
 use crate::errors::{Kind, job as job_error, raise};
 use crate::geometry::{PyLattice, PyMesh};
 use crate::physics::{PyModel, PyProblem, PySimulation};
@@ -240,6 +240,10 @@ fn limits_of(max_memory: Option<&Bound<'_, PyAny>>) -> PyResult<Limits> {
 #[pyclass(name = "Job", module = "hexmss", frozen)]
 pub struct PyJob {
     job: Arc<Job>,
+    /// What the getters hand out, made once (each is a copy of the job's).
+    mesh: std::sync::OnceLock<Py<PyMesh>>,
+    lattice: std::sync::OnceLock<Py<PyLattice>>,
+    model: std::sync::OnceLock<Py<PyModel>>,
 }
 
 /// prepare(scene, *, max_memory=None, progress=None)
@@ -267,6 +271,9 @@ fn prepare(
     reporter.finish()?;
     Ok(PyJob {
         job: Arc::new(job.map_err(job_error)?),
+        mesh: std::sync::OnceLock::new(),
+        lattice: std::sync::OnceLock::new(),
+        model: std::sync::OnceLock::new(),
     })
 }
 
@@ -311,22 +318,26 @@ fn run_job<'py>(
 impl PyJob {
     /// The mesh (placed as the scene says).
     #[getter]
-    fn mesh(&self) -> PyMesh {
-        PyMesh::wrap(self.job.mesh.clone(), self.job.mesh_name.clone())
+    fn mesh(&self, py: Python<'_>) -> PyResult<Py<PyMesh>> {
+        cached_object(py, &self.mesh, || {
+            PyMesh::wrap(self.job.mesh.clone(), self.job.mesh_name.clone())
+        })
     }
 
     /// The lattice.
     #[getter]
-    fn lattice(&self) -> PyLattice {
-        PyLattice::wrap(self.job.lattice.clone())
+    fn lattice(&self, py: Python<'_>) -> PyResult<Py<PyLattice>> {
+        cached_object(py, &self.lattice, || {
+            PyLattice::wrap(self.job.lattice.clone())
+        })
     }
 
     /// The model.
     #[getter]
-    fn model(&self) -> PyModel {
-        PyModel {
+    fn model(&self, py: Python<'_>) -> PyResult<Py<PyModel>> {
+        cached_object(py, &self.model, || PyModel {
             model: Arc::new(self.job.problem.model().clone()),
-        }
+        })
     }
 
     /// The problem (constraints, loads, damping, obstacles).

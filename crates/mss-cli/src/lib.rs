@@ -202,15 +202,7 @@ fn init_logger(g: &GlobalArgs) {
 /// errors include their cause's text) is not repeated, so the operating
 /// system's reason appears once.
 pub fn error_report(e: &anyhow::Error) -> String {
-    let flat = |s: String| s.split_whitespace().collect::<Vec<_>>().join(" ");
-    let mut parts: Vec<String> = Vec::new();
-    for cause in e.chain() {
-        let text = flat(cause.to_string());
-        if parts.last().is_some_and(|prev| prev.contains(&text)) {
-            continue;
-        }
-        parts.push(text);
-    }
+    let parts = mss_scene::error::causes(e.as_ref());
     if VERBOSITY.load(Ordering::Relaxed) == 0 {
         return format!("error: {}", parts.join(": "));
     }

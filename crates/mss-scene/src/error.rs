@@ -127,6 +127,28 @@ pub enum JobError {
     },
 }
 
+/// The messages of an error and its causes, each on one line (whitespace
+/// runs folded), a cause left out when the message before already says it
+/// (as wrappers that quote their source do): what every front end prints.
+pub fn causes(e: &(dyn std::error::Error + 'static)) -> Vec<String> {
+    let flat = |s: String| s.split_whitespace().collect::<Vec<_>>().join(" ");
+    let mut parts: Vec<String> = Vec::new();
+    let mut cause = Some(e);
+    while let Some(c) = cause {
+        let text = flat(c.to_string());
+        if !parts.last().is_some_and(|prev| prev.contains(&text)) {
+            parts.push(text);
+        }
+        cause = c.source();
+    }
+    parts
+}
+
+/// [`causes`] joined by ": ": the one-line message of an error.
+pub fn one_line(e: &(dyn std::error::Error + 'static)) -> String {
+    causes(e).join(": ")
+}
+
 /// Bytes with a binary unit, for messages.
 pub fn human(bytes: u64) -> String {
     const UNITS: [&str; 5] = ["B", "KiB", "MiB", "GiB", "TiB"];
