@@ -254,7 +254,10 @@ fn springs_frames_read_back_with_strain_and_stiffness() {
     let scene = write(
         dir.path(),
         "scene.toml",
-        &SCENE.replace("skin_stl = true", "skin_stl = true\nsprings = true"),
+        &format!(
+            "{}[model]\nparameterization = \"paper\"\n",
+            SCENE.replace("skin_stl = true", "skin_stl = true\nsprings = true")
+        ),
     );
     let out = dir.path().join("out");
     mss_cli::run_with_args(["mss", "-q", "run", &scene, "--out", out.to_str().unwrap()]).unwrap();

@@ -815,6 +815,23 @@ impl Model {
         std::array::from_fn(|k| to_arr(&x[c[k] as usize]))
     }
 
+    /// Number of distinct kernel parameter sets (one per material).
+    pub(crate) fn num_param_sets(&self) -> usize {
+        self.params.len()
+    }
+
+    /// Index of the parameter set of `cell`, below [`Model::num_param_sets`].
+    pub(crate) fn param_set_of(&self, cell: usize) -> usize {
+        self.param_index(cell)
+    }
+
+    /// The rest stiffness of one cell alone, `-d f / d x` at its rest corners
+    /// (24 x 24, dofs corner-major).
+    pub(crate) fn cell_rest_stiffness(&self, cell: usize) -> [[f64; 24]; 24] {
+        let j = kernel::cell_jacobian(self.params_of(cell), &self.corners(&self.rest, cell));
+        j.map(|row| row.map(|v| -v))
+    }
+
     /// A workspace sized for this model.
     pub fn workspace(&self) -> ForceWorkspace {
         ForceWorkspace::default()

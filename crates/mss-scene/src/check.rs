@@ -1,7 +1,9 @@
 //! What `mss check` reports about a prepared job without running it: sizes,
-//! the time plan, memory and output estimates, and the mechanisms the held
-//! nodes leave free.
+//! the time plan, memory and output estimates, the mechanisms the held
+//! nodes leave free, and whether the body has a stable equilibrium under its
+//! load.
 
+use mss_core::solver::{SolverError, Stability, State, StaticOptions, solve_static};
 use serde::Serialize;
 
 use crate::job::Job;
@@ -10,8 +12,16 @@ use std::path::Path;
 use crate::limits::run_memory_estimate;
 
 /// Largest model (nodes) on which a run counts zero-energy modes before
-/// starting; [`CheckReport::new`] always counts them.
+/// starting when the count needs a factorization; [`CheckReport::new`]
+/// always counts them, and so does a run whose cells are rigid (hourglass
+/// control: the count is linear in the cells).
 pub const RUN_MODE_CHECK_MAX_NODES: usize = 20_000;
+
+/// True when a run should count zero-energy modes before starting: the count
+/// is cheap for this model (see [`RUN_MODE_CHECK_MAX_NODES`]).
+pub fn run_counts_modes(model: &mss_core::Model) -> bool {
+    model.num_nodes() <= RUN_MODE_CHECK_MAX_NODES || mss_core::modes::cells_are_rigid(model)
+}
 
 /// The figures of a prepared job that `mss check` prints.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -28,11 +38,194 @@ pub struct CheckReport {
     pub hourglass_stiffness: f64,
     /// A warning about mechanisms the held nodes leave free, if any.
     pub mechanism_warning: Option<String>,
+    /// What a static solve of the scene's load found (mechanisms that appear
+    /// under load, buckling), or why it was not done.
+    pub load_check: LoadCheck,
+}
+
+/// Largest model (nodes) on which [`CheckReport::new`] solves the scene's
+/// load statically (seconds with the multigrid solver at this size).
+pub const LOAD_CHECK_MAX_NODES: usize = 60_000;
+
+/// Smallest load increment of the load check's static solve.
+pub const LOAD_CHECK_MIN_INCREMENT: f64 = 1.0 / 32.0;
+
+/// What the static solve of a scene's load at its end time found: whether
+/// the body has a stable equilibrium under it, so that mechanisms which only
+/// appear under load (a compressed lattice losing stiffness, buckling under
+/// the body's own weight) are reported before a dynamic run folds.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(tag = "outcome", rename_all = "snake_case")]
+pub enum LoadCheck {
+    /// An equilibrium was found.
+    Equilibrium {
+        /// Whether its stiffness is positive definite (`None`: too large to
+        /// test, see [`mss_core::solver::STABILITY_TEST_MAX_FACTOR_BYTES`]).
+        stable: Option<bool>,
+        /// Largest displacement (m).
+        max_displacement: f64,
+        /// The same relative to the body's largest extent.
+        relative_displacement: f64,
+        /// Smallest volume ratio `J` at a cell centre at the equilibrium.
+        min_jacobian: f64,
+        /// Worst cell's deviation from the affine map of its corners, as a
+        /// fraction of the cell size.
+        worst_affine_deviation: f64,
+    },
+    /// The equilibrium path ends before the full load: the body buckles or
+    /// collapses under it.
+    LoadLimit {
+        /// Fraction of the load carried.
+        load_factor: f64,
+    },
+    /// The static solve failed for another reason.
+    Failed {
+        /// The solver's message.
+        reason: String,
+    },
+    /// Not solved.
+    Skipped {
+        /// Why not.
+        reason: String,
+    },
+}
+
+impl LoadCheck {
+    /// Solves `job`'s load statically (see [`LoadCheck`]).
+    pub fn new(job: &Job, mechanisms_at_rest: bool) -> Self {
+        let problem = &job.problem;
+        let model = problem.model();
+        let s = &job.input.scene.solver;
+        let skipped = |reason: &str| LoadCheck::Skipped {
+            reason: reason.to_owned(),
+        };
+        if problem.loads().is_empty() && problem.contact().is_none() {
+            return skipped("the scene has no load");
+        }
+        if mechanisms_at_rest {
+            return skipped("the held nodes leave zero-energy modes");
+        }
+        if model.num_nodes() > LOAD_CHECK_MAX_NODES {
+            return LoadCheck::Skipped {
+                reason: format!(
+                    "{} nodes, more than {LOAD_CHECK_MAX_NODES}",
+                    model.num_nodes()
+                ),
+            };
+        }
+        let first = 1.0 / f64::from(s.load_steps);
+        let opts = StaticOptions {
+            rtol: s.tolerance,
+            // Past a limit point Newton fails slowly; within 25 iterations
+            // a converging increment has converged (5 on the bundled scenes).
+            max_newton: s.max_iterations.min(25),
+            initial_load_increment: first,
+            // The load limit to about 3 %: enough to tell buckling apart,
+            // without the many failing increments a precise limit costs.
+            min_load_increment: LOAD_CHECK_MIN_INCREMENT.min(first),
+            linear_solver: s.linear_solver.into(),
+            small_strain: false,
+            accept_unstable: true,
+        };
+        let mut state = State::at_rest(model);
+        problem.apply_constraints(&mut state);
+        state.time = s.duration;
+        match solve_static(problem, &mut state, &opts) {
+            Ok(info) => {
+                let u = state.displacements(model);
+                let max_displacement = u.iter().map(|v| v.norm()).fold(0.0, f64::max);
+                let extent = job
+                    .mesh
+                    .bounding_box()
+                    .map_or(model.h(), |b| b.extent().into_iter().fold(0.0, f64::max));
+                let min_jacobian = model
+                    .cell_diagnostics(&state.x)
+                    .iter()
+                    .map(|d| 1.0 + d.volumetric_strain)
+                    .fold(f64::INFINITY, f64::min);
+                let worst = model
+                    .affine_deviation(&state.x)
+                    .into_iter()
+                    .fold(0.0, f64::max);
+                LoadCheck::Equilibrium {
+                    stable: match info.stability {
+                        Stability::Stable => Some(true),
+                        Stability::Unstable => Some(false),
+                        Stability::NotTested => None,
+                    },
+                    max_displacement,
+                    relative_displacement: max_displacement / extent,
+                    min_jacobian,
+                    worst_affine_deviation: worst,
+                }
+            }
+            Err(SolverError::LoadLimit { load_factor, .. }) => LoadCheck::LoadLimit { load_factor },
+            Err(e) => LoadCheck::Failed {
+                reason: e.to_string(),
+            },
+        }
+    }
+
+    /// A warning when the body has no stable equilibrium under its load.
+    pub fn warning(&self) -> Option<String> {
+        match self {
+            LoadCheck::Equilibrium {
+                stable: Some(false),
+                ..
+            } => Some(
+                "under the scene's load the static equilibrium is unstable (its stiffness is \
+                 not positive definite): a mechanism appears under load and the body may fold; \
+                 use hourglass control (parameterization \"volumetric-barrier+hg\", \
+                 hourglass = 1.0), a stiffer material or a larger held region"
+                    .to_owned(),
+            ),
+            LoadCheck::LoadLimit { load_factor } => Some(format!(
+                "the body carries only {:.0} % of the scene's load statically: it buckles or \
+                 collapses under it, and a dynamic run will fold or sag far; hold a larger \
+                 region, stiffen the material or reduce the load",
+                100.0 * load_factor
+            )),
+            LoadCheck::Failed { reason } => Some(format!(
+                "the static solve of the scene's load failed: {reason}"
+            )),
+            _ => None,
+        }
+    }
+
+    /// One line for `mss check`.
+    pub fn describe(&self) -> String {
+        match self {
+            LoadCheck::Equilibrium {
+                stable,
+                max_displacement,
+                relative_displacement,
+                min_jacobian,
+                worst_affine_deviation,
+            } => format!(
+                "{} static equilibrium: largest displacement {max_displacement:.3e} m \
+                 ({:.1} % of the body's size), smallest volume ratio {min_jacobian:.3}, \
+                 worst cell {:.1} % of h off affine",
+                match stable {
+                    Some(true) => "stable",
+                    Some(false) => "UNSTABLE",
+                    None => "untested",
+                },
+                100.0 * relative_displacement,
+                100.0 * worst_affine_deviation
+            ),
+            LoadCheck::LoadLimit { load_factor } => format!(
+                "no equilibrium beyond {:.0} % of the load (buckling or collapse)",
+                100.0 * load_factor
+            ),
+            LoadCheck::Failed { reason } => format!("static solve failed: {reason}"),
+            LoadCheck::Skipped { reason } => format!("not solved: {reason}"),
+        }
+    }
 }
 
 impl CheckReport {
-    /// Estimates and checks for `job` (counts zero-energy modes: seconds on
-    /// large lattices).
+    /// Estimates and checks for `job`: counts zero-energy modes and solves the
+    /// scene's load statically ([`LoadCheck`]; seconds on large lattices).
     pub fn new(job: &Job) -> Self {
         let model = job.problem.model();
         let (frame_bytes, frames) = job.output_estimate();
@@ -40,13 +233,15 @@ impl CheckReport {
             .filter(|&n| job.problem.constraints().mask(n).iter().any(|&h| h))
             .count();
         let needs_matrix = !job.input.scene.solver.is_explicit();
+        let mechanism_warning = mechanism_warning(job);
         CheckReport {
             held_nodes,
             memory_bytes: run_memory_estimate(model.num_cells(), model.num_nodes(), needs_matrix),
             frames,
             frame_bytes,
             hourglass_stiffness: model.cell_coefficients(0).hourglass,
-            mechanism_warning: mechanism_warning(job),
+            load_check: LoadCheck::new(job, mechanism_warning.is_some()),
+            mechanism_warning,
         }
     }
 

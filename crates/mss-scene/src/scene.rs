@@ -417,32 +417,61 @@ impl VoxelizeSection {
 
 /// `[model]`: the spring parameterization.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(from = "RawModelSection")]
 pub struct ModelSection {
-    /// `"paper"` (default: springs and correction forces of Baudet et al.),
-    /// `"springs"` (springs only), `"volumetric"`, each optionally with
-    /// hourglass control (`"paper+hg"`, ...), or another name the library knows.
-    #[serde(default = "default_parameterization")]
+    /// `"volumetric-barrier+hg"` (default), `"paper"` (springs and correction
+    /// forces of Baudet et al.), `"springs"` (springs only), `"volumetric"`,
+    /// `"volumetric-barrier"`, each optionally with hourglass control
+    /// (`"paper+hg"`, ...), or another name the library knows.
     pub parameterization: String,
     /// Factor alpha of the hourglass control on the lattice's mechanisms
     /// (dimensionless, >= 0; 1 gives a mechanism its elastic strain energy).
     /// Given, it adds the control to any parameterization (or sets the factor
     /// of a `"+hg"` one); absent, `"+hg"` names use the library's default
-    /// ([`mss_core::HourglassControl::DEFAULT_ALPHA`]) and the others have none.
-    #[serde(default)]
+    /// ([`mss_core::HourglassControl::DEFAULT_ALPHA`]) and the others have
+    /// none. When the parameterization is not given either, it is
+    /// [`DEFAULT_HOURGLASS`]: the default model is the one that keeps soft
+    /// bodies from folding (docs/robustness.md).
     pub hourglass: Option<f64>,
 }
 
-fn default_parameterization() -> String {
-    "paper".to_owned()
+/// Parameterization of a scene that names none.
+pub const DEFAULT_PARAMETERIZATION: &str = "volumetric-barrier+hg";
+
+/// Hourglass factor of a scene that names neither a parameterization nor a
+/// factor: the mechanisms' elastic energy.
+pub const DEFAULT_HOURGLASS: f64 = 1.0;
+
+/// `[model]` as written: the defaults of one key depend on the other.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawModelSection {
+    parameterization: Option<String>,
+    hourglass: Option<f64>,
+}
+
+impl From<RawModelSection> for ModelSection {
+    fn from(raw: RawModelSection) -> Self {
+        match raw.parameterization {
+            Some(parameterization) => ModelSection {
+                parameterization,
+                hourglass: raw.hourglass,
+            },
+            None => ModelSection {
+                parameterization: DEFAULT_PARAMETERIZATION.to_owned(),
+                hourglass: Some(raw.hourglass.unwrap_or(DEFAULT_HOURGLASS)),
+            },
+        }
+    }
 }
 
 impl Default for ModelSection {
     fn default() -> Self {
-        Self {
-            parameterization: default_parameterization(),
+        RawModelSection {
+            parameterization: None,
             hourglass: None,
         }
+        .into()
     }
 }
 
@@ -1449,8 +1478,8 @@ mod tests {
         assert_eq!(s.voxelize, VoxelizeSection::default());
         assert_eq!(s.solver, SolverSection::default());
         assert_eq!(s.output, OutputSection::default());
-        assert_eq!(s.model.parameterization, "paper");
-        assert_eq!(s.model.hourglass, None);
+        assert_eq!(s.model.parameterization, "volumetric-barrier+hg");
+        assert_eq!(s.model.hourglass, Some(1.0));
         assert!(s.fixed.is_empty());
         let s = Scene::from_toml_str(
             &format!("{MIN}[model]\nparameterization = \"volumetric+hg\"\nhourglass = 0.25\n"),
@@ -1460,6 +1489,28 @@ mod tests {
         assert_eq!(s.model.parameterization, "volumetric+hg");
         assert_eq!(s.model.hourglass, Some(0.25));
         assert!(err(&format!("{MIN}[model]\nhourglass = \"strong\"\n")).contains("hourglass"));
+        // A named parameterization keeps its own hourglass default; a factor
+        // alone applies to the default parameterization.
+        let s = Scene::from_toml_str(
+            &format!("{MIN}[model]\nparameterization = \"paper+hg\"\n"),
+            "s.toml",
+        )
+        .unwrap();
+        assert_eq!(
+            (s.model.parameterization.as_str(), s.model.hourglass),
+            ("paper+hg", None)
+        );
+        let s =
+            Scene::from_toml_str(&format!("{MIN}[model]\nhourglass = 0.3\n"), "s.toml").unwrap();
+        assert_eq!(
+            (s.model.parameterization.as_str(), s.model.hourglass),
+            ("volumetric-barrier+hg", Some(0.3))
+        );
+        let e = err(&format!("{MIN}[model]\nhourglas = 0.3\n"));
+        assert!(
+            e.contains("unknown field `hourglas`") && e.contains("s.toml:8"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -308,7 +308,8 @@ fn a_diverging_run_writes_only_checked_frames_in_time_order() {
     for (force, every) in [(1.0e15, 1), (2.0e3, 1), (2.0e3, 3)] {
         let job = Job::prepare(
             input(&format!(
-                "[[loads.forces]]\nselect = {{ kind = \"face\", face = \"z+\" }}\n\
+                "[model]\nparameterization = \"paper\"\n\
+                 [[loads.forces]]\nselect = {{ kind = \"face\", face = \"z+\" }}\n\
                  force = [{force:e}, 0.0, 0.0]\n[solver]\nduration = 0.05\n\
                  [output]\nevery_steps = {every}\n"
             )),

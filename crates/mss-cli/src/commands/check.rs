@@ -37,6 +37,9 @@ pub fn run(args: &CheckArgs, global: &GlobalArgs) -> anyhow::Result<()> {
         if let Some(w) = &report.mechanism_warning {
             log::warn!("{w}");
         }
+        if let Some(w) = report.load_check.warning() {
+            log::warn!("{w}");
+        }
         return Ok(());
     }
     println!("scene            {}: OK", job.input.name());
@@ -118,6 +121,10 @@ pub fn run(args: &CheckArgs, global: &GlobalArgs) -> anyhow::Result<()> {
     match &report.mechanism_warning {
         Some(w) => println!("warning          {w}"),
         None => println!("mechanisms       none expected"),
+    }
+    println!("under load       {}", report.load_check.describe());
+    if let Some(w) = report.load_check.warning() {
+        println!("warning          {w}");
     }
     Ok(())
 }

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::bail;
 use clap::Args;
-use mss_scene::check::{RUN_MODE_CHECK_MAX_NODES, mechanism_warning};
+use mss_scene::check::{mechanism_warning, run_counts_modes};
 use mss_scene::{Cancel, Job, Registry, RunSummary, SceneInput, write_summary};
 
 use crate::GlobalArgs;
@@ -74,7 +74,7 @@ pub fn run(args: &RunArgs, global: &GlobalArgs) -> anyhow::Result<()> {
     // A static solve reports mechanisms itself, as its one-line error; dynamic
     // runs go on, so they get the warning.
     if !job.plan.is_static
-        && job.problem.model().num_nodes() <= RUN_MODE_CHECK_MAX_NODES
+        && run_counts_modes(job.problem.model())
         && let Some(warning) = mechanism_warning(&job)
     {
         log::warn!("{warning}");

@@ -281,7 +281,9 @@ pub fn solve_static(
                 if let Divergence::NewtonFailed { iterations, .. } = &reason {
                     rejected += iterations;
                 }
-                dl *= 0.5;
+                // Halve the increment that was tried: `dl` may reach past the
+                // full load, and halving it alone would try the same one again.
+                dl = 0.5 * (lt - lambda);
                 if dl < opts.min_load_increment {
                     // Some load carried and no more: a limit point, most likely.
                     if lambda > 0.0 {

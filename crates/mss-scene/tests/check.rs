@@ -1,0 +1,121 @@
+//! `mss check`'s static solve of the scene's load (`LoadCheck`): it finds the
+//! equilibrium a static run finds, and reports the buckling and the unstable
+//! equilibria that a dynamic run would only show by folding.
+
+use mss_scene::check::{CheckReport, LoadCheck};
+use mss_scene::scene::{DEFAULT_SCENE_TOML, TEMPLATE_SCENE_TOML};
+use mss_scene::{Cancel, Job, Registry, SceneInput, no_progress};
+
+fn job(toml: &str) -> Job {
+    Job::prepare(
+        SceneInput::from_toml(toml, "check.toml").unwrap(),
+        Registry::default(),
+        &no_progress,
+    )
+    .unwrap()
+}
+
+/// The bundled mesh path of the default scene, as the template writes it.
+fn default_scene(extra: &str) -> String {
+    format!(
+        "{}{extra}",
+        DEFAULT_SCENE_TOML.replace("../meshes/critter.obj", "builtin:critter")
+    )
+}
+
+#[test]
+fn the_default_scene_has_the_static_runs_stable_equilibrium() {
+    let report = CheckReport::new(&job(&default_scene("")));
+    let LoadCheck::Equilibrium {
+        stable,
+        max_displacement,
+        min_jacobian,
+        worst_affine_deviation,
+        ..
+    } = report.load_check.clone()
+    else {
+        panic!("{:?}", report.load_check);
+    };
+    assert_eq!(stable, Some(true));
+    assert!(report.load_check.warning().is_none());
+    assert!(min_jacobian > 0.9 && worst_affine_deviation < 0.02);
+    // The same scene solved statically by a run.
+    let static_job = job(&default_scene("").replace("kind = \"explicit\"", "kind = \"static\""));
+    let out = tempfile::tempdir().unwrap();
+    let summary = static_job
+        .run(out.path(), &no_progress, &Cancel::new())
+        .unwrap();
+    let run_max = summary.max_displacement;
+    assert!(
+        (max_displacement - run_max).abs() <= 1e-6 * run_max,
+        "check {max_displacement} run {run_max}"
+    );
+}
+
+#[test]
+fn the_papers_model_is_unstable_under_the_default_load() {
+    // docs/robustness.md, cause 1: without hourglass control the critter's
+    // equilibrium under its own weight is not stable.
+    let report = CheckReport::new(&job(&default_scene("")
+        .replace("\"volumetric-barrier+hg\"", "\"paper\"")
+        .replace("hourglass = 1.0", "")));
+    assert!(
+        matches!(
+            report.load_check,
+            LoadCheck::Equilibrium {
+                stable: Some(false),
+                ..
+            }
+        ),
+        "{:?}",
+        report.load_check
+    );
+    let w = report.load_check.warning().unwrap();
+    assert!(w.contains("unstable") && w.contains("hourglass"), "{w}");
+}
+
+#[test]
+fn the_template_buckles_under_its_own_weight() {
+    // docs/robustness.md, cause 2: the template's critter at 20 kPa cannot
+    // carry its full weight statically (the FEM's path ends at 0.90 g).
+    let report = CheckReport::new(&job(TEMPLATE_SCENE_TOML));
+    let LoadCheck::LoadLimit { load_factor } = report.load_check else {
+        panic!("{:?}", report.load_check);
+    };
+    assert!((0.5..1.0).contains(&load_factor), "{load_factor}");
+    assert!(report.load_check.warning().unwrap().contains("buckles"));
+    // Twice as stiff, it carries the load.
+    let stiff = CheckReport::new(&job(
+        &TEMPLATE_SCENE_TOML.replace("young = 2.0e4", "young = 4.0e4")
+    ));
+    assert!(
+        matches!(
+            stiff.load_check,
+            LoadCheck::Equilibrium {
+                stable: Some(true),
+                ..
+            }
+        ),
+        "{:?}",
+        stiff.load_check
+    );
+}
+
+#[test]
+fn unloaded_or_free_scenes_are_not_solved() {
+    let r = CheckReport::new(&job(
+        &default_scene("").replace("gravity = [0.0, 0.0, -9.81]", "")
+    ));
+    assert!(
+        matches!(r.load_check, LoadCheck::Skipped { .. }),
+        "{:?}",
+        r.load_check
+    );
+    let free = default_scene("").replace("[[fixed]]\nkind = \"lowest_layer\"\n", "");
+    let r = CheckReport::new(&job(&free));
+    assert!(r.mechanism_warning.is_some());
+    let LoadCheck::Skipped { reason } = &r.load_check else {
+        panic!("{:?}", r.load_check);
+    };
+    assert!(reason.contains("zero-energy"), "{reason}");
+}
