@@ -497,10 +497,12 @@ fn mean_boundary_mass(model: &Model, nodes: &[u32]) -> f64 {
 
 impl ContactSettings {
     /// Defaults for `model`: a stiffness that gives contact
-    /// [`DEFAULT_FREQUENCY_FRACTION`] of the lattice's highest frequency,
-    /// friction 0.5, damping ratio 0.2.
+    /// [`DEFAULT_FREQUENCY_FRACTION`] of the bound of the lattice's highest
+    /// frequency ([`Model::omega_max_bound`]: a stiffness set by the cells'
+    /// own, which the tolerance of penetration follows), friction 0.5,
+    /// damping ratio 0.2.
     pub fn for_model(model: &Model) -> Self {
-        let omega = DEFAULT_FREQUENCY_FRACTION * 2.0 / model.critical_time_step();
+        let omega = DEFAULT_FREQUENCY_FRACTION * model.omega_max_bound();
         let mass = mean_boundary_mass(model, &model.boundary_nodes());
         Self {
             stiffness: mass * omega * omega,

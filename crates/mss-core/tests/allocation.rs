@@ -80,15 +80,18 @@ fn explicit_steps_and_force_passes_do_not_allocate() {
             integ.step(&problem, &mut state).unwrap();
         }
         let before = allocations();
+        let mut lowest = f64::INFINITY;
         for k in 0..200 {
             if k % 10 == 0 {
                 integ.check_next_step();
             }
             integ.step(&problem, &mut state).unwrap();
+            lowest = state.x.iter().map(|v| v.z).fold(lowest, f64::min);
         }
         let steps = allocations() - before;
-        // It fell onto the ground and touched it.
-        assert!(problem.contact_forces(&state).iter().any(|f| f.z > 0.0));
+        // It fell onto the ground and touched it (penalty contact: a node
+        // went below the plane), whether or not it is bouncing now.
+        assert!(lowest < 0.0, "{lowest}");
         let model = problem.model();
         let mut ws = model.workspace();
         let mut f = vec![Vec3::zeros(); model.num_nodes()];

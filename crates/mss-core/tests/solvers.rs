@@ -124,8 +124,10 @@ fn explicit_conserves_energy_and_momentum_springs_only() {
         m.energy(x)
     });
     assert!(r.shadow < 0.01 && r.drift < 0.01, "energy not conserved");
-    // Bounded O(dt^2) oscillation of Verlet at the stable step, not a drift.
-    assert!(r.physical < 0.2);
+    // Bounded O(dt^2) oscillation of Verlet at the stable step, not a drift
+    // (0.16 at the Gershgorin step, 0.24 at the Lanczos one: 0.86 of the
+    // true limit, where the top modes' share dt^2 |a|^2 / 8 is larger).
+    assert!(r.physical < 0.3, "{}", r.physical);
     assert!(r.momentum < 1e-12, "momentum deviation {}", r.momentum);
 }
 
@@ -146,7 +148,7 @@ fn explicit_conserves_quadratic_energy_with_corrections_at_small_amplitude() {
             "{}: energy not conserved",
             param.name()
         );
-        assert!(r.physical < 0.2);
+        assert!(r.physical < 0.3, "{}: {}", param.name(), r.physical);
         assert!(r.momentum < 1e-12, "momentum deviation {}", r.momentum);
     }
 }
