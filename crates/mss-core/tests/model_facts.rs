@@ -423,7 +423,6 @@ fn forces_are_bitwise_identical_for_any_thread_count() {
 
 #[test]
 fn critical_time_step_is_safe_and_tight() {
-    use nalgebra::{DMatrix, SymmetricEigen};
     let l = Lattice::block([3, 2, 2], 0.1, [0.0; 3]).unwrap();
     for param in [
         &SpringsOnly as &dyn Parameterization,
@@ -432,22 +431,7 @@ fn critical_time_step_is_safe_and_tight() {
     ] {
         for nu in [-0.2, 0.0, 0.3, 0.49] {
             let model = Model::new(&l, mat(1000.0, nu, 10.0), param).unwrap();
-            let k = model.rest_stiffness();
-            let n = 3 * model.num_nodes();
-            let mut dense = DMatrix::<f64>::zeros(n, n);
-            for i in 0..model.num_nodes() {
-                for kk in k.row_offsets[i] as usize..k.row_offsets[i + 1] as usize {
-                    let j = k.col_indices[kk] as usize;
-                    for e in 0..3 {
-                        for d in 0..3 {
-                            let s = (model.masses()[i] * model.masses()[j]).sqrt();
-                            dense[(3 * i + e, 3 * j + d)] = k.blocks[kk][(e, d)] / s;
-                        }
-                    }
-                }
-            }
-            let eig = SymmetricEigen::new(dense);
-            let wmax = eig.eigenvalues.max().sqrt();
+            let wmax = dense_omega_max(&model);
             let bound = model.omega_max_bound();
             let ratio = bound / wmax;
             eprintln!("{} nu {nu}: omega bound / true = {ratio:.3}", param.name());
