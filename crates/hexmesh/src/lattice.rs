@@ -1,5 +1,6 @@
 //! The cubic lattice: cells of edge `h` on a regular grid with shared nodes.
 
+use std::sync::Arc;
 use thiserror::Error;
 
 /// Offsets of the 8 corners of a cell, in VTK_HEXAHEDRON order: the bottom face
@@ -55,9 +56,11 @@ pub struct Lattice {
     origin: [f64; 3],
     h: f64,
     dims: [u32; 3],
-    nodes: Vec<[f64; 3]>,
+    /// Shared with the models built on the lattice (no copy).
+    nodes: Arc<[[f64; 3]]>,
     node_coords: Vec<[u32; 3]>,
-    cells: Vec<[u32; 8]>,
+    /// Shared with the models built on the lattice (no copy).
+    cells: Arc<[[u32; 8]]>,
     cell_coords: Vec<[u32; 3]>,
 }
 
@@ -141,11 +144,11 @@ impl Lattice {
                 ]
             })
             .collect();
-        let nodes = node_coords
+        let nodes: Vec<[f64; 3]> = node_coords
             .iter()
             .map(|c| std::array::from_fn(|k| origin[k] + h * c[k] as f64))
             .collect();
-        let cells = cell_coords
+        let cells: Vec<[u32; 8]> = cell_coords
             .iter()
             .map(|&c| {
                 std::array::from_fn(|k| {
@@ -159,9 +162,9 @@ impl Lattice {
             origin,
             h,
             dims,
-            nodes,
+            nodes: nodes.into(),
             node_coords,
-            cells,
+            cells: cells.into(),
             cell_coords,
         })
     }
@@ -222,6 +225,17 @@ impl Lattice {
     /// Rest positions of the nodes (m).
     pub fn nodes(&self) -> &[[f64; 3]] {
         &self.nodes
+    }
+
+    /// The node positions as a shared handle: a model built on the lattice
+    /// keeps this one instead of a copy.
+    pub fn shared_nodes(&self) -> Arc<[[f64; 3]]> {
+        Arc::clone(&self.nodes)
+    }
+
+    /// The cells as a shared handle (see [`Lattice::shared_nodes`]).
+    pub fn shared_cells(&self) -> Arc<[[u32; 8]]> {
+        Arc::clone(&self.cells)
     }
 
     /// Grid coordinates of the nodes.
@@ -292,7 +306,7 @@ impl Lattice {
         // axis (a byte per node), not a sorted list of the 12 edges of every
         // cell (96 bytes per cell, and a sort).
         let mut flags = vec![0u8; self.nodes.len()];
-        for c in &self.cells {
+        for c in self.cells.iter() {
             for &(a, _, axis) in &CELL_EDGES {
                 flags[c[a] as usize] |= 1 << axis;
             }
@@ -554,9 +568,9 @@ impl Lattice {
             origin,
             h,
             dims,
-            nodes,
+            nodes: nodes.into(),
             node_coords,
-            cells,
+            cells: cells.into(),
             cell_coords,
         })
     }

@@ -531,8 +531,10 @@ const CHUNK: usize = 512;
 /// A lattice turned into a mass-spring model. Positions are absolute (m).
 #[derive(Debug, Clone)]
 pub struct Model {
-    rest: Vec<Vec3>,
-    cells: Vec<[u32; 8]>,
+    /// The lattice's node positions, shared with it (see [`Model::rest_positions`]).
+    rest: std::sync::Arc<[[f64; 3]]>,
+    /// The lattice's cells, shared with it.
+    cells: std::sync::Arc<[[u32; 8]]>,
     h: f64,
     masses: Vec<f64>,
     /// Kernel constants per material.
@@ -665,12 +667,8 @@ impl Model {
                 (part / whole).min(1.0)
             })
             .collect();
-        let rest: Vec<Vec3> = lattice
-            .nodes()
-            .iter()
-            .map(|p| Vec3::new(p[0], p[1], p[2]))
-            .collect();
-        let cells = lattice.cells().to_vec();
+        let rest = lattice.shared_nodes();
+        let cells = lattice.shared_cells();
         let n = rest.len();
         let cell_material: Vec<u32> = match cell_material {
             Some(cm) if materials.len() > 1 => cm.to_vec(),
@@ -733,7 +731,10 @@ impl Model {
 
     /// Rest positions of the nodes (m).
     pub fn rest_positions(&self) -> &[Vec3] {
-        &self.rest
+        // SAFETY: Vector3<f64> is a repr(C) wrapper of [[f64; 3]; 1], so a
+        // slice of [f64; 3] has the layout of a slice of Vec3 of the same
+        // length (the force pass relies on the converse).
+        unsafe { std::slice::from_raw_parts(self.rest.as_ptr().cast::<Vec3>(), self.rest.len()) }
     }
     /// Cells (VTK_HEXAHEDRON order).
     pub fn cells(&self) -> &[[u32; 8]] {
@@ -783,7 +784,7 @@ impl Model {
     /// with fewer than 8 cells around them, ascending.
     pub fn boundary_nodes(&self) -> Vec<u32> {
         let mut count = vec![0u8; self.num_nodes()];
-        for cell in &self.cells {
+        for cell in self.cells.iter() {
             for &v in cell {
                 count[v as usize] += 1;
             }
@@ -794,10 +795,12 @@ impl Model {
             .collect()
     }
 
-    /// Approximate heap memory of the model (bytes), excluding workspaces.
+    /// Approximate heap memory of the model (bytes), excluding workspaces;
+    /// the node positions and cells are counted although they are shared
+    /// with the lattice the model was built on.
     pub fn memory_bytes(&self) -> usize {
-        self.rest.capacity() * 24
-            + self.cells.capacity() * 32
+        self.rest.len() * 24
+            + self.cells.len() * 32
             + self.masses.capacity() * 8
             + self.volumetric_share.capacity() * 8
             + self.cell_material.capacity() * 4
@@ -833,7 +836,10 @@ impl Model {
     /// The rest stiffness of one cell alone, `-d f / d x` at its rest corners
     /// (24 x 24, dofs corner-major).
     pub(crate) fn cell_rest_stiffness(&self, cell: usize) -> [[f64; 24]; 24] {
-        let j = kernel::cell_jacobian(self.params_of(cell), &self.corners(&self.rest, cell));
+        let j = kernel::cell_jacobian(
+            self.params_of(cell),
+            &self.corners(self.rest_positions(), cell),
+        );
         j.map(|row| row.map(|v| -v))
     }
 
@@ -970,7 +976,7 @@ impl Model {
     /// The rest stiffness matrix `-tangent(rest)` (N/m), symmetric positive
     /// semi-definite.
     pub fn rest_stiffness(&self) -> BlockCsr {
-        self.stiffness(&self.rest)
+        self.stiffness(self.rest_positions())
     }
 
     /// Potential energy of the springs and the volumetric term (J). The

@@ -48,9 +48,11 @@ fn dot(a: &[Vec3], b: &[Vec3]) -> f64 {
     parts.iter().sum()
 }
 
-/// Largest eigenvalue of the symmetric tridiagonal matrix (`alpha` on the
-/// diagonal, `beta` beside it) and the last component of its eigenvector.
-fn top_ritz(alpha: &[f64], beta: &[f64]) -> (f64, f64) {
+/// The largest (or, with `smallest`, the smallest) eigenvalue of the
+/// symmetric tridiagonal matrix of a Lanczos iteration (`alpha` on the
+/// diagonal, `beta` beside it) and the last component of its eigenvector,
+/// whose product with the next `beta` is the Ritz pair's residual norm.
+pub(crate) fn extreme_ritz(alpha: &[f64], beta: &[f64], smallest: bool) -> (f64, f64) {
     let m = alpha.len();
     let t = nalgebra::DMatrix::<f64>::from_fn(m, m, |i, j| {
         if i == j {
@@ -64,13 +66,33 @@ fn top_ritz(alpha: &[f64], beta: &[f64]) -> (f64, f64) {
         }
     });
     let eig = nalgebra::SymmetricEigen::new(t);
+    let order = |a: &(usize, &f64), b: &(usize, &f64)| {
+        if smallest {
+            b.1.total_cmp(a.1)
+        } else {
+            a.1.total_cmp(b.1)
+        }
+    };
     let (k, &theta) = eig
         .eigenvalues
         .iter()
         .enumerate()
-        .max_by(|a, b| a.1.total_cmp(b.1))
+        .max_by(order)
         .expect("at least one Lanczos step");
     (theta, eig.eigenvectors[(m - 1, k)])
+}
+
+/// A fixed, rough start vector for `n` nodes (a hash of the index): it has
+/// components along every mode, the localized ones included.
+pub(crate) fn start_vector(n: usize) -> Vec<Vec3> {
+    (0..n)
+        .map(|i| {
+            Vec3::from_fn(|d, _| {
+                let s = ((3 * i + d) as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 40;
+                s as f64 / (1u64 << 24) as f64 - 0.5
+            })
+        })
+        .collect()
 }
 
 /// Estimate of the largest eigenvalue of `M^-1 K` (1/s^2) for the symmetric
@@ -79,16 +101,7 @@ fn top_ritz(alpha: &[f64], beta: &[f64]) -> (f64, f64) {
 pub(super) fn max_eigenvalue(masses: &[f64], mut mul_k: impl FnMut(&[Vec3], &mut [Vec3])) -> f64 {
     let n = masses.len();
     let inv_sqrt_m: Vec<f64> = masses.iter().map(|m| 1.0 / m.sqrt()).collect();
-    // A fixed, rough start vector (a hash of the index): it has components
-    // along every mode, the localized ones included.
-    let mut q: Vec<Vec3> = (0..n)
-        .map(|i| {
-            Vec3::from_fn(|d, _| {
-                let s = ((3 * i + d) as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 40;
-                s as f64 / (1u64 << 24) as f64 - 0.5
-            })
-        })
-        .collect();
+    let mut q = start_vector(n);
     let norm = dot(&q, &q).sqrt();
     q.par_iter_mut().for_each(|v| *v /= norm);
     let mut q_prev = vec![Vec3::zeros(); n];
@@ -114,7 +127,7 @@ pub(super) fn max_eigenvalue(masses: &[f64], mut mul_k: impl FnMut(&[Vec3], &mut
             .for_each(|(v, (qi, qp))| *v -= qi * a + qp * b_prev);
         alpha.push(a);
         let b = dot(&w, &w).sqrt();
-        let (theta, last) = top_ritz(&alpha, &beta);
+        let (theta, last) = extreme_ritz(&alpha, &beta, false);
         let residual = (b * last).abs();
         estimate = theta + residual;
         if b <= 1e-14 * theta.abs()

@@ -329,6 +329,45 @@ impl LinearSolver {
         self.stats
     }
 
+    /// Whether the symmetric `stiffness` is positive definite on the free
+    /// dofs, by a Lanczos iteration preconditioned with a multigrid cycle of
+    /// the positive definite `reference` (the rest stiffness): no
+    /// factorization, so it costs about as much as one iterative solve.
+    /// `None` when the test does not decide (or `reference` is singular).
+    pub(crate) fn is_positive_definite(
+        &mut self,
+        stiffness: BlockCsr,
+        reference: BlockCsr,
+        free: &[bool],
+    ) -> Option<bool> {
+        if !self.shape.as_ref().is_some_and(|s| s.fits(free)) {
+            self.shape = Some(super::multigrid::HierarchyShape::new(
+                &self.cells,
+                &self.coords,
+                free,
+            ));
+        }
+        let shape = self.shape.as_ref()?;
+        let pre = super::multigrid::Operator::from_owned(reference, free);
+        let mg = match super::multigrid::Multigrid::new(pre, shape) {
+            Ok(mg) => mg,
+            Err(e) => {
+                log::debug!("definiteness test: no preconditioner ({})", e.0);
+                return None;
+            }
+        };
+        let op = super::multigrid::Operator::from_owned(stiffness, free);
+        let (verdict, theta) = super::multigrid::definiteness(op.matrix(), &mg);
+        log::debug!(
+            "definiteness test: {verdict:?}, smallest eigenvalue against the rest stiffness {theta:.3e}"
+        );
+        match verdict {
+            super::multigrid::Definiteness::Positive => Some(true),
+            super::multigrid::Definiteness::NotPositive => Some(false),
+            super::multigrid::Definiteness::Undecided => None,
+        }
+    }
+
     /// Solves `A y = b` on the free dofs (`free[3 node + d]`; held components
     /// of `y` are zero) to a relative residual `rtol` (direct solves are
     /// exact). `size` is a length scale of the body: a solution above

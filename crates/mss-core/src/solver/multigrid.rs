@@ -223,19 +223,27 @@ fn masks_of(free: &[bool]) -> Vec<[bool; 3]> {
 /// `M A M + (I - M)` for the free-dof mask `M`: held dofs decoupled.
 fn decoupled(a: &BlockCsr, mask: &[[bool; 3]]) -> BlockCsr {
     let mut out = a.clone();
-    out.blocks
+    decouple(&mut out, mask);
+    out
+}
+
+/// [`decoupled`] in place.
+fn decouple(a: &mut BlockCsr, mask: &[[bool; 3]]) {
+    let offsets = &a.row_offsets;
+    let cols = &a.col_indices;
+    a.blocks
         .par_chunks_mut(CHUNK)
         .enumerate()
         .for_each(|(ci, chunk)| {
             // Rows of this chunk of blocks: found from the offsets.
             let start = ci * CHUNK;
-            let mut row = a.row_offsets.partition_point(|&o| o as usize <= start) - 1;
+            let mut row = offsets.partition_point(|&o| o as usize <= start) - 1;
             for (k, b) in chunk.iter_mut().enumerate() {
                 let pos = start + k;
-                while a.row_offsets[row + 1] as usize <= pos {
+                while offsets[row + 1] as usize <= pos {
                     row += 1;
                 }
-                let col = a.col_indices[pos] as usize;
+                let col = cols[pos] as usize;
                 for e in 0..3 {
                     for d in 0..3 {
                         let keep = mask[row][e] && mask[col][d];
@@ -246,7 +254,6 @@ fn decoupled(a: &BlockCsr, mask: &[[bool; 3]]) -> BlockCsr {
                 }
             }
         });
-    out
 }
 
 fn inverse_diagonal(a: &BlockCsr) -> Vec<Mat3> {
@@ -651,10 +658,28 @@ impl Operator {
         Self { a, mask }
     }
 
+    /// `a` with the dofs not in `free` decoupled, in place (no copy).
+    pub(crate) fn from_owned(mut a: BlockCsr, free: &[bool]) -> Self {
+        let mask = masks_of(free);
+        decouple(&mut a, &mask);
+        Self { a, mask }
+    }
+
     /// The matrix (with held dofs decoupled).
     pub(crate) fn matrix(&self) -> &BlockCsr {
         &self.a
     }
+}
+
+/// Zeroes the held components (`!mask`) of `v`.
+fn zero_held(v: &mut [Vec3], mask: &[[bool; 3]]) {
+    v.par_iter_mut().zip(mask.par_iter()).for_each(|(vi, m)| {
+        for d in 0..3 {
+            if !m[d] {
+                vi[d] = 0.0;
+            }
+        }
+    })
 }
 
 /// Outcome of a Krylov solve.
@@ -681,15 +706,7 @@ pub(crate) fn krylov(
 ) -> KrylovInfo {
     let (op, mask) = mg.operator();
     let n = op.num_rows();
-    let masked = |v: &mut [Vec3]| {
-        v.par_iter_mut().zip(mask.par_iter()).for_each(|(vi, m)| {
-            for d in 0..3 {
-                if !m[d] {
-                    vi[d] = 0.0;
-                }
-            }
-        })
-    };
+    let masked = |v: &mut [Vec3]| zero_held(v, mask);
     let mut r: Vec<Vec3> = b.to_vec();
     masked(&mut r);
     x.iter_mut().for_each(|v| *v = Vec3::zeros());
@@ -848,4 +865,106 @@ pub(crate) fn krylov(
         relative_residual: rn / bnorm,
         converged: rn <= target,
     }
+}
+
+/// What [`definiteness`] found about a symmetric matrix on the free dofs.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum Definiteness {
+    /// Positive definite: the smallest eigenvalue of `M^-1 A` converged
+    /// above the margin.
+    Positive,
+    /// Not positive definite: a direction with `v . A v` at or below the
+    /// margin was found.
+    NotPositive,
+    /// The iteration did not decide within its steps.
+    Undecided,
+}
+
+/// Smallest eigenvalue of `M^-1 A`, relative to `M` (a multigrid cycle of a
+/// positive definite matrix), at or below which `A` counts as not positive
+/// definite: the tangent has lost all but this fraction of the
+/// preconditioner's stiffness along some motion.
+pub(crate) const DEFINITENESS_MARGIN: f64 = 1e-6;
+
+/// Lanczos steps of [`definiteness`] (fewest before deciding, most).
+const DEFINITENESS_STEPS: (usize, usize) = (15, 200);
+
+/// Whether the symmetric `a` (held dofs decoupled, same free dofs as
+/// `mg`'s operator) is positive definite on the free dofs, by the Lanczos
+/// iteration on the pencil `(a, M)` with `M^-1` the V-cycle of `mg` (built
+/// on a positive definite matrix, so `M` is symmetric positive definite and
+/// `M^-1 a` has the inertia of `a`, Sylvester). The smallest Ritz value is
+/// a Rayleigh quotient `y.a y / y.M y`: a negative one is a certificate.
+/// A positive one is accepted once its residual is small against it and it
+/// has settled. Deterministic (fixed start vector, fixed-order sums).
+pub(crate) fn definiteness(a: &BlockCsr, mg: &Multigrid) -> (Definiteness, f64) {
+    let (_, mask) = mg.operator();
+    let n = a.num_rows();
+    let masked = |v: &mut [Vec3]| zero_held(v, mask);
+    let mut v = crate::model::frequency::start_vector(n);
+    masked(&mut v);
+    let mut w = vec![Vec3::zeros(); n];
+    mg.apply(&v, &mut w);
+    masked(&mut w);
+    let b0 = dot(&v, &w);
+    if !(b0.is_finite() && b0 > 0.0) {
+        return (Definiteness::Undecided, f64::NAN);
+    }
+    let b0 = b0.sqrt();
+    v.par_iter_mut().for_each(|x| *x /= b0);
+    w.par_iter_mut().for_each(|x| *x /= b0);
+    let mut v_prev = vec![Vec3::zeros(); n];
+    let mut u = vec![Vec3::zeros(); n];
+    let mut z = vec![Vec3::zeros(); n];
+    let (mut alpha, mut beta) = (Vec::<f64>::new(), Vec::<f64>::new());
+    let mut history: Vec<f64> = Vec::new();
+    for step in 0..DEFINITENESS_STEPS.1 {
+        mul(a, &w, &mut u);
+        masked(&mut u);
+        let al = dot(&w, &u);
+        let b_prev = beta.last().copied().unwrap_or(0.0);
+        u.par_iter_mut()
+            .zip(v.par_iter().zip(v_prev.par_iter()))
+            .for_each(|(ui, (vi, vp))| *ui -= vi * al + vp * b_prev);
+        alpha.push(al);
+        mg.apply(&u, &mut z);
+        masked(&mut z);
+        let bb = dot(&u, &z);
+        let (theta, last) = crate::model::frequency::extreme_ritz(&alpha, &beta, true);
+        if theta <= -DEFINITENESS_MARGIN {
+            return (Definiteness::NotPositive, theta);
+        }
+        let b = if bb.is_finite() && bb > 0.0 {
+            bb.sqrt()
+        } else {
+            0.0
+        };
+        let residual = (b * last).abs();
+        history.push(theta);
+        // Ritz values only fall towards the smallest eigenvalue; an outlier
+        // below the multigrid's cluster (a softening mode) shows within a
+        // few steps, so a value that has stopped moving is the bottom.
+        let settled =
+            history.len() > 5 && (history[history.len() - 6] - theta).abs() <= 1e-2 * theta.abs();
+        let decided =
+            b == 0.0 || (step + 1 >= DEFINITENESS_STEPS.0 && settled && residual <= 0.1 * theta);
+        if decided {
+            return if theta > DEFINITENESS_MARGIN {
+                (Definiteness::Positive, theta)
+            } else {
+                (Definiteness::NotPositive, theta)
+            };
+        }
+        beta.push(b);
+        std::mem::swap(&mut v_prev, &mut v);
+        // v <- u / b, w <- z / b.
+        v.par_iter_mut()
+            .zip(u.par_iter())
+            .for_each(|(vi, ui)| *vi = ui / b);
+        w.par_iter_mut()
+            .zip(z.par_iter())
+            .for_each(|(wi, zi)| *wi = zi / b);
+    }
+    let theta = history.last().copied().unwrap_or(f64::NAN);
+    (Definiteness::Undecided, theta)
 }

@@ -310,7 +310,7 @@ pub fn solve_static(
     }
     let mut r = vec![Vec3::zeros(); n];
     sys.lambda = 1.0;
-    let stability = equilibrium_stability(&mut sys, &x, &free);
+    let stability = equilibrium_stability(&mut sys, &x, &x_init, &free, &mut linear);
     if stability == Stability::Unstable {
         if opts.accept_unstable {
             log::warn!("static: the equilibrium is unstable (kept, as asked)");
@@ -350,25 +350,58 @@ pub enum Stability {
     NotTested,
 }
 
-/// Tests the stability of the equilibrium `x`: a Cholesky factorization of
-/// the symmetric part of the stiffness `K = -d(residual)/dx` on the free dofs.
-/// For a conservative model `K` is the energy's Hessian and this is the
-/// second-order test of a minimum; with the correction forces `K` is not
-/// symmetric, and a positive definite symmetric part is a sufficient
-/// condition (`v . K v > 0` for every `v`: no static direction releases
-/// energy), so the test errs on the side of refusing.
-fn equilibrium_stability(sys: &mut StaticSystem<'_>, x: &[Vec3], free: &[bool]) -> Stability {
-    let jac = sys.jacobian(x);
-    let mut k = jac.clone();
+/// The symmetric part of the stiffness `-jac`, in place.
+fn symmetric_stiffness(mut jac: BlockCsr) -> BlockCsr {
     for row in 0..jac.num_rows() {
         for idx in jac.row_offsets[row] as usize..jac.row_offsets[row + 1] as usize {
             let col = jac.col_indices[idx] as usize;
+            if col < row {
+                // Done with the block of (col, row).
+                continue;
+            }
             let mirror = jac
                 .find(col, row)
                 .expect("the lattice pattern is symmetric");
-            k.blocks[idx] = -(jac.blocks[idx] + jac.blocks[mirror].transpose()) * 0.5;
+            let sym = -(jac.blocks[idx] + jac.blocks[mirror].transpose()) * 0.5;
+            jac.blocks[idx] = sym;
+            jac.blocks[mirror] = sym.transpose();
         }
     }
+    jac
+}
+
+/// Tests the stability of the equilibrium `x`: whether the symmetric part
+/// of the stiffness `K = -d(residual)/dx` is positive definite on the free
+/// dofs. For a conservative model `K` is the energy's Hessian and this is
+/// the second-order test of a minimum; with the correction forces `K` is not
+/// symmetric, and a positive definite symmetric part is a sufficient
+/// condition (`v . K v > 0` for every `v`: no static direction releases
+/// energy), so the test errs on the side of refusing.
+///
+/// Above [`super::linear::DIRECT_MAX_FREE_DOFS`] free dofs it is a Lanczos
+/// iteration preconditioned by a multigrid cycle of the stiffness at the
+/// start `x0` (`LinearSolver::is_positive_definite`: a negative Rayleigh
+/// quotient is a certificate, about the cost of one iterative solve);
+/// otherwise, or when that does not decide, a Cholesky factorization.
+fn equilibrium_stability(
+    sys: &mut StaticSystem<'_>,
+    x: &[Vec3],
+    x0: &[Vec3],
+    free: &[bool],
+    linear: &mut LinearSolver,
+) -> Stability {
+    let free_dofs = free.iter().filter(|f| **f).count();
+    if free_dofs > super::linear::DIRECT_MAX_FREE_DOFS {
+        // One matrix alive at a time besides the test's own.
+        let reference = symmetric_stiffness(sys.jacobian(x0));
+        let k = symmetric_stiffness(sys.jacobian(x));
+        match linear.is_positive_definite(k, reference, free) {
+            Some(true) => return Stability::Stable,
+            Some(false) => return Stability::Unstable,
+            None => log::debug!("static: Lanczos stability test undecided; factoring"),
+        }
+    }
+    let mut k = symmetric_stiffness(sys.jacobian(x));
     // A relative shift below round-off of the Newton solution, so that a
     // positive definite matrix is not refused for its last digits.
     let shift = 1e-10 * k.max_diagonal();
