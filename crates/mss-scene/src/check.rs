@@ -41,10 +41,99 @@ pub struct CheckReport {
     /// What a static solve of the scene's load found (mechanisms that appear
     /// under load, buckling), or why it was not done.
     pub load_check: LoadCheck,
+    /// Estimated wall time of the run's stepping and writing, if estimated.
+    pub time_estimate: Option<TimeEstimate>,
+}
+
+/// Steps an explicit run's time estimate times (after one untimed step,
+/// which builds what later steps reuse).
+pub const TIME_PROBE_STEPS: u32 = 6;
+
+/// Seconds a frame costs whatever its size (files created and renamed, the
+/// skin and the embedded surface as text), measured on the bundled scenes.
+const FRAME_SECONDS: f64 = 0.005;
+/// Estimated frame bytes ([`Job::output_estimate`]) written per second and
+/// thread with zlib (compression runs in parallel), and in all without
+/// compression; measured on voxelized cubes of 32^3 to 96^3 cells.
+const WRITE_RATE_ZLIB_PER_THREAD: f64 = 450e6;
+const WRITE_RATE_NONE: f64 = 1.2e9;
+
+/// The wall time a run should take, from its own steps timed on a scratch
+/// state (nothing is written): what `mss check` prints as the time estimate.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TimeEstimate {
+    /// Estimated wall time of stepping and writing (s).
+    pub seconds: f64,
+    /// Of which writing the frames (s).
+    pub writing_seconds: f64,
+    /// Steps timed (0: the static solve of [`LoadCheck`] was timed).
+    pub probe_steps: u32,
+    /// Wall time per step measured (s).
+    pub seconds_per_step: f64,
+}
+
+impl TimeEstimate {
+    /// Times `job`'s steps (see [`TimeEstimate`]); `static_seconds` is the
+    /// time the load check's static solve took, the estimate of a static
+    /// run. `None` for an implicit run on more than [`LOAD_CHECK_MAX_NODES`]
+    /// nodes (a probe step would cost too much) or when a probe step fails.
+    pub fn new(job: &Job, static_seconds: Option<f64>) -> Option<Self> {
+        let (frame_bytes, frames) = job.output_estimate();
+        let rate = match job.input.scene.output.compression {
+            crate::scene::CompressionKey::Zlib => {
+                WRITE_RATE_ZLIB_PER_THREAD * rayon::current_num_threads() as f64
+            }
+            crate::scene::CompressionKey::None => WRITE_RATE_NONE,
+        };
+        let writing_seconds = frames as f64 * (FRAME_SECONDS + frame_bytes as f64 / rate);
+        let plan = &job.plan;
+        if plan.is_static {
+            let solve = static_seconds?;
+            return Some(TimeEstimate {
+                seconds: solve + writing_seconds,
+                writing_seconds,
+                probe_steps: 0,
+                seconds_per_step: solve,
+            });
+        }
+        let explicit = job.input.scene.solver.is_explicit();
+        let model = job.problem.model();
+        if !explicit && model.num_nodes() > LOAD_CHECK_MAX_NODES {
+            return None;
+        }
+        let mut integrator = job
+            .input
+            .integrator(&job.registry, &job.problem, plan)
+            .ok()??;
+        let mut state = State::at_rest(model);
+        job.problem.apply_constraints(&mut state);
+        let probe = if explicit { TIME_PROBE_STEPS } else { 1 };
+        let probe = u64::from(probe).min(plan.steps.saturating_sub(1));
+        let start = std::time::Instant::now();
+        integrator.step(&job.problem, &mut state).ok()?;
+        let first = start.elapsed().as_secs_f64();
+        let start = std::time::Instant::now();
+        for _ in 0..probe {
+            integrator.step(&job.problem, &mut state).ok()?;
+        }
+        let per_step = if probe > 0 {
+            start.elapsed().as_secs_f64() / probe as f64
+        } else {
+            first
+        };
+        let stepping = first + per_step * plan.steps.saturating_sub(1) as f64;
+        Some(TimeEstimate {
+            seconds: stepping + writing_seconds,
+            writing_seconds,
+            probe_steps: probe as u32 + 1,
+            seconds_per_step: per_step,
+        })
+    }
 }
 
 /// Largest model (nodes) on which [`CheckReport::new`] solves the scene's
-/// load statically (seconds with the multigrid solver at this size).
+/// load statically (seconds with the multigrid solver at this size), when
+/// the model has hourglass control; without, [`RUN_MODE_CHECK_MAX_NODES`].
 pub const LOAD_CHECK_MAX_NODES: usize = 60_000;
 
 /// Smallest load increment of the load check's static solve.
@@ -105,12 +194,17 @@ impl LoadCheck {
         if mechanisms_at_rest {
             return skipped("the held nodes leave zero-energy modes");
         }
-        if model.num_nodes() > LOAD_CHECK_MAX_NODES {
+        // Without hourglass control the lattice's near-mechanisms stall the
+        // iterative solver (docs/solvers.md): minutes beyond the size that
+        // the direct fallback covers.
+        let limit = if mss_core::modes::cells_are_rigid(model) {
+            LOAD_CHECK_MAX_NODES
+        } else {
+            RUN_MODE_CHECK_MAX_NODES
+        };
+        if model.num_nodes() > limit {
             return LoadCheck::Skipped {
-                reason: format!(
-                    "{} nodes, more than {LOAD_CHECK_MAX_NODES}",
-                    model.num_nodes()
-                ),
+                reason: format!("{} nodes, more than {limit}", model.num_nodes()),
             };
         }
         let first = 1.0 / f64::from(s.load_steps);
@@ -224,8 +318,9 @@ impl LoadCheck {
 }
 
 impl CheckReport {
-    /// Estimates and checks for `job`: counts zero-energy modes and solves the
-    /// scene's load statically ([`LoadCheck`]; seconds on large lattices).
+    /// Estimates and checks for `job`: counts zero-energy modes, solves the
+    /// scene's load statically ([`LoadCheck`]; seconds on large lattices)
+    /// and times a few of the run's steps ([`TimeEstimate`]).
     pub fn new(job: &Job) -> Self {
         let model = job.problem.model();
         let (frame_bytes, frames) = job.output_estimate();
@@ -234,13 +329,19 @@ impl CheckReport {
             .count();
         let needs_matrix = !job.input.scene.solver.is_explicit();
         let mechanism_warning = mechanism_warning(job);
+        let started = std::time::Instant::now();
+        let load_check = LoadCheck::new(job, mechanism_warning.is_some());
+        let static_seconds = matches!(load_check, LoadCheck::Equilibrium { .. })
+            .then(|| started.elapsed().as_secs_f64());
         CheckReport {
             held_nodes,
-            memory_bytes: run_memory_estimate(model.num_cells(), model.num_nodes(), needs_matrix),
+            memory_bytes: run_memory_estimate(model.num_cells(), model.num_nodes(), needs_matrix)
+                + crate::limits::mesh_memory_estimate(job.mesh.vertices.len()),
             frames,
             frame_bytes,
             hourglass_stiffness: model.cell_coefficients(0).hourglass,
-            load_check: LoadCheck::new(job, mechanism_warning.is_some()),
+            time_estimate: TimeEstimate::new(job, static_seconds),
+            load_check,
             mechanism_warning,
         }
     }

@@ -276,7 +276,7 @@ impl Job {
             vox.lattice.num_cells(),
             vox.lattice.num_nodes(),
             needs_matrix,
-        );
+        ) + crate::limits::mesh_memory_estimate(loaded.mesh.vertices.len());
         if needed > limits.memory_bytes {
             return Err(memory_error(
                 format!(

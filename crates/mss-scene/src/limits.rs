@@ -110,15 +110,16 @@ pub fn parse_size(text: &str) -> Result<u64, String> {
 }
 
 /// Bytes of a process before any lattice (program, runtime, thread stacks).
-const BASE_BYTES: u64 = 16 << 20;
+const BASE_BYTES: u64 = 13 << 20;
 /// Bytes per cell of an explicit run at its peak, output included, beyond
-/// [`BASE_BYTES`] (measured with the layered force pass and reused frame
-/// arrays: 475 on the critter and the bunny at 53,000 cells, 523 on the bunny
-/// at 419,000, 483 on a 128^3 block; the lattice, the model, the state, the
+/// [`BASE_BYTES`] (measured with the model sharing the lattice's arrays:
+/// the slope over voxelized cubes of 64^3 and 96^3 cells is 439, the
+/// bundled scenes 12-13 MiB in all; the lattice, the model, the state, the
 /// integrator and one frame being written). The mode check that `mss run`
 /// makes on lattices of at most 20,000 nodes is not counted (it is bounded
-/// by that size).
-const EXPLICIT_BYTES_PER_CELL: u64 = 560;
+/// by that size); `benches/estimates.rs` of mss-cli compares the estimate
+/// with runs.
+const EXPLICIT_BYTES_PER_CELL: u64 = 440;
 /// Bytes per node that Newton solves add (tangent, multigrid hierarchy,
 /// Krylov vectors; measured: 28,000 implicit and 30,000 static with the
 /// stability test on 8,800 nodes).
@@ -146,6 +147,17 @@ pub fn run_memory_estimate(cells: usize, nodes: usize, needs_matrix: bool) -> u6
         0
     };
     BASE_BYTES + EXPLICIT_BYTES_PER_CELL * cells as u64 + matrix
+}
+
+/// Bytes per vertex of the input surface that a run keeps (the mesh, its
+/// embedding in the lattice, the deformed surface of a frame; measured: the
+/// 36,000-vertex Stanford bunny on a 3,000-cell lattice adds 12 MiB).
+const MESH_BYTES_PER_VERTEX: u64 = 350;
+
+/// Estimated memory (bytes) for the input surface of `vertices` vertices,
+/// beyond [`run_memory_estimate`].
+pub fn mesh_memory_estimate(vertices: usize) -> u64 {
+    MESH_BYTES_PER_VERTEX * vertices as u64
 }
 
 #[cfg(test)]

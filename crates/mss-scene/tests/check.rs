@@ -119,3 +119,21 @@ fn unloaded_or_free_scenes_are_not_solved() {
     };
     assert!(reason.contains("zero-energy"), "{reason}");
 }
+
+#[test]
+fn the_time_estimate_times_the_runs_own_steps() {
+    use mss_scene::check::TIME_PROBE_STEPS;
+    let r = CheckReport::new(&job(&default_scene("")));
+    let t = r.time_estimate.expect("explicit runs are estimated");
+    assert_eq!(t.probe_steps, TIME_PROBE_STEPS + 1);
+    // Stepping is the steps times the measured step, plus the writing.
+    let steps = job(&default_scene("")).plan.steps as f64;
+    assert!(t.seconds >= t.writing_seconds + t.seconds_per_step * (steps - 1.0));
+    assert!(t.seconds.is_finite() && t.writing_seconds > 0.0);
+    // A static scene's estimate is the load check's solve.
+    let r = CheckReport::new(&job(
+        &default_scene("").replace("kind = \"explicit\"", "kind = \"static\"")
+    ));
+    let t = r.time_estimate.expect("a solved static scene is estimated");
+    assert_eq!(t.probe_steps, 0);
+}

@@ -106,6 +106,22 @@ pub fn run(args: &CheckArgs, global: &GlobalArgs) -> anyhow::Result<()> {
         human_bytes(report.memory_bytes),
         human_bytes(job.limits.memory_bytes)
     );
+    match &report.time_estimate {
+        Some(t) if t.probe_steps > 0 => println!(
+            "time estimate    {} ({:.3e} s per step, timed on {} steps; writing {})",
+            human_seconds(t.seconds),
+            t.seconds_per_step,
+            t.probe_steps,
+            human_seconds(t.writing_seconds)
+        ),
+        Some(t) => println!(
+            "time estimate    {} (the static solve took {}; writing {})",
+            human_seconds(t.seconds),
+            human_seconds(t.seconds_per_step),
+            human_seconds(t.writing_seconds)
+        ),
+        None => println!("time estimate    not estimated (a probe step would cost too much)"),
+    }
     let (free, disk_warning) = report.disk(&out_dir);
     println!(
         "output estimate  {} frames x {} = {} in {}{}",
@@ -127,4 +143,17 @@ pub fn run(args: &CheckArgs, global: &GlobalArgs) -> anyhow::Result<()> {
         println!("warning          {w}");
     }
     Ok(())
+}
+
+/// Seconds as "0.42 s", "12 s", "3.5 min" or "2.1 h".
+fn human_seconds(s: f64) -> String {
+    if s < 10.0 {
+        format!("{s:.2} s")
+    } else if s < 120.0 {
+        format!("{s:.0} s")
+    } else if s < 7200.0 {
+        format!("{:.1} min", s / 60.0)
+    } else {
+        format!("{:.1} h", s / 3600.0)
+    }
 }
