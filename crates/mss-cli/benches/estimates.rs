@@ -13,29 +13,6 @@ use std::process::Command;
 use mss_scene::check::CheckReport;
 use mss_scene::{Job, Registry, SceneInput, no_progress};
 
-/// A unit cube as an OBJ surface.
-fn cube_obj() -> String {
-    let mut text = String::new();
-    for z in 0..2 {
-        for y in 0..2 {
-            for x in 0..2 {
-                text.push_str(&format!("v {x} {y} {z}\n"));
-            }
-        }
-    }
-    for [a, b, c, d] in [
-        [1, 3, 4, 2],
-        [5, 6, 8, 7],
-        [1, 2, 6, 5],
-        [3, 7, 8, 4],
-        [1, 5, 7, 3],
-        [2, 4, 8, 6],
-    ] {
-        text.push_str(&format!("f {a} {b} {c}\nf {a} {c} {d}\n"));
-    }
-    text
-}
-
 fn cube_scene(cells: u32) -> String {
     format!(
         "[mesh]\npath = \"cube.obj\"\n[voxelize]\ncells = {cells}\n\
@@ -53,7 +30,13 @@ fn main() {
     let threads: usize = args.first().and_then(|s| s.parse().ok()).unwrap_or(1);
     let largest: u32 = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(64);
     let dir = tempfile::tempdir().expect("a temporary folder");
-    std::fs::write(dir.path().join("cube.obj"), cube_obj()).expect("cube.obj");
+    let cube = hexmesh::generate::box_mesh([0.0; 3], [1.0; 3]);
+    mss_io::skin::write_obj(
+        &dir.path().join("cube.obj"),
+        &cube.vertices,
+        &cube.triangles,
+    )
+    .expect("cube.obj");
     let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/scenes");
     let mut scenes: Vec<(String, std::path::PathBuf)> = ["default", "template", "drop", "press"]
         .iter()

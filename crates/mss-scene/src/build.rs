@@ -56,6 +56,25 @@ impl SceneInput {
         })
     }
 
+    /// The static solver's options from `[solver]` (`load_steps`,
+    /// `tolerance`, `max_iterations`, `linear_solver`, `linear`,
+    /// `accept_unstable`).
+    pub fn static_options(&self) -> mss_core::solver::StaticOptions {
+        let s = &self.scene.solver;
+        let first = 1.0 / f64::from(s.load_steps);
+        mss_core::solver::StaticOptions {
+            rtol: s.tolerance,
+            max_newton: s.max_iterations,
+            initial_load_increment: first,
+            min_load_increment: mss_core::solver::StaticOptions::default()
+                .min_load_increment
+                .min(first),
+            linear_solver: s.linear_solver.into(),
+            small_strain: s.linear,
+            accept_unstable: s.accept_unstable,
+        }
+    }
+
     /// Name of the scene in messages.
     pub fn name(&self) -> String {
         self.origin.display_name()

@@ -207,19 +207,17 @@ impl LoadCheck {
                 reason: format!("{} nodes, more than {limit}", model.num_nodes()),
             };
         }
-        let first = 1.0 / f64::from(s.load_steps);
+        let scene_opts = job.input.static_options();
         let opts = StaticOptions {
-            rtol: s.tolerance,
             // Past a limit point Newton fails slowly; within 25 iterations
             // a converging increment has converged (5 on the bundled scenes).
-            max_newton: s.max_iterations.min(25),
-            initial_load_increment: first,
+            max_newton: scene_opts.max_newton.min(25),
             // The load limit to about 3 %: enough to tell buckling apart,
             // without the many failing increments a precise limit costs.
-            min_load_increment: LOAD_CHECK_MIN_INCREMENT.min(first),
-            linear_solver: s.linear_solver.into(),
+            min_load_increment: LOAD_CHECK_MIN_INCREMENT.min(scene_opts.initial_load_increment),
             small_strain: false,
             accept_unstable: true,
+            ..scene_opts
         };
         let mut state = State::at_rest(model);
         problem.apply_constraints(&mut state);

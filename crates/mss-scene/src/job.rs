@@ -9,7 +9,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use mss_core::Model;
-use mss_core::solver::{Integrator, Problem, State, StaticOptions, solve_static};
+use mss_core::solver::{Integrator, Problem, State, solve_static};
 use serde::Serialize;
 
 use crate::build::{SceneInput, TimePlan, load_mesh, prepare_output_folder};
@@ -449,16 +449,7 @@ impl Job {
                 // A static solve is the whole computation: do it before creating
                 // any file, so that a failure leaves nothing behind.
                 let rest_state = state.clone();
-                let first = 1.0 / f64::from(s.load_steps);
-                let opts = StaticOptions {
-                    rtol: s.tolerance,
-                    max_newton: s.max_iterations,
-                    initial_load_increment: first,
-                    min_load_increment: StaticOptions::default().min_load_increment.min(first),
-                    linear_solver: s.linear_solver.into(),
-                    small_strain: s.linear,
-                    accept_unstable: s.accept_unstable,
-                };
+                let opts = self.input.static_options();
                 state.time = s.duration;
                 progress(Progress::Solving);
                 let r = solve_static(problem, &mut state, &opts);

@@ -20,6 +20,7 @@
 use rayon::prelude::*;
 
 use crate::Vec3;
+use crate::solver::multigrid::dot;
 
 /// Factor on the estimated `omega_max^2` (covers what the iteration has not
 /// converged).
@@ -34,19 +35,6 @@ const MIN_STEPS: usize = 20;
 /// Stop when the residual norm of the top Ritz pair is below this fraction
 /// of its value.
 const RELATIVE_RESIDUAL: f64 = 1e-3;
-
-/// Entries per chunk of the reductions (fixed, so that sums do not depend on
-/// the thread count).
-const CHUNK: usize = 4096;
-
-fn dot(a: &[Vec3], b: &[Vec3]) -> f64 {
-    let parts: Vec<f64> = a
-        .par_chunks(CHUNK)
-        .zip(b.par_chunks(CHUNK))
-        .map(|(x, y)| x.iter().zip(y).map(|(p, q)| p.dot(q)).sum::<f64>())
-        .collect();
-    parts.iter().sum()
-}
 
 /// The largest (or, with `smallest`, the smallest) eigenvalue of the
 /// symmetric tridiagonal matrix of a Lanczos iteration (`alpha` on the

@@ -35,7 +35,7 @@
 mod explicit;
 mod implicit;
 mod linear;
-mod multigrid;
+pub(crate) mod multigrid;
 mod statics;
 
 use std::sync::OnceLock;
