@@ -217,6 +217,13 @@ impl Integrator for Implicit {
     }
 
     fn step(&mut self, problem: &Problem, state: &mut State) -> Result<StepInfo, SolverError> {
+        crate::on_worker(|| self.step_here(problem, state))
+    }
+}
+
+impl Implicit {
+    /// [`Integrator::step`], on the thread it is called on.
+    fn step_here(&mut self, problem: &Problem, state: &mut State) -> Result<StepInfo, SolverError> {
         state.check_size(problem.model())?;
         self.steps += 1;
         let t_end = state.time + self.opts.dt;

@@ -294,6 +294,11 @@ pub struct LinearSolver {
     coords: Vec<[i64; 3]>,
     shape: Option<super::multigrid::HierarchyShape>,
     stats: LinearStats,
+    /// Whether the next iterative solve keeps its hierarchy (when its
+    /// matrix is symmetric) for [`LinearSolver::is_positive_definite`].
+    keep_next: bool,
+    /// The kept hierarchy: a multigrid cycle of a symmetric stiffness.
+    kept: Option<super::multigrid::Multigrid>,
 }
 
 impl std::fmt::Debug for LinearSolver {
@@ -321,6 +326,8 @@ impl LinearSolver {
             coords: super::multigrid::grid_coords(rest, h),
             shape: None,
             stats: LinearStats::default(),
+            keep_next: false,
+            kept: None,
         }
     }
 
@@ -334,13 +341,18 @@ impl LinearSolver {
     /// the positive definite `reference` (the rest stiffness): no
     /// factorization, so it costs about as much as one iterative solve.
     /// `None` when the test does not decide (or `reference` is singular).
+    ///
+    /// A hierarchy kept by [`LinearSolver::keep_next_hierarchy`] (for the
+    /// same free dofs) serves instead of one of `reference`, which is then
+    /// not called.
     pub(crate) fn is_positive_definite(
         &mut self,
         stiffness: BlockCsr,
-        reference: BlockCsr,
+        reference: impl FnOnce() -> BlockCsr,
         free: &[bool],
     ) -> Option<bool> {
         if !self.shape.as_ref().is_some_and(|s| s.fits(free)) {
+            self.kept = None;
             self.shape = Some(super::multigrid::HierarchyShape::new(
                 &self.cells,
                 &self.coords,
@@ -348,12 +360,17 @@ impl LinearSolver {
             ));
         }
         let shape = self.shape.as_ref()?;
-        let pre = super::multigrid::Operator::from_owned(reference, free);
-        let mg = match super::multigrid::Multigrid::new(pre, shape) {
-            Ok(mg) => mg,
-            Err(e) => {
-                log::debug!("definiteness test: no preconditioner ({})", e.0);
-                return None;
+        let mg = match self.kept.take() {
+            Some(mg) => mg,
+            None => {
+                let pre = super::multigrid::Operator::from_owned(reference(), free);
+                match super::multigrid::Multigrid::new(pre, shape) {
+                    Ok(mg) => mg,
+                    Err(e) => {
+                        log::debug!("definiteness test: no preconditioner ({})", e.0);
+                        return None;
+                    }
+                }
             }
         };
         let op = super::multigrid::Operator::from_owned(stiffness, free);
@@ -366,6 +383,14 @@ impl LinearSolver {
             super::multigrid::Definiteness::NotPositive => Some(false),
             super::multigrid::Definiteness::Undecided => None,
         }
+    }
+
+    /// Asks the next iterative solve to keep its multigrid hierarchy if its
+    /// matrix is symmetric, as the preconditioner of a later
+    /// [`LinearSolver::is_positive_definite`] (a static solve's first
+    /// tangent, at its start, is the stability test's reference).
+    pub(crate) fn keep_next_hierarchy(&mut self) {
+        self.keep_next = true;
     }
 
     /// Solves `A y = b` on the free dofs (`free[3 node + d]`; held components
@@ -400,6 +425,8 @@ impl LinearSolver {
         rtol: f64,
     ) -> Result<Vec<Vec3>, LinearFailure> {
         self.stats.solves += 1;
+        // Only the very next solve may keep its hierarchy.
+        let keep = std::mem::take(&mut self.keep_next);
         let free_dofs = free.iter().filter(|f| **f).count();
         let iterative = match self.kind {
             LinearSolverKind::Direct => false,
@@ -454,6 +481,9 @@ impl LinearSolver {
             info.iterations,
             info.relative_residual
         );
+        if keep && symmetric {
+            self.kept = Some(mg.into_preconditioner());
+        }
         let worst = y.iter().map(|v| v.amax()).fold(0.0, f64::max);
         let usable = info.relative_residual.is_finite()
             && worst.is_finite()

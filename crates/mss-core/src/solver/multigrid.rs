@@ -85,7 +85,14 @@ struct Prolongation {
 #[derive(Debug, Clone)]
 struct Level {
     /// The operator, with held dofs decoupled (identity rows and columns).
+    /// Below the finest level its blocks are dropped once the hierarchy is
+    /// set up (the pattern stays): the cycle uses `smoothing` only.
     a: BlockCsr,
+    /// The blocks of `a` in single precision, 9 per block in column-major
+    /// order plus 3 of padding at the end (see [`mul_smoothing`]), for the
+    /// smoother and the cycle's residuals: they move half the bytes of `f64`
+    /// blocks, and a preconditioner needs no more digits (sums stay in `f64`).
+    smoothing: Vec<f32>,
     /// Inverses of the 3 x 3 diagonal blocks.
     inv_diag: Vec<Mat3>,
     /// Largest eigenvalue estimate of `D^-1 A` (for Chebyshev).
@@ -288,6 +295,57 @@ pub(crate) fn mul(a: &BlockCsr, x: &[Vec3], y: &mut [Vec3]) {
     });
 }
 
+/// `y = A x` with the single-precision blocks `blocks` (the layout of
+/// [`Level::smoothing`]) on the pattern of `a`, summed in `f64`
+/// (deterministic like [`mul`]). Each block adds its three columns to a
+/// four-lane accumulator (the fourth lane reads the next block's first entry
+/// and is discarded, hence the padding), which the compiler turns into
+/// vector instructions.
+fn mul_smoothing(a: &BlockCsr, blocks: &[f32], x: &[Vec3], y: &mut [Vec3]) {
+    assert_eq!(blocks.len(), 9 * a.col_indices.len() + 3);
+    #[cfg(target_arch = "x86_64")]
+    let avx2 = std::arch::is_x86_feature_detected!("avx2");
+    y.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, yc)| {
+        #[cfg(target_arch = "x86_64")]
+        if avx2 {
+            // SAFETY: the CPU supports AVX2 (checked above). The rows are
+            // a separate function: the closure would not get the feature.
+            unsafe { mul_smoothing_rows_avx2(a, blocks, x, yc, ci * CHUNK) };
+            return;
+        }
+        mul_smoothing_rows(a, blocks, x, yc, ci * CHUNK);
+    });
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn mul_smoothing_rows_avx2(a: &BlockCsr, blocks: &[f32], x: &[Vec3], y: &mut [Vec3], first: usize) {
+    mul_smoothing_rows(a, blocks, x, y, first);
+}
+
+/// Rows `first..first + y.len()` of [`mul_smoothing`]; no FMA on any path,
+/// so every path gives the same bits.
+#[inline(always)]
+fn mul_smoothing_rows(a: &BlockCsr, blocks: &[f32], x: &[Vec3], y: &mut [Vec3], first: usize) {
+    for (k, yi) in y.iter_mut().enumerate() {
+        let i = first + k;
+        let lo = a.row_offsets[i] as usize;
+        let hi = a.row_offsets[i + 1] as usize;
+        let mut acc = [0.0f64; 4];
+        for (p, &c) in (lo..hi).zip(&a.col_indices[lo..hi]) {
+            let v = &x[c as usize];
+            let b = &blocks[9 * p..9 * p + 12];
+            for (d, xd) in [v.x, v.y, v.z].into_iter().enumerate() {
+                let col = &b[3 * d..3 * d + 4];
+                for l in 0..4 {
+                    acc[l] += col[l] as f64 * xd;
+                }
+            }
+        }
+        *yi = Vec3::new(acc[0], acc[1], acc[2]);
+    }
+}
+
 /// `a . b` summed in fixed chunks, in order: the same bits for any thread count.
 pub(crate) fn dot(a: &[Vec3], b: &[Vec3]) -> f64 {
     let partial: Vec<f64> = a
@@ -409,6 +467,9 @@ impl Multigrid {
             Ok(f) => Some(f),
             Err(e) => return Err(SetupError(format!("coarsest level: {e}"))),
         };
+        for level in levels.iter_mut().skip(1) {
+            level.a.blocks = Vec::new();
+        }
         let scratch = levels
             .iter()
             .map(|l| Scratch::new(l.a.num_rows()))
@@ -419,6 +480,15 @@ impl Multigrid {
             coarsest,
             scratch: std::cell::RefCell::new(scratch),
         })
+    }
+
+    /// The hierarchy as a preconditioner only: the finest level's `f64`
+    /// blocks, which only [`Multigrid::operator`] reads (the cycle reads the
+    /// single-precision copy), are dropped. `operator()` then returns the
+    /// pattern with no blocks.
+    pub(crate) fn into_preconditioner(mut self) -> Self {
+        self.levels[0].a.blocks = Vec::new();
+        self
     }
 
     /// Nodes per level, finest first.
@@ -457,7 +527,7 @@ impl Multigrid {
         x.iter_mut().for_each(|v| *v = Vec3::zeros());
         chebyshev(level, b, x, SMOOTHING_STEPS, &mut s.r, &mut s.d);
         // Residual, restricted into the coarse level's right-hand side.
-        mul(&level.a, x, &mut s.t);
+        mul_smoothing(&level.a, &level.smoothing, x, &mut s.t);
         s.t.par_iter_mut()
             .zip(b.par_iter())
             .for_each(|(ri, bi)| *ri = bi - *ri);
@@ -479,8 +549,12 @@ impl Multigrid {
 fn level_of(a: BlockCsr, mask: Vec<[bool; 3]>) -> Level {
     let inv_diag = inverse_diagonal(&a);
     let rho = spectral_radius(&a, &inv_diag, &mask);
+    let mut smoothing: Vec<f32> = Vec::with_capacity(9 * a.blocks.len() + 3);
+    smoothing.extend(a.blocks.iter().flat_map(|b| b.iter().map(|&v| v as f32)));
+    smoothing.extend([0.0; 3]);
     Level {
         a,
+        smoothing,
         inv_diag,
         rho,
         mask,
@@ -605,7 +679,7 @@ fn chebyshev(
     let sigma = theta / delta;
     let mut rho_k = 1.0 / sigma;
     let residual = |x: &[Vec3], r: &mut [Vec3]| {
-        mul(&level.a, x, r);
+        mul_smoothing(&level.a, &level.smoothing, x, r);
         r.par_iter_mut()
             .zip(b.par_iter())
             .zip(level.inv_diag.par_iter())

@@ -134,6 +134,15 @@ pub fn solve_static(
     state: &mut State,
     opts: &StaticOptions,
 ) -> Result<StaticInfo, SolverError> {
+    crate::on_worker(|| solve_static_here(problem, state, opts))
+}
+
+/// [`solve_static`], on the thread it is called on.
+fn solve_static_here(
+    problem: &Problem,
+    state: &mut State,
+    opts: &StaticOptions,
+) -> Result<StaticInfo, SolverError> {
     let model = problem.model();
     state.check_size(model)?;
     if !(opts.rtol > 0.0
@@ -237,6 +246,11 @@ pub fn solve_static(
             }
         }
         sys.lambda = lt;
+        if load_steps == 0 && rejected == 0 && previous.is_none() && trial == x_init {
+            // The first tangent is the one at the start: its hierarchy is
+            // the stability test's preconditioner.
+            linear.keep_next_hierarchy();
+        }
         let result = newton(
             &mut sys,
             &mut trial,
@@ -393,8 +407,8 @@ fn equilibrium_stability(
     let free_dofs = free.iter().filter(|f| **f).count();
     if free_dofs > super::linear::DIRECT_MAX_FREE_DOFS {
         // One matrix alive at a time besides the test's own.
-        let reference = symmetric_stiffness(sys.jacobian(x0));
         let k = symmetric_stiffness(sys.jacobian(x));
+        let reference = || symmetric_stiffness(sys.jacobian(x0));
         match linear.is_positive_definite(k, reference, free) {
             Some(true) => return Stability::Stable,
             Some(false) => return Stability::Unstable,
