@@ -185,13 +185,32 @@ fn hourglass_control_fixes_the_one_cell_beam_and_leaves_16x4x4_alone() {
         models: builtin_models(&["paper", "paper+hg", "volumetric", "volumetric+hg"]).unwrap(),
     };
     let r = beam(&s).unwrap();
-    for base in ["paper", "volumetric"] {
+    // (base, bound on the mean and on the largest error with hg, %), 10 %
+    // above what was measured: paper 25.1 / 56.9, volumetric 5.3 / 11.2.
+    for (base, bound) in [("paper", (28.0, 63.0)), ("volumetric", (6.0, 12.5))] {
         let hg = format!("{base}+hg");
+        // Without control, the one-cell beam keeps mechanisms that the
+        // lumped gravity load excites: its tangent is singular and the
+        // numbers of its solve are whatever the round-off of the
+        // factorization makes of a zero pivot (they changed 4x when the
+        // cell Jacobian was rewritten, correct to 1e-16 either way). So the
+        // test asks that the mechanisms be there without control, gone with
+        // it, and that the controlled beam be accurate.
+        let lattice = hexmesh::Lattice::block([4, 1, 1], 0.1, [0.0; 3]).unwrap();
+        let clamped: Vec<bool> = lattice.node_coords().iter().map(|c| c[0] == 0).collect();
+        let material = mss_core::Material::new(1000.0, 0.3, 0.01).unwrap();
+        let params = mss_core::Parameterizations::default();
+        let modes = |name: &str| {
+            let model =
+                mss_core::Model::new(&lattice, material, params.get(name).unwrap().as_ref())
+                    .unwrap();
+            mss_core::modes::count_zero_energy_modes(&model, &clamped).unwrap()
+        };
+        assert!(modes(base) > 0, "{base} 4x1x1 has mechanisms");
+        assert_eq!(modes(&hg), 0, "{hg} 4x1x1 has none");
         let (plain1, with1) = (stats(&r, base, 1), stats(&r, &hg, 1));
-        // Measured (M / MAX %): paper 72.1 / 191 -> 25.2 / 56.9, volumetric
-        // 15.9 / 46.7 -> 5.3 / 11.2.
         assert!(
-            with1.0 < plain1.0 / 2.5 && with1.2 < plain1.2 / 3.0,
+            with1.0 < bound.0 && with1.2 < bound.1,
             "{base} 4x1x1: {plain1:?} -> {with1:?}"
         );
         let (plain4, with4) = (stats(&r, base, 4), stats(&r, &hg, 4));
