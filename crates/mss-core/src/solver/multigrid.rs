@@ -519,13 +519,13 @@ impl Multigrid {
                 Some(Ok(sol)) => x.copy_from_slice(&sol),
                 _ => {
                     x.iter_mut().for_each(|v| *v = Vec3::zeros());
-                    chebyshev(level, b, x, 8, &mut s.r, &mut s.d);
+                    chebyshev(level, b, x, 8, &mut s.r, &mut s.d, true);
                 }
             }
             return;
         }
         x.iter_mut().for_each(|v| *v = Vec3::zeros());
-        chebyshev(level, b, x, SMOOTHING_STEPS, &mut s.r, &mut s.d);
+        chebyshev(level, b, x, SMOOTHING_STEPS, &mut s.r, &mut s.d, true);
         // Residual, restricted into the coarse level's right-hand side.
         mul_smoothing(&level.a, &level.smoothing, x, &mut s.t);
         s.t.par_iter_mut()
@@ -542,7 +542,7 @@ impl Multigrid {
         if let Some(c) = below.first_mut() {
             (c.b, c.x) = (rc, ec);
         }
-        chebyshev(level, b, x, SMOOTHING_STEPS, &mut s.r, &mut s.d);
+        chebyshev(level, b, x, SMOOTHING_STEPS, &mut s.r, &mut s.d, false);
     }
 }
 
@@ -663,7 +663,9 @@ fn prolong_add(p: &Prolongation, mask: &[[bool; 3]], ec: &[Vec3], x: &mut [Vec3]
 }
 
 /// `steps` Chebyshev iterations of block Jacobi on `A x = b`, from `x`, with
-/// work vectors `r` and `d` (one entry per node).
+/// work vectors `r` and `d` (one entry per node). `x_is_zero` says that `x`
+/// is zero: the first residual is then `b` itself, without a product (the
+/// same bits: the product of zero is zero).
 fn chebyshev(
     level: &Level,
     b: &[Vec3],
@@ -671,6 +673,7 @@ fn chebyshev(
     steps: usize,
     r: &mut [Vec3],
     d: &mut [Vec3],
+    x_is_zero: bool,
 ) {
     let hi = RHO_SAFETY * level.rho;
     let lo = hi / 30.0;
@@ -685,7 +688,14 @@ fn chebyshev(
             .zip(level.inv_diag.par_iter())
             .for_each(|((ri, bi), di)| *ri = di * (bi - *ri));
     };
-    residual(x, r);
+    if x_is_zero {
+        r.par_iter_mut()
+            .zip(b.par_iter())
+            .zip(level.inv_diag.par_iter())
+            .for_each(|((ri, bi), di)| *ri = di * bi);
+    } else {
+        residual(x, r);
+    }
     d.par_iter_mut()
         .zip(r.par_iter())
         .for_each(|(di, ri)| *di = ri / theta);
