@@ -405,12 +405,13 @@ impl LinearSolver {
         size: f64,
         rtol: f64,
     ) -> Result<Vec<Vec3>, crate::sparse::LinearSolveError> {
-        self.solve(a, b, free, size, rtol).map_err(|e| match e {
-            LinearFailure::Singular { nodes } => crate::sparse::LinearSolveError::Singular {
-                detail: format!("the solution grows without bound at nodes {nodes:?}"),
-            },
-            LinearFailure::Other(m) => crate::sparse::LinearSolveError::Library(m),
-        })
+        self.solve(a.clone(), b, free, size, rtol)
+            .map_err(|e| match e {
+                LinearFailure::Singular { nodes } => crate::sparse::LinearSolveError::Singular {
+                    detail: format!("the solution grows without bound at nodes {nodes:?}"),
+                },
+                LinearFailure::Other(m) => crate::sparse::LinearSolveError::Library(m),
+            })
     }
 
     /// Solves `A y = b` on the free dofs to a relative residual `rtol` (the
@@ -418,7 +419,7 @@ impl LinearSolver {
     /// solution above `1e6 size` means a singular matrix.
     pub(crate) fn solve(
         &mut self,
-        a: &BlockCsr,
+        a: BlockCsr,
         b: &[Vec3],
         free: &[bool],
         size: f64,
@@ -434,7 +435,7 @@ impl LinearSolver {
             LinearSolverKind::Auto => free_dofs > DIRECT_MAX_FREE_DOFS,
         };
         if !iterative || free_dofs == 0 {
-            return solve_free(&mut self.lu, a, b, free, size);
+            return solve_free(&mut self.lu, &a, b, free, size);
         }
         self.stats.iterative_solves += 1;
         if !self.shape.as_ref().is_some_and(|s| s.fits(free)) {
@@ -456,7 +457,8 @@ impl LinearSolver {
             .sum();
         let sign = if trace < 0.0 { -1.0 } else { 1.0 };
         let b_signed: Vec<Vec3> = b.iter().map(|v| v * sign).collect();
-        let op = super::multigrid::Operator::new(a, free, sign);
+        let n = a.num_rows();
+        let op = super::multigrid::Operator::from_owned_signed(a, free, sign);
         let scale = op
             .matrix()
             .blocks
@@ -464,7 +466,7 @@ impl LinearSolver {
             .map(|b| b.abs().max())
             .fold(0.0, f64::max);
         let symmetric = op.matrix().asymmetry() <= 1e-10 * scale;
-        let mut y = vec![Vec3::zeros(); a.num_rows()];
+        let mut y = vec![Vec3::zeros(); n];
         // A hierarchy is built for every matrix: reusing the previous one
         // (Newton iterations change the tangent little) was tried and lost,
         // since a stale hierarchy takes more Krylov iterations than a new
@@ -481,9 +483,6 @@ impl LinearSolver {
             info.iterations,
             info.relative_residual
         );
-        if keep && symmetric {
-            self.kept = Some(mg.into_preconditioner());
-        }
         let worst = y.iter().map(|v| v.amax()).fold(0.0, f64::max);
         let usable = info.relative_residual.is_finite()
             && worst.is_finite()
@@ -497,7 +496,9 @@ impl LinearSolver {
                 "iterative solve stalled at relative residual {:.2e}: solving directly",
                 info.relative_residual
             );
-            return solve_free(&mut self.lu, a, b, free, size);
+            // The operator is the matrix times `sign` with the held dofs
+            // decoupled: its free block is that of `sign * a`.
+            return solve_free(&mut self.lu, mg.operator().0, &b_signed, free, size);
         }
         if !usable {
             let mut order: Vec<u32> = (0..y.len() as u32).collect();
@@ -508,6 +509,9 @@ impl LinearSolver {
             order.sort_by(|&p, &q| mag(q).total_cmp(&mag(p)));
             order.truncate(8);
             return Err(LinearFailure::Singular { nodes: order });
+        }
+        if keep && symmetric {
+            self.kept = Some(mg.into_preconditioner());
         }
         Ok(y)
     }

@@ -918,7 +918,7 @@ pub fn newton(
         // Never beyond what reaches the Newton target from here.
         let eta = forcing.max(0.05 * target.max(floor) / norm).min(0.1);
         previous_norm = Some(norm);
-        let delta = match linear.solve(&jac, &neg_r, free, size, eta) {
+        let delta = match linear.solve(jac, &neg_r, free, size, eta) {
             Ok(d) => d,
             Err(linear::LinearFailure::Singular { nodes }) => {
                 return Err(NewtonFailure::Singular(nodes));

@@ -18,10 +18,13 @@
 //!   fine cell is a corner of that cell's parent. Coarse dofs whose every child
 //!   is held get an identity row.
 //! - **Smoother**: Chebyshev polynomials of the 3 x 3 block-Jacobi iteration,
-//!   on the interval `[rho/30, 1.1 rho]` with `rho` the largest eigenvalue of
+//!   on the interval `[1.5 rho / 30, 1.5 rho]` with `rho` the largest eigenvalue of
 //!   `D^-1 A` estimated by power iterations. Chebyshev needs no inner products
 //!   and updates every node from the previous iterate only, so the result is
-//!   bitwise the same for any thread count (colouring is not needed).
+//!   bitwise the same for any thread count (colouring is not needed). It
+//!   multiplies by a single-precision copy of the blocks (sums in `f64`):
+//!   the products are memory bound, and a preconditioner needs no more
+//!   digits; the Krylov method's own products use the `f64` operator.
 //! - **Coarsest level**: a sparse direct solve (LU) once it has at most
 //!   [`COARSEST_NODES`] nodes.
 //!
@@ -722,24 +725,12 @@ pub(crate) struct Operator {
 }
 
 impl Operator {
-    /// `sign * a` with the dofs not in `free` decoupled (one copy of `a`).
-    pub(crate) fn new(a: &BlockCsr, free: &[bool], sign: f64) -> Self {
-        let mask = masks_of(free);
-        let mut a = decoupled(a, &mask);
+    /// `sign * a` with the dofs not in `free` decoupled, in place (no copy).
+    pub(crate) fn from_owned_signed(mut a: BlockCsr, free: &[bool], sign: f64) -> Self {
         if sign != 1.0 {
             a.blocks.par_iter_mut().for_each(|blk| *blk *= sign);
-            // The decoupled rows stay identity.
-            for (i, m) in mask.iter().enumerate() {
-                if let Some(k) = a.find(i, i) {
-                    for (d, free) in m.iter().enumerate() {
-                        if !free {
-                            a.blocks[k][(d, d)] = 1.0;
-                        }
-                    }
-                }
-            }
         }
-        Self { a, mask }
+        Self::from_owned(a, free)
     }
 
     /// `a` with the dofs not in `free` decoupled, in place (no copy).

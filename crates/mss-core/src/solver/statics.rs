@@ -460,7 +460,7 @@ fn singular_at_rest(
         .map(|i| Vec3::new(1.0, -0.5, 0.25) * (1.0 + (i % 7) as f64))
         .collect();
     matches!(
-        linear.solve(&jac, &b, free, sys.problem.size(), 1e-8),
+        linear.solve(jac, &b, free, sys.problem.size(), 1e-8),
         Err(super::linear::LinearFailure::Singular { .. })
     )
 }
@@ -494,7 +494,7 @@ fn solve_small_strain(
     let scale = sys.residual(&x0, &mut r);
     let jac = sys.jacobian(rest);
     let neg_r: Vec<Vec3> = r.iter().map(|v| -v).collect();
-    let du = match linear.solve(&jac, &neg_r, free, problem.size(), opts.rtol) {
+    let du = match linear.solve(jac.clone(), &neg_r, free, problem.size(), opts.rtol) {
         Ok(d) => d,
         Err(super::linear::LinearFailure::Singular { nodes }) => {
             return Err(SolverError::Mechanism {
