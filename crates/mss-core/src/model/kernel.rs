@@ -426,6 +426,26 @@ fn hourglass_sign(n: usize, i: usize) -> f64 {
     corner_sign(n, (i + 1) % 3) * corner_sign(n, (i + 2) % 3)
 }
 
+/// The cell's axis sums `m_i`: the sum of its four edge vectors along axis
+/// `i` (docs/model.md step 2).
+#[inline(always)]
+fn axis_sums(x: &[V3<f64>; 8]) -> [V3<f64>; 3] {
+    let mut axis_sum = [[0.0; 3]; 3];
+    for &(a, b, ax) in &CELL_EDGES {
+        add_to(&mut axis_sum[ax], sub(x[b], x[a]));
+    }
+    axis_sum
+}
+
+/// `d a / d m = (I - a a^T) / |m|` of an axis `a = m / |m|`, given `a` and
+/// `1 / |m|`.
+#[inline(always)]
+fn axis_derivative(a: V3<f64>, inv_len: f64) -> [[f64; 3]; 3] {
+    std::array::from_fn(|e| {
+        std::array::from_fn(|d| (if e == d { 1.0 } else { 0.0 } - a[e] * a[d]) * inv_len)
+    })
+}
+
 /// The current cell axes `a_i` (normalized `axis_sum[i]`, docs/model.md step 2)
 /// and `1 / |axis_sum[i]|`.
 #[inline(always)]
@@ -557,11 +577,7 @@ pub(crate) fn cell_energy(p: &CellParams, x: &[V3<f64>; 8]) -> f64 {
             };
     }
     if p.k_hourglass != 0.0 {
-        let mut axis_sum = [[0.0; 3]; 3];
-        for &(a, b, ax) in &CELL_EDGES {
-            add_to(&mut axis_sum[ax], sub(x[b], x[a]));
-        }
-        let (axes, _) = cell_axes(&axis_sum);
+        let (axes, _) = cell_axes(&axis_sums(x));
         let (_, q) = hourglass_amplitudes(x, &axes);
         e += 0.5 * p.k_hourglass * dot(q, q);
     }
@@ -610,8 +626,13 @@ fn skew(v: V3<f64>) -> [[f64; 3]; 3] {
 ///   with `u = m / |m|`, `P = I - u u^T` and `w = P g`.
 pub(crate) fn cell_jacobian_closed_form(p: &CellParams, x: &[V3<f64>; 8]) -> [[f64; 24]; 24] {
     let mut jac = [[0.0; 24]; 24];
+    // The springs' forces, for the corrections (built from them).
+    let mut spring_forces = [[0.0; 3]; 8];
     let mut spring_block = |k: f64, rest: f64, a: usize, b: usize| {
         let d = sub(x[b], x[a]);
+        if p.correction.is_some() {
+            spring(k, rest, d, a, b, &mut spring_forces);
+        }
         let l2 = dot(d, d);
         let l = l2.sqrt();
         let along = rest / (l * l2);
@@ -630,8 +651,16 @@ pub(crate) fn cell_jacobian_closed_form(p: &CellParams, x: &[V3<f64>; 8]) -> [[f
     for &(a, b) in &CELL_DIAGONALS {
         spring_block(p.k_diag, p.rest_diag, a, b);
     }
-    if let Some(corr) = &p.correction {
-        add_correction_jacobian(p, corr, x, &mut jac);
+    // The current axes and their derivatives serve both the corrections and
+    // the hourglass control.
+    let axes = (p.correction.is_some() || p.k_hourglass != 0.0).then(|| {
+        let (axes, inv_len) = cell_axes(&axis_sums(x));
+        let turn: [[[f64; 3]; 3]; 3] =
+            std::array::from_fn(|i| axis_derivative(axes[i], inv_len[i]));
+        (axes, inv_len, turn)
+    });
+    if let (Some(corr), Some((axes, _, turn))) = (&p.correction, &axes) {
+        add_correction_jacobian(corr, &spring_forces, axes, turn, &mut jac);
     }
     if p.vol_lambda_h3 != 0.0 {
         let (cols, det) = deformation_gradient(x, p.grad_scale);
@@ -694,26 +723,19 @@ pub(crate) fn cell_jacobian_closed_form(p: &CellParams, x: &[V3<f64>; 8]) -> [[f
             }
         }
     }
-    if p.k_hourglass != 0.0 {
-        let mut axis_sum = [[0.0; 3]; 3];
-        for &(a, b, ax) in &CELL_EDGES {
-            add_to(&mut axis_sum[ax], sub(x[b], x[a]));
-        }
-        let (axes, inv_len) = cell_axes(&axis_sum);
-        let (g, q) = hourglass_amplitudes(x, &axes);
+    if let (true, Some((axes, inv_len, turn))) = (p.k_hourglass != 0.0, &axes) {
+        let (g, q) = hourglass_amplitudes(x, axes);
         for i in 0..3 {
             let u = axes[i];
             let il = inv_len[i];
-            let proj: [[f64; 3]; 3] = std::array::from_fn(|e| {
-                std::array::from_fn(|d| if e == d { 1.0 } else { 0.0 } - u[e] * u[d])
-            });
             let w = sub(g[i], mul_s(u, q[i]));
-            // d^2 q / dm^2 and d^2 q / dm dg.
+            // d^2 q / dm dg = P / |m| (the axis derivative) and d^2 q / dm^2.
+            let qmg = &turn[i];
             let qmm: [[f64; 3]; 3] = std::array::from_fn(|e| {
-                std::array::from_fn(|d| -(u[e] * w[d] + w[e] * u[d] + q[i] * proj[e][d]) * il * il)
+                std::array::from_fn(|d| {
+                    -(u[e] * w[d] + w[e] * u[d]) * il * il - q[i] * qmg[e][d] * il
+                })
             });
-            let qmg: [[f64; 3]; 3] =
-                std::array::from_fn(|e| std::array::from_fn(|d| proj[e][d] * il));
             // m_i = sum_n s_i(n) x_n (every corner ends one of the four edges
             // along i), g_i = 1/8 sum_n s_j s_k(n) x_n.
             let side = |n: usize| corner_sign(n, i);
@@ -744,7 +766,9 @@ pub(crate) fn cell_jacobian_closed_form(p: &CellParams, x: &[V3<f64>; 8]) -> [[f
 }
 
 /// Adds the derivative of the correction forces to `jac`, which holds the
-/// springs' Jacobian (the corrections are built from the springs' forces).
+/// springs' Jacobian (the corrections are built from the springs' forces
+/// `f`), given the current axes and their derivatives `dproj`
+/// ([`axis_derivative`]).
 ///
 /// The correction on node `n` is `sum_j s_j(n) beta_j a_j` with
 /// `beta = C t`, `C = -(c/4) (1 1^T - I) M^-1` and `t_i = a_i . S_i / 2`,
@@ -754,22 +778,12 @@ pub(crate) fn cell_jacobian_closed_form(p: &CellParams, x: &[V3<f64>; 8]) -> [[f
 // Node, axis and component indices run over several arrays at once.
 #[allow(clippy::needless_range_loop)]
 fn add_correction_jacobian(
-    p: &CellParams,
     corr: &Correction,
-    x: &[V3<f64>; 8],
+    f: &[V3<f64>; 8],
+    axes: &[V3<f64>; 3],
+    dproj: &[[[f64; 3]; 3]; 3],
     jac: &mut [[f64; 24]; 24],
 ) {
-    let mut f = [[0.0; 3]; 8];
-    let mut axis_sum = [[0.0; 3]; 3];
-    for &(a, b, ax) in &CELL_EDGES {
-        let d = sub(x[b], x[a]);
-        add_to(&mut axis_sum[ax], d);
-        spring(p.k_edge, p.rest_edge, d, a, b, &mut f);
-    }
-    for &(a, b) in &CELL_DIAGONALS {
-        spring(p.k_diag, p.rest_diag, sub(x[b], x[a]), a, b, &mut f);
-    }
-    let (axes, inv_len) = cell_axes(&axis_sum);
     let mut sums = [[0.0; 3]; 3];
     for (i, si) in sums.iter_mut().enumerate() {
         for (n, fn_) in f.iter().enumerate() {
@@ -785,13 +799,6 @@ fn add_correction_jacobian(
         std::array::from_fn(|k| q * (0..3).filter(|&i| i != j).map(|i| m[i][k]).sum::<f64>())
     });
     let beta: [f64; 3] = std::array::from_fn(|j| dot(cmat[j], t));
-    // P_i / |m_i| = d a_i / d m_i.
-    let dproj: [[[f64; 3]; 3]; 3] = std::array::from_fn(|i| {
-        let u = axes[i];
-        std::array::from_fn(|e| {
-            std::array::from_fn(|d| (if e == d { 1.0 } else { 0.0 } - u[e] * u[d]) * inv_len[i])
-        })
-    });
     // grad_t[i][mm] = d t_i / d x_mm.
     let mut grad_t = [[[0.0; 3]; 8]; 3];
     for i in 0..3 {

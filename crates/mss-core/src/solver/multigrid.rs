@@ -494,6 +494,11 @@ impl Multigrid {
         self
     }
 
+    /// Free-dof mask of the finest level, per node.
+    pub(crate) fn mask(&self) -> &[[bool; 3]] {
+        &self.levels[0].mask
+    }
+
     /// Nodes per level, finest first.
     pub(crate) fn level_sizes(&self) -> Vec<usize> {
         self.levels.iter().map(|l| l.a.num_rows()).collect()
@@ -973,7 +978,7 @@ const DEFINITENESS_STEPS: (usize, usize) = (15, 200);
 /// A positive one is accepted once its residual is small against it and it
 /// has settled. Deterministic (fixed start vector, fixed-order sums).
 pub(crate) fn definiteness(a: &BlockCsr, mg: &Multigrid) -> (Definiteness, f64) {
-    let (_, mask) = mg.operator();
+    let mask = mg.mask();
     let n = a.num_rows();
     let masked = |v: &mut [Vec3]| zero_held(v, mask);
     let mut v = crate::model::frequency::start_vector(n);

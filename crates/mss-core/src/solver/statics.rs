@@ -246,7 +246,7 @@ fn solve_static_here(
             }
         }
         sys.lambda = lt;
-        if load_steps == 0 && rejected == 0 && previous.is_none() && trial == x_init {
+        if load_steps == 0 && trial == x_init {
             // The first tangent is the one at the start: its hierarchy is
             // the stability test's preconditioner.
             linear.keep_next_hierarchy();
