@@ -7,6 +7,9 @@
 
 use std::time::Instant;
 
+mod common;
+use common::cpu_seconds;
+
 use mss_core::contact::{Contact, ContactSettings, Plane};
 use mss_core::loads::{Damping, LoadSpec};
 use mss_core::model::{HourglassControl, VolumetricBarrier};
@@ -55,19 +58,28 @@ fn main() {
     let frame = 1.0 / 60.0;
     let mut times = Vec::new();
     let mut substeps = 0;
-    for k in 0..120 {
+    let frames = 120;
+    let cpu_start = cpu_seconds();
+    for k in 0..frames {
         let phase = k as f64 * frame * std::f64::consts::TAU * 0.5;
         sim.drag_to(start + Vec3::new(0.03 * phase.sin(), 0.0, 0.02));
         let t = Instant::now();
         let info = sim.step(frame).expect("step");
         times.push(t.elapsed().as_secs_f64() * 1e3);
+        if std::env::var_os("FRAMES").is_some() {
+            eprintln!(
+                "frame {k}: {:.1} ms, {} sub-steps",
+                times[k as usize], info.substeps
+            );
+        }
         substeps = info.substeps;
     }
+    let cpu_per_frame = (cpu_seconds() - cpu_start) / f64::from(frames) * 1e3;
     times.sort_by(f64::total_cmp);
     let mean = times.iter().sum::<f64>() / times.len() as f64;
     println!(
         "{cells} cells, E = {young} Pa, {} threads: frame of 1/60 s in {substeps} sub-steps; \
-         frame time mean {mean:.1} ms, median {:.1} ms, max {:.1} ms (target 16 ms)",
+         frame time mean {mean:.1} ms, median {:.1} ms, max {:.1} ms; CPU {cpu_per_frame:.1} ms per frame (target 16 ms)",
         rayon::current_num_threads(),
         times[times.len() / 2],
         times[times.len() - 1]

@@ -27,6 +27,9 @@
 //! `k d dn/dx` on curved obstacles) and for friction, sticking or sliding,
 //! including the turning of the normal; damping adds `-(c / dt) n n^T` in
 //! implicit steps (its dependence on the normal's turning is left out).
+//! The explicit integrator uses them too: it updates each touching node
+//! implicitly ([`Contact::node_point_force`], [`crate::solver::Explicit`]),
+//! so that contact, however stiff, does not limit its step.
 //!
 //! ```
 //! use mss_core::contact::{Contact, ContactSettings, Plane};
@@ -478,10 +481,12 @@ pub struct ContactSettings {
     pub damping_ratio: f64,
 }
 
-/// Default contact frequency as a fraction of the lattice's highest one:
-/// a resting body sinks by `g / omega^2` (micrometres), and the explicit
-/// step, which resolves contact twice as finely ([`crate::solver::CONTACT_RESOLUTION`]),
-/// shrinks by about 1.7.
+/// Default contact frequency as a fraction of the bound of the lattice's
+/// highest one: a resting body sinks by `g / omega^2` (micrometres), and a
+/// pressing obstacle sinks into it by a fraction of the indentation. The
+/// explicit step integrates node contact implicitly, so this stiffness does
+/// not shorten it; contact of surface vertices does, by about 1.7
+/// ([`crate::solver::CONTACT_RESOLUTION`]).
 pub const DEFAULT_FREQUENCY_FRACTION: f64 = 0.7;
 
 /// Mean mass of the boundary nodes (kg).
@@ -584,6 +589,14 @@ pub struct Contact {
     /// Contact's part of `omega_max^2` per unit of `stiffness` (1/(s^2 N/m)):
     /// the largest Gershgorin row sum of the mapped stiffness over a node's mass.
     omega_sq_per_stiffness: f64,
+    /// The same, of the surface points alone.
+    surface_omega_sq_per_stiffness: f64,
+    /// The same, of the node points alone.
+    node_omega_sq_per_stiffness: f64,
+    /// Points that are nodes.
+    node_points: Vec<u32>,
+    /// Points that are surface vertices.
+    surface_points: Vec<u32>,
 }
 
 /// One point's force from one obstacle, and what friction did.
@@ -656,23 +669,33 @@ impl Contact {
         }
         // Gershgorin: a point of stiffness k couples its nodes a, b by
         // w_a w_b k; node a's row sums |w_a| (sum_b |w_b|) k over its points.
-        let mut rows = vec![0.0f64; model.num_nodes()];
-        for p in &points {
-            let total: f64 = p.bound().map(|(_, w)| w.abs()).sum();
-            for (n, w) in p.bound() {
-                rows[n] += w.abs() * total * p.stiffness_ratio;
+        let bound = |keep: fn(&Point) -> bool| {
+            let mut rows = vec![0.0f64; model.num_nodes()];
+            for p in points.iter().filter(|p| keep(p)) {
+                let total: f64 = p.bound().map(|(_, w)| w.abs()).sum();
+                for (n, w) in p.bound() {
+                    rows[n] += w.abs() * total * p.stiffness_ratio;
+                }
             }
-        }
-        let omega_sq_per_stiffness = rows
-            .iter()
-            .zip(masses)
-            .filter(|(_, m)| **m > 0.0)
-            .map(|(r, m)| r / m)
-            .fold(0.0, f64::max);
+            rows.iter()
+                .zip(masses)
+                .filter(|(_, m)| **m > 0.0)
+                .map(|(r, m)| r / m)
+                .fold(0.0, f64::max)
+        };
+        let omega_sq_per_stiffness = bound(|_| true);
+        let surface_omega_sq_per_stiffness = bound(|p| p.len > 1);
+        let node_omega_sq_per_stiffness = bound(|p| p.len == 1);
+        let (node_points, surface_points) =
+            (0..points.len() as u32).partition(|&i| points[i as usize].len == 1);
         Self {
             obstacles,
             points,
             omega_sq_per_stiffness,
+            surface_omega_sq_per_stiffness,
+            node_omega_sq_per_stiffness,
+            node_points,
+            surface_points,
         }
     }
 
@@ -700,12 +723,26 @@ impl Contact {
     /// What contact adds to `omega_max^2` (1/s^2): a Gershgorin bound of
     /// the contact stiffness over the nodes' masses.
     pub fn omega_sq(&self) -> f64 {
-        let k = self
-            .obstacles
+        self.max_stiffness() * self.omega_sq_per_stiffness
+    }
+
+    /// What the surface points alone add to `omega_max^2` (1/s^2): the part
+    /// the explicit step integrates explicitly ([`Contact::surface_points`]).
+    pub fn surface_omega_sq(&self) -> f64 {
+        self.max_stiffness() * self.surface_omega_sq_per_stiffness
+    }
+
+    /// The highest contact frequency squared of a node point (1/s^2): what
+    /// the implicit node updates of the explicit step have to integrate.
+    pub fn node_omega_sq(&self) -> f64 {
+        self.max_stiffness() * self.node_omega_sq_per_stiffness
+    }
+
+    fn max_stiffness(&self) -> f64 {
+        self.obstacles
             .iter()
             .map(|(_, s)| s.stiffness)
-            .fold(0.0, f64::max);
-        k * self.omega_sq_per_stiffness
+            .fold(0.0, f64::max)
     }
 
     fn touch(
@@ -769,15 +806,131 @@ impl Contact {
         anchors: &[Option<Vec3>],
         f: &mut [Vec3],
     ) {
+        for i in 0..self.points.len() {
+            self.add_point_forces(i, t, x, v, anchors, f);
+        }
+    }
+
+    /// Indices of the points that are lattice nodes (the explicit
+    /// integrator treats their contact implicitly, node by node).
+    pub fn node_points(&self) -> &[u32] {
+        &self.node_points
+    }
+
+    /// Indices of the points that are embedded-surface vertices (integrated
+    /// explicitly: they share their force among 8 nodes).
+    pub fn surface_points(&self) -> &[u32] {
+        &self.surface_points
+    }
+
+    /// The node of a node point (see [`Contact::node_points`]); for a
+    /// surface vertex, the first of its cell's nodes.
+    pub fn point_node(&self, i: u32) -> u32 {
+        self.points[i as usize].nodes[0]
+    }
+
+    /// The force (N) on node point `i` at position `x` and velocity `v`
+    /// (both absolute) at time `t`, summed over the obstacles it is inside,
+    /// and, if `jacobian`, its derivative with respect to `x` when `v`
+    /// follows `x` as `dv/dx = dv_dx` (as in [`Contact::add_jacobian`];
+    /// zero otherwise); `None` when it touches nothing.
+    #[allow(clippy::too_many_arguments)]
+    pub fn node_point_force(
+        &self,
+        i: u32,
+        t: f64,
+        x: Vec3,
+        v: Vec3,
+        dv_dx: f64,
+        anchors: &[Option<Vec3>],
+        jacobian: bool,
+    ) -> Option<(Vec3, Mat3)> {
+        let i = i as usize;
         let nobs = self.obstacles.len();
-        for (i, point) in self.points.iter().enumerate() {
-            let (xp, vp) = (point.position(x), point.position(v));
-            for j in 0..nobs {
-                let k = i * nobs + j;
-                if let Some((touch, _)) = self.touch(i, j, t, xp, vp, Self::anchor_of(anchors, k)) {
-                    for (n, w) in point.bound() {
-                        f[n] += touch.force * w;
-                    }
+        let mut total: Option<(Vec3, Mat3)> = None;
+        for j in 0..nobs {
+            let anchor = Self::anchor_of(anchors, i * nobs + j);
+            if let Some((touch, pen)) = self.touch(i, j, t, x, v, anchor) {
+                let (f, d) = total.get_or_insert((Vec3::zeros(), Mat3::zeros()));
+                *f += touch.force;
+                if jacobian {
+                    *d += self.touch_jacobian(i, j, &touch, &pen, dv_dx);
+                }
+            }
+        }
+        total
+    }
+
+    /// `d(force)/dx` of one touch of point `i` with obstacle `j`.
+    fn touch_jacobian(
+        &self,
+        i: usize,
+        j: usize,
+        touch: &Touch,
+        pen: &Penetration,
+        dv_dx: f64,
+    ) -> Mat3 {
+        let point = &self.points[i];
+        let s = &self.obstacles[j].1;
+        let stiffness = s.stiffness * point.stiffness_ratio;
+        let nn = touch.normal * touch.normal.transpose();
+        let c = 2.0 * s.damping_ratio * (stiffness * point.mass).sqrt();
+        // Normal force: -k n n^T + k d dn/dx, damping -(c dv/dx) n n^T.
+        let mut block =
+            -nn * (stiffness + c * dv_dx) + pen.normal_gradient * (stiffness * pen.depth);
+        // d(delta)/dx for delta = d - n (n . d): the tangent
+        // projector, and the turning of n on a curved obstacle.
+        let (n, d) = (touch.normal, touch.offset);
+        let g = pen.normal_gradient;
+        let d_delta = Mat3::identity() - nn - g * n.dot(&d) - n * (d.transpose() * g);
+        if touch.sliding {
+            let len = touch.delta.norm();
+            if len > 0.0 {
+                let dir = touch.delta / len;
+                let f_n = touch.force.dot(&n);
+                let mu = s.friction_kinetic;
+                // -mu f_n d(dir)/dx - mu dir (d f_n / dx).
+                block -= (Mat3::identity() - dir * dir.transpose()) * d_delta * (mu * f_n / len);
+                block += dir * n.transpose() * (mu * (stiffness + c * dv_dx));
+            }
+        } else {
+            block -= d_delta * stiffness;
+        }
+        block
+    }
+
+    /// [`Contact::add_forces`] of the points `which` only.
+    pub fn add_forces_of(
+        &self,
+        which: &[u32],
+        t: f64,
+        x: &[Vec3],
+        v: &[Vec3],
+        anchors: &[Option<Vec3>],
+        f: &mut [Vec3],
+    ) {
+        for &i in which {
+            self.add_point_forces(i as usize, t, x, v, anchors, f);
+        }
+    }
+
+    fn add_point_forces(
+        &self,
+        i: usize,
+        t: f64,
+        x: &[Vec3],
+        v: &[Vec3],
+        anchors: &[Option<Vec3>],
+        f: &mut [Vec3],
+    ) {
+        let nobs = self.obstacles.len();
+        let point = &self.points[i];
+        let (xp, vp) = (point.position(x), point.position(v));
+        for j in 0..nobs {
+            let k = i * nobs + j;
+            if let Some((touch, _)) = self.touch(i, j, t, xp, vp, Self::anchor_of(anchors, k)) {
+                for (n, w) in point.bound() {
+                    f[n] += touch.force * w;
                 }
             }
         }
@@ -805,32 +958,7 @@ impl Contact {
                 else {
                     continue;
                 };
-                let s = &self.obstacles[j].1;
-                let stiffness = s.stiffness * point.stiffness_ratio;
-                let nn = touch.normal * touch.normal.transpose();
-                let c = 2.0 * s.damping_ratio * (stiffness * point.mass).sqrt();
-                // Normal force: -k n n^T + k d dn/dx, damping -(c dv/dx) n n^T.
-                let mut block =
-                    -nn * (stiffness + c * dv_dx) + pen.normal_gradient * (stiffness * pen.depth);
-                // d(delta)/dx for delta = d - n (n . d): the tangent
-                // projector, and the turning of n on a curved obstacle.
-                let (n, d) = (touch.normal, touch.offset);
-                let g = pen.normal_gradient;
-                let d_delta = Mat3::identity() - nn - g * n.dot(&d) - n * (d.transpose() * g);
-                if touch.sliding {
-                    let len = touch.delta.norm();
-                    if len > 0.0 {
-                        let dir = touch.delta / len;
-                        let f_n = touch.force.dot(&n);
-                        let mu = s.friction_kinetic;
-                        // -mu f_n d(dir)/dx - mu dir (d f_n / dx).
-                        block -=
-                            (Mat3::identity() - dir * dir.transpose()) * d_delta * (mu * f_n / len);
-                        block += dir * n.transpose() * (mu * (stiffness + c * dv_dx));
-                    }
-                } else {
-                    block -= d_delta * stiffness;
-                }
+                let block = self.touch_jacobian(i, j, &touch, &pen, dv_dx);
                 // The point moves with its nodes by their weights.
                 for (a, wa) in point.bound() {
                     for (b, wb) in point.bound() {
@@ -850,32 +978,63 @@ impl Contact {
         if anchors.len() != self.num_anchors() {
             *anchors = vec![None; self.num_anchors()];
         }
+        for i in 0..self.points.len() {
+            self.update_point_anchors(i, t, x, v, anchors);
+        }
+    }
+
+    /// [`Contact::update_anchors`] of the points `which` only; the others'
+    /// anchors are left as they are (`anchors` is resized, to `None`s, if
+    /// needed).
+    pub fn update_anchors_of(
+        &self,
+        which: &[u32],
+        t: f64,
+        x: &[Vec3],
+        v: &[Vec3],
+        anchors: &mut Vec<Option<Vec3>>,
+    ) {
+        if anchors.len() != self.num_anchors() {
+            *anchors = vec![None; self.num_anchors()];
+        }
+        for &i in which {
+            self.update_point_anchors(i as usize, t, x, v, anchors);
+        }
+    }
+
+    fn update_point_anchors(
+        &self,
+        i: usize,
+        t: f64,
+        x: &[Vec3],
+        v: &[Vec3],
+        anchors: &mut [Option<Vec3>],
+    ) {
         let nobs = self.obstacles.len();
-        for (i, point) in self.points.iter().enumerate() {
-            let (xp, vp) = (point.position(x), point.position(v));
-            for j in 0..nobs {
-                let k = i * nobs + j;
-                let offset = self.obstacles[j].0.offset(t);
-                let anchor = Self::anchor_of(anchors, k);
-                anchors[k] = match self.touch(i, j, t, xp, vp, anchor) {
-                    None => None,
-                    Some(_) if anchor.is_none() => Some(xp - offset),
-                    Some((touch, _)) if touch.sliding => {
-                        let s = &self.obstacles[j].1;
-                        let f_n = touch.force.dot(&touch.normal).max(0.0);
-                        let len = touch.delta.norm();
-                        let k_p = s.stiffness * point.stiffness_ratio;
-                        let back = if len > 0.0 {
-                            touch.delta * ((s.friction_kinetic * f_n / k_p) / len)
-                        } else {
-                            Vec3::zeros()
-                        };
-                        Some(xp - back - offset)
-                    }
-                    // Sticking: the anchor stays.
-                    Some(_) => anchors[k],
-                };
-            }
+        let point = &self.points[i];
+        let (xp, vp) = (point.position(x), point.position(v));
+        for j in 0..nobs {
+            let k = i * nobs + j;
+            let offset = self.obstacles[j].0.offset(t);
+            let anchor = Self::anchor_of(anchors, k);
+            anchors[k] = match self.touch(i, j, t, xp, vp, anchor) {
+                None => None,
+                Some(_) if anchor.is_none() => Some(xp - offset),
+                Some((touch, _)) if touch.sliding => {
+                    let s = &self.obstacles[j].1;
+                    let f_n = touch.force.dot(&touch.normal).max(0.0);
+                    let len = touch.delta.norm();
+                    let k_p = s.stiffness * point.stiffness_ratio;
+                    let back = if len > 0.0 {
+                        touch.delta * ((s.friction_kinetic * f_n / k_p) / len)
+                    } else {
+                        Vec3::zeros()
+                    };
+                    Some(xp - back - offset)
+                }
+                // Sticking: the anchor stays.
+                Some(_) => anchors[k],
+            };
         }
     }
 

@@ -69,25 +69,31 @@ fn mean_y(s: &State) -> f64 {
 fn a_block_on_the_ground_carries_its_weight_without_sinking() {
     let p = resting_block();
     let s = run(&p, 0.4);
+    let k = ContactSettings::for_model(p.model()).stiffness;
+    assert_rests_on_the_ground(&p, &s, k, "default");
+}
+
+/// The block at `s` carries its weight on the ground within 1 %, sideways
+/// forces cancel, no node is deeper than four times the mean load of a
+/// bottom node over the contact stiffness `k`, and it is at rest.
+fn assert_rests_on_the_ground(p: &Problem, s: &State, k: f64, what: &str) {
     let weight = p.model().total_mass() * G;
-    let f = p.contact_forces(&s);
+    let f = p.contact_forces(s);
     let total: Vec3 = f.iter().sum();
     assert!(
         (total.z - weight).abs() < 0.01 * weight,
-        "{} vs {weight}",
+        "{what}: {} vs {weight}",
         total.z
     );
-    assert!(total.x.abs() + total.y.abs() < 1e-6 * weight);
-    // No node deeper than four times the mean load of a bottom node over k.
-    let k = ContactSettings::for_model(p.model()).stiffness;
+    assert!(total.x.abs() + total.y.abs() < 1e-6 * weight, "{what}");
     let touching = f.iter().filter(|v| v.z > 0.0).count();
     let tolerance = 4.0 * weight / touching as f64 / k;
     let deepest = s.x.iter().map(|x| -x.z).fold(f64::MIN, f64::max);
     assert!(
         deepest > 0.0 && deepest < tolerance,
-        "{deepest} vs {tolerance}"
+        "{what}: {deepest} vs {tolerance}"
     );
-    assert!(s.v.iter().all(|v| v.norm() < 1e-3));
+    assert!(s.v.iter().all(|v| v.norm() < 1e-3), "{what}");
 }
 
 #[test]
@@ -206,6 +212,14 @@ fn a_sphere_pressed_in_leaves_no_node_deep_inside() {
 
 #[test]
 fn an_elastic_drop_does_not_gain_energy() {
+    // The default ground, and one 100 times stiffer (which the explicit
+    // step integrates with the same step: node contact is implicit).
+    for stiffer in [1.0, 100.0] {
+        elastic_drop(stiffer);
+    }
+}
+
+fn elastic_drop(stiffer: f64) {
     // 1 cm above the ground, no damping, no friction: the energy of the
     // bounce stays what the fall started with.
     let lattice = Lattice::block([4, 4, 2], 0.025, [0.0, 0.0, 0.01]).unwrap();
@@ -218,10 +232,10 @@ fn an_elastic_drop_does_not_gain_energy() {
     )
     .unwrap();
     let elastic = |s: ContactSettings| ContactSettings {
+        stiffness: stiffer * s.stiffness,
         friction_static: 0.0,
         friction_kinetic: 0.0,
         damping_ratio: 0.0,
-        ..s
     };
     let p = problem(
         model,
@@ -249,7 +263,76 @@ fn an_elastic_drop_does_not_gain_energy() {
         bounced |= s.v.iter().map(|v| v.z).sum::<f64>() > 0.0;
     }
     assert!(bounced, "it must have hit the ground");
-    assert!(worst < 0.05 * drop, "energy grew by {worst} J of {drop} J");
+    assert!(
+        worst < 0.05 * drop,
+        "ground {stiffer} x stiffer: energy grew by {worst} J of {drop} J"
+    );
+}
+
+/// Contact of the nodes is implicit in the explicit step: at the default
+/// stiffness it does not shorten the step at all; 100 times stiffer, the
+/// step resolves it (NODE_CONTACT_ANGLE), still twice as long as explicit
+/// contact allows, and a block rests at its equilibrium with either scheme;
+/// contact of embedded-surface vertices is explicit and shortens the step.
+#[test]
+fn node_contact_does_not_limit_the_explicit_step() {
+    use mss_core::contact::ContactPoints;
+    use mss_core::solver::{ExplicitScheme, NODE_CONTACT_ANGLE, explicit_time_step_limit};
+    let down = Vec3::new(0.0, 0.0, -G);
+    let gravity = [LoadSpec::Gravity { g: down.into() }];
+    let lattice_only = Problem::from_specs(block(0.0), &[], &gravity, mass_damping(30.0)).unwrap();
+    let limit = explicit_time_step_limit(&lattice_only, 0.9);
+    let p = resting_block();
+    assert_eq!(explicit_time_step_limit(&p, 0.9), limit);
+    let stiff = |s: ContactSettings| ContactSettings {
+        stiffness: 100.0 * s.stiffness,
+        ..s
+    };
+    let p = problem(block(0.0), down, ground(), stiff, mass_damping(30.0), &[]);
+    let contact = p.contact().unwrap();
+    let stiff_limit = explicit_time_step_limit(&p, 0.9);
+    assert_eq!(
+        stiff_limit,
+        NODE_CONTACT_ANGLE / contact.node_omega_sq().sqrt()
+    );
+    // Explicit contact: the lattice and contact frequencies together, the
+    // contact's twice over (mss_core::solver::CONTACT_RESOLUTION).
+    let w_lattice = 2.0 / p.model().critical_time_step();
+    let explicit = 0.9 * 2.0 / (w_lattice.powi(2) + 4.0 * contact.omega_sq()).sqrt();
+    assert!(stiff_limit > 2.0 * explicit, "{stiff_limit} vs {explicit}");
+    let k = stiff(ContactSettings::for_model(p.model())).stiffness;
+    for scheme in [
+        ExplicitScheme::VelocityVerlet,
+        ExplicitScheme::SymplecticEuler,
+    ] {
+        let opts = ExplicitOptions {
+            scheme,
+            ..ExplicitOptions::default()
+        };
+        let mut it = Explicit::new(&p, opts).unwrap();
+        assert_eq!(it.dt(), stiff_limit);
+        let mut s = State::at_rest(p.model());
+        while s.time < 0.4 {
+            it.step(&p, &mut s).unwrap();
+        }
+        assert_rests_on_the_ground(&p, &s, k, &format!("{scheme:?}"));
+    }
+    // The same block touching with its embedded surface's vertices.
+    let model = block(0.0);
+    let surface = hexmesh::generate::box_mesh([0.001, 0.001, 0.001], [0.099, 0.099, 0.049]);
+    let lattice = Lattice::block([4, 4, 2], 0.025, [0.0; 3]).unwrap();
+    let embedding = hexmesh::Embedding::new(&lattice, &surface);
+    let settings = ContactSettings::for_model(&model);
+    let contact = Contact::with_points(
+        &model,
+        vec![(ground(), settings)],
+        ContactPoints::Surface,
+        Some(&embedding),
+    );
+    let p = Problem::from_specs(model, &[], &gravity, mass_damping(30.0))
+        .unwrap()
+        .with_contact(contact);
+    assert!(explicit_time_step_limit(&p, 0.9) < 0.8 * limit);
 }
 
 #[test]

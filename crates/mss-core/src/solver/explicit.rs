@@ -7,15 +7,37 @@
 //! stability bound of symplectic Euler for a damped oscillator, which reduces
 //! to `safety * 2 / w` without damping.
 //!
+//! **Contact of the lattice's nodes is implicit, node by node.** A contact
+//! spring is as stiff as the lattice's stiffest mode (it must be, or a
+//! pressing obstacle sinks into the body), so integrated explicitly it
+//! would set the step, and twice over, since an explicit step has to
+//! resolve each contact oscillation for an elastic bounce to keep its
+//! energy. But a node's contact force depends on that node alone, so its
+//! implicit update is a 3 x 3 Newton solve: with velocity Verlet, the node's
+//! position follows the trapezoidal rule in its contact force,
+//! `x1 = x0 + dt v0 + dt^2 / 2m (F0 + (G0 + G1) / 2)` (Newmark's average
+//! acceleration in `G`, central differences in the lattice's `F`; `G1`
+//! at `x1`, its damping at the chord velocity `(x1 - x0) / dt`), and the
+//! kicks use `G0` and `G1`; with symplectic Euler, backward Euler in `G`.
+//! Such implicit-explicit partitions are stable whenever the explicit part
+//! is on its own (Hughes and Liu 1978), the trapezoidal part keeps a
+//! linear spring's energy, and a body at rest sits at the exact
+//! equilibrium. So node contact does not shorten the step at all. The
+//! points of the embedded surface share their force among 8 nodes; they stay
+//! explicit and count in the limit, their frequency
+//! [`CONTACT_RESOLUTION`] times over.
+//!
 //! The limit holds at rest. As a body deforms its stiffness changes (the
 //! barrier of `volumetric-barrier` stiffens compressed cells, folding
 //! springs stiffen transversally), and a step that was stable can stop being
 //! so. [`Explicit`] therefore controls its sub-step. At every check it
 //! estimates how much the stiffness has grown ([`Model::stiffness_growth`])
-//! and, from the next step on, halves the sub-step until it is below the
-//! limit at rest divided by the square root of that growth, less half the
-//! safety margin (up to
-//! [`MAX_GROWTH_HALVINGS`] times). And when a step fails its
+//! and, from the next step on, takes as many sub-steps as keep the sub-step
+//! below the limit at rest divided by the square root of that growth, less
+//! half the safety margin (at most `2^`[`MAX_GROWTH_HALVINGS`] times those
+//! at rest; any count, not a power of two, so that a little growth costs a
+//! little), and gives fewer back after [`CALM_CHECKS`] calm checks. And
+//! when a step fails its
 //! checks (non-finite values, a cell deforming by a quarter of its size in
 //! one sub-step, an inverted cell), it goes back to the state at the start
 //! of that step and takes it again with the sub-step halved, up to
@@ -29,39 +51,58 @@
 //!
 //! Steps do not allocate: forces, damping products and the last-good snapshot
 //! live in buffers owned by [`Explicit`]. Node updates run in parallel over
-//! fixed-size chunks with no reduction other than a logical AND, so results are
-//! bitwise identical for any number of threads (the model's force gather is
-//! deterministic too).
+//! fixed-size chunks with no reduction other than a logical AND, and the
+//! contact updates visit the touching nodes in a fixed order on one thread, so
+//! results are bitwise identical for any number of threads (the model's
+//! force gather is deterministic too).
 
 use rayon::prelude::*;
 
 use super::{
     Divergence, EXPLICIT_HINT, Integrator, Problem, SolverError, State, StepInfo, check_inverted,
 };
+use crate::contact::Contact;
 use crate::model::ForceWorkspace;
 use crate::{BlockCsr, Model, Vec3};
 
 /// Nodes per parallel task.
 const CHUNK: usize = 1024;
 
-/// How much finer than its stability limit the explicit step resolves a
-/// contact oscillation (see [`explicit_time_step_limit`]).
+/// How much finer than its stability limit the explicit step resolves the
+/// contact oscillation of an embedded-surface vertex (see
+/// [`explicit_time_step_limit`]).
 pub const CONTACT_RESOLUTION: f64 = 2.0;
 
 /// How many times a failing step is retried with its sub-step halved.
 pub const MAX_HALVINGS: u32 = 5;
 
-/// How many times the sub-step is halved, at most, for the estimated growth
-/// of the stiffness.
+/// How many times, at most, the estimated growth of the stiffness may
+/// halve the sub-step (its sub-steps grow to at most `2^this` times those
+/// of the limit at rest).
 pub const MAX_GROWTH_HALVINGS: u32 = 8;
 
-/// Consecutive checks asking for fewer growth halvings before one is undone.
+/// Consecutive checks asking for fewer sub-steps than the growth of the
+/// stiffness is given before it is given fewer (halfway down to the last
+/// one's wish).
 pub const CALM_CHECKS: u32 = 5;
+
+/// The most halvings a failure can put in force: one more than the most
+/// the other reasons can.
+const MOST_HALVINGS: u32 = 1 + if MAX_HALVINGS > MAX_GROWTH_HALVINGS {
+    MAX_HALVINGS
+} else {
+    MAX_GROWTH_HALVINGS
+};
+
+/// `substeps` sub-steps halved `k` times: `substeps << k`, saturated.
+fn halved(substeps: u32, k: u32) -> u32 {
+    u32::try_from(u64::from(substeps) << k.min(32)).unwrap_or(u32::MAX)
+}
 
 /// How an attempt at a step ended.
 enum Attempt {
     Done,
-    /// The stiffness grew: the step needs this many growth halvings.
+    /// The stiffness grew: the step needs this many sub-steps.
     Stiffer(u32),
     Failed(Divergence),
 }
@@ -123,25 +164,50 @@ pub fn explicit_time_step_limit(problem: &Problem, safety: f64) -> f64 {
     let w = (w_model_sq + w_contact_sq).sqrt();
     let d = problem.damping();
     let c = d.alpha + d.beta * w * w;
-    safety * 4.0 / ((c * c + 4.0 * w * w).sqrt() + c)
+    let limit = safety * 4.0 / ((c * c + 4.0 * w * w).sqrt() + c);
+    // The implicit node contact keeps any spring stable, but a one-sided
+    // spring that the trapezoidal rule crosses in fewer than about three
+    // steps per radian gains energy at its kink (an elastic bounce comes
+    // back higher): contact far stiffer than the lattice is resolved.
+    let w_node = problem.contact().map_or(0.0, |c| c.node_omega_sq().sqrt());
+    if w_node * limit > NODE_CONTACT_ANGLE {
+        NODE_CONTACT_ANGLE / w_node
+    } else {
+        limit
+    }
 }
+
+/// The largest phase `omega dt` of a node's contact oscillation per
+/// explicit step (rad). Measured on an undamped bounce (docs/solvers.md): at
+/// the default contact stiffness (about 1.5 there) no energy is gained; at
+/// 2, with contact up to 100 times stiffer, at most about 15 % of the drop's
+/// energy, as explicit contact at its own limit did; beyond 3 the bounce
+/// gains more than its drop.
+pub const NODE_CONTACT_ANGLE: f64 = 2.0;
 
 /// The lattice's and the contact's parts of the `omega_max^2` bound (1/s^2).
 fn omega_sq_parts(problem: &Problem) -> (f64, f64) {
     let model = problem.model();
     let w_model = 2.0 / model.critical_time_step();
-    // A contact spring on a boundary node adds k / m to omega^2 (Gershgorin:
-    // it sits on that node's diagonal). Contact switches on and off within
-    // an oscillation, which Verlet integrates without energy drift only when
-    // it resolves it: that part counts CONTACT_RESOLUTION^2 times (about 7
-    // steps per contact period at safety 0.9).
+    // Contact of the nodes is integrated implicitly (module docs) and does
+    // not limit the step. A surface vertex's contact spring is explicit: it
+    // adds k / m to omega^2 (Gershgorin), and contact switches on and off
+    // within an oscillation, which Verlet integrates without energy drift
+    // only when it resolves it: that part counts CONTACT_RESOLUTION^2 times.
     let w_contact_sq = problem.contact().map_or(0.0, |c| {
-        c.omega_sq() * CONTACT_RESOLUTION * CONTACT_RESOLUTION
+        c.surface_omega_sq() * CONTACT_RESOLUTION * CONTACT_RESOLUTION
     });
     (w_model * w_model, w_contact_sq)
 }
 
-/// The explicit integrator.
+/// Newton iterations, at most, of a node's implicit contact update.
+const CONTACT_NEWTON_ITERATIONS: usize = 12;
+
+/// The explicit integrator: velocity Verlet or symplectic Euler with a
+/// controlled sub-step, and contact of the lattice's nodes updated
+/// implicitly node by node (Newmark's trapezoidal rule in the contact force
+/// for Verlet, backward Euler for symplectic Euler), so that contact
+/// stiffness does not limit the step; docs/solvers.md explains both.
 #[derive(Debug)]
 pub struct Explicit {
     opts: ExplicitOptions,
@@ -155,16 +221,15 @@ pub struct Explicit {
     /// Contact's share of `omega_max^2`: the part that does not grow with
     /// the lattice's stiffness.
     contact_share: f64,
-    /// Halvings of the sub-step in force (see the module docs): the larger
-    /// of `fail_halvings` and `growth_halvings`.
-    halvings: u32,
-    /// Halvings asked for by failed steps (undone after good sub-steps).
+    /// Halvings asked for by failed steps (undone after good sub-steps):
+    /// they ask for `base_substeps << fail_halvings` sub-steps.
     fail_halvings: u32,
-    /// Halvings asked for by the stiffness growth seen at the checks.
-    growth_halvings: u32,
-    /// Checks in a row that asked for fewer growth halvings.
+    /// Sub-steps asked for by the stiffness growth seen at the checks
+    /// (`>= base_substeps`; `substeps` is the larger of the two wishes).
+    growth_substeps: u32,
+    /// Checks in a row that asked for fewer sub-steps than `growth_substeps`.
     calm_checks: u32,
-    /// Good sub-steps since the last change of `halvings`.
+    /// Good sub-steps since the last change of `substeps`.
     good_substeps: u64,
     /// Good sub-steps after which a halving is undone.
     relax_after: u64,
@@ -174,8 +239,22 @@ pub struct Explicit {
     /// Conservative force (internal + external) at the positions whose
     /// [`positions_key`] is `cache_key`, at `cache_time`.
     f_cons: Vec<Vec3>,
-    /// Contact forces (empty without obstacles).
+    /// Contact forces of the kicks (empty without obstacles).
     f_contact: Vec<Vec3>,
+    /// Nodes whose entry of `f_contact` may be non-zero.
+    contact_touched: Vec<u32>,
+    /// Node points that touch (or were anchored) at the start of the
+    /// sub-step under way, then those that touch at its end.
+    candidates: Vec<u32>,
+    /// Their contact forces at the start of the sub-step.
+    g_start: Vec<Vec3>,
+    /// `mark[i] == stamp` marks the points in `candidates`.
+    mark: Vec<u32>,
+    stamp: u32,
+    /// Whether the anchors may not tell which node points touch (a new call
+    /// of [`Integrator::step`]: obstacles may have been moved by hand, or
+    /// the state changed).
+    contact_fresh: bool,
     cache_key: u64,
     cache_time: f64,
     cache_valid: bool,
@@ -238,6 +317,7 @@ impl Explicit {
             return Err(SolverError::TimeStepTooLarge { dt, limit });
         };
         let n = problem.model().num_nodes();
+        let node_points = problem.contact().map_or(0, |c| c.node_points().len());
         Ok(Self {
             opts,
             dt,
@@ -246,9 +326,8 @@ impl Explicit {
             base_substeps: substeps,
             limit,
             contact_share,
-            halvings: 0,
             fail_halvings: 0,
-            growth_halvings: 0,
+            growth_substeps: substeps,
             calm_checks: 0,
             good_substeps: 0,
             relax_after: RELAX_AFTER,
@@ -265,6 +344,13 @@ impl Explicit {
             } else {
                 Vec::new()
             },
+            // Every node point may touch at once: no growth while stepping.
+            contact_touched: Vec::with_capacity(node_points),
+            candidates: Vec::with_capacity(node_points),
+            g_start: Vec::with_capacity(node_points),
+            mark: vec![0; problem.contact().map_or(0, Contact::num_points)],
+            stamp: 0,
+            contact_fresh: true,
             cache_key: 0,
             cache_time: f64::NAN,
             cache_valid: false,
@@ -293,33 +379,49 @@ impl Explicit {
         self.substeps
     }
 
-    /// Puts in force the larger of the halvings asked for.
+    /// Puts in force the larger of the sub-step counts asked for.
     fn update_substep(&mut self) {
-        let halvings = self.fail_halvings.max(self.growth_halvings);
-        if halvings != self.halvings {
-            self.halvings = halvings;
-            self.substeps = self.base_substeps << halvings;
+        let substeps = self.wished_substeps();
+        if substeps != self.substeps {
+            self.substeps = substeps;
             self.dt_sub = self.dt / f64::from(self.substeps);
             self.good_substeps = 0;
         }
     }
 
-    /// The halvings that the stiffness growth at `x` asks for.
-    fn halvings_for_growth(&self, model: &Model, x: &[Vec3]) -> u32 {
+    fn wished_substeps(&self) -> u32 {
+        self.growth_substeps
+            .max(halved(self.base_substeps, self.fail_halvings))
+    }
+
+    /// The halvings of the base sub-step that the count in force amounts to
+    /// (rounded up).
+    fn halvings(&self) -> u32 {
+        (0..MOST_HALVINGS)
+            .find(|&k| halved(self.base_substeps, k) >= self.substeps)
+            .unwrap_or(MOST_HALVINGS)
+    }
+
+    /// The sub-steps that the stiffness growth at `x` asks for: as many as
+    /// needed, not a power of two, so that a little growth costs a little.
+    fn substeps_for_growth(&self, model: &Model, x: &[Vec3]) -> u32 {
         if self.opts.unchecked {
-            return 0;
+            return self.base_substeps;
         }
         // Growth may use up half the safety margin (in the step's logarithm)
-        // before the sub-step is halved, so that small vibrations, which
-        // change the stiffness by their amplitude, do not halve it; a step
+        // before the sub-step shrinks, so that small vibrations, which
+        // change the stiffness by their amplitude, do not shrink it; a step
         // at the limit (safety 1) has no margin to give, beyond round-off.
         // Only the lattice's part of omega^2 grows with its stiffness.
         let growth = self.contact_share + (1.0 - self.contact_share) * model.stiffness_growth(x);
         let wanted = self.limit / (growth * self.opts.safety).sqrt() * (1.0 + 1e-9);
-        let base = self.dt / f64::from(self.base_substeps);
-        (0..MAX_GROWTH_HALVINGS)
-            .find(|&k| base / f64::from(1u32 << k) <= wanted)
-            .unwrap_or(MAX_GROWTH_HALVINGS)
+        let most = halved(self.base_substeps, MAX_GROWTH_HALVINGS);
+        let needed = (self.dt / wanted).ceil();
+        if needed.is_finite() && needed < f64::from(most) {
+            (needed as u32).max(self.base_substeps)
+        } else {
+            most
+        }
     }
 
     /// Takes one step of `dt` in `substeps` sub-steps, checking every
@@ -336,16 +438,16 @@ impl Explicit {
                 if let Some(reason) = self.check(problem.model(), state) {
                     return Attempt::Failed(reason);
                 }
-                let needed = self.halvings_for_growth(problem.model(), &state.x);
-                if needed > self.halvings {
+                let needed = self.substeps_for_growth(problem.model(), &state.x);
+                if needed > self.substeps {
                     return Attempt::Stiffer(needed);
                 }
-                // Undo growth halvings only after several calm checks: the
+                // Give fewer sub-steps only after several calm checks: the
                 // stiffness of a rebounding body swings faster than checks.
-                if needed < self.growth_halvings {
+                if needed < self.growth_substeps {
                     self.calm_checks += 1;
                     if self.calm_checks >= CALM_CHECKS {
-                        self.growth_halvings -= 1;
+                        self.growth_substeps = (self.growth_substeps + needed).div_ceil(2);
                         self.calm_checks = 0;
                     }
                 } else {
@@ -373,6 +475,7 @@ impl Explicit {
         }
         self.since_check = 0;
         self.cache_valid = false;
+        self.contact_fresh = true;
     }
 
     /// The sub-step actually integrated (s).
@@ -390,25 +493,15 @@ impl Explicit {
         }
     }
 
-    /// Contact forces at `state`, which depend on its velocities and friction
-    /// anchors too: evaluated at every kick, apart from the cached forces
-    /// (they cost the boundary points only).
-    fn contact_forces(&mut self, problem: &Problem, state: &State) {
-        if let Some(c) = problem.contact() {
-            let f = &mut self.f_contact;
-            f.iter_mut().for_each(|v| *v = Vec3::zeros());
-            c.add_forces(state.time, &state.x, &state.v, &state.contact, f);
-        }
-    }
-
     fn damping_product(&mut self, problem: &Problem, v: &[Vec3]) {
         if problem.damping().beta > 0.0 {
             par_mul(problem.rest_stiffness(), v, &mut self.kv);
         }
     }
 
-    /// One velocity kick of `h` with the cached conservative force plus
-    /// damping, on free components only. Returns false on non-finite values.
+    /// One velocity kick of `h` with the cached conservative force, the
+    /// contact forces and damping, on free components only. Returns false on
+    /// non-finite values.
     fn kick(&self, problem: &Problem, v: &mut [Vec3], h: f64) -> bool {
         let model = problem.model();
         let masses = model.masses();
@@ -437,7 +530,7 @@ impl Explicit {
                             vi[c] += dv[c];
                         }
                     }
-                    ok &= vi.iter().all(|a| a.is_finite());
+                    ok &= all_finite(vi);
                 }
                 ok
             })
@@ -460,7 +553,7 @@ impl Explicit {
                     let i = ci * CHUNK + k;
                     *xi += *vi * dt;
                     cons.prescribe(i, t1, dt, &rest[i], xi, vi);
-                    ok &= xi.iter().all(|a| a.is_finite());
+                    ok &= all_finite(xi);
                 }
                 ok
             })
@@ -479,34 +572,229 @@ impl Explicit {
                 if !cached {
                     self.conservative_forces(problem, state);
                 }
-                self.contact_forces(problem, state);
+                self.contact_start(problem, state, true);
                 self.damping_product(problem, &state.v);
                 let mut ok = self.kick(problem, &mut state.v, 0.5 * dt);
                 ok &= Self::drift(problem, state, dt, t1);
+                ok &= self.contact_end(problem, state, dt, t0, true);
                 state.time = t1;
                 self.conservative_forces(problem, state);
-                self.contact_forces(problem, state);
                 self.damping_product(problem, &state.v);
                 ok &= self.kick(problem, &mut state.v, 0.5 * dt);
                 self.cache_time = t1;
                 self.cache_valid = ok;
-                problem.update_contact(state);
+                self.update_anchors(problem, state);
                 ok
             }
             ExplicitScheme::SymplecticEuler => {
                 if !cached {
                     self.conservative_forces(problem, state);
                 }
-                self.contact_forces(problem, state);
+                self.contact_start(problem, state, false);
                 self.damping_product(problem, &state.v);
                 let mut ok = self.kick(problem, &mut state.v, dt);
                 ok &= Self::drift(problem, state, dt, t1);
+                ok &= self.contact_end(problem, state, dt, t0, false);
                 state.time = t1;
                 self.cache_valid = false;
-                problem.update_contact(state);
+                self.update_anchors(problem, state);
                 ok
             }
         }
+    }
+
+    /// Zeroes the contact forces of the kicks.
+    fn clear_contact_forces(&mut self, contact: &Contact) {
+        if contact.surface_points().is_empty() {
+            for &n in &self.contact_touched {
+                self.f_contact[n as usize] = Vec3::zeros();
+            }
+        } else {
+            self.f_contact.fill(Vec3::zeros());
+        }
+        self.contact_touched.clear();
+    }
+
+    /// At the start of a sub-step: finds the node points that touch or are
+    /// anchored, with their forces (into the first kick's contact forces
+    /// when `verlet`: symplectic Euler's node contact is all implicit), and
+    /// the surface points' explicit forces.
+    fn contact_start(&mut self, problem: &Problem, state: &State, verlet: bool) {
+        let Some(contact) = problem.contact() else {
+            return;
+        };
+        self.clear_contact_forces(contact);
+        self.stamp = self.stamp.wrapping_add(1);
+        if self.stamp == 0 {
+            self.mark.fill(0);
+            self.stamp = 1;
+        }
+        self.candidates.clear();
+        self.g_start.clear();
+        let nobs = contact.obstacles().count();
+        let known = state.contact.len() == contact.num_anchors();
+        // Within a call, a node point is anchored exactly when it was inside
+        // an obstacle at the end of the last sub-step (`contact_end` and
+        // `update_anchors` see to it), where this one starts: only the
+        // anchored can touch.
+        let anchors_tell = known && !self.contact_fresh;
+        self.contact_fresh = false;
+        for &i in contact.node_points() {
+            let anchored = known
+                && state.contact[i as usize * nobs..(i as usize + 1) * nobs]
+                    .iter()
+                    .any(Option::is_some);
+            if anchors_tell && !anchored {
+                continue;
+            }
+            let n = contact.point_node(i) as usize;
+            let force = contact.node_point_force(
+                i,
+                state.time,
+                state.x[n],
+                state.v[n],
+                0.0,
+                &state.contact,
+                false,
+            );
+            if force.is_none() && !anchored {
+                continue;
+            }
+            let g = force.map_or(Vec3::zeros(), |(g, _)| g);
+            self.candidates.push(i);
+            self.g_start.push(g);
+            self.mark[i as usize] = self.stamp;
+            if verlet {
+                self.f_contact[n] += g;
+                self.contact_touched.push(n as u32);
+            }
+        }
+        let surface = contact.surface_points();
+        if !surface.is_empty() {
+            let f = &mut self.f_contact;
+            contact.add_forces_of(surface, state.time, &state.x, &state.v, &state.contact, f);
+        }
+    }
+
+    /// After the drift of a sub-step from `t0` by `dt`: the implicit contact
+    /// update of the node points (module docs) that touched at its start or
+    /// touch at its end, then the contact forces of the second kick (when
+    /// `verlet`). Returns false on non-finite values.
+    fn contact_end(
+        &mut self,
+        problem: &Problem,
+        state: &mut State,
+        dt: f64,
+        t0: f64,
+        verlet: bool,
+    ) -> bool {
+        let Some(contact) = problem.contact() else {
+            return true;
+        };
+        let t1 = t0 + dt;
+        let started = self.candidates.len();
+        for &i in contact.node_points() {
+            if self.mark[i as usize] == self.stamp {
+                continue;
+            }
+            let n = contact.point_node(i) as usize;
+            let inside = contact
+                .obstacles()
+                .any(|(o, _)| o.penetration(t1, state.x[n]).is_some());
+            if inside {
+                self.candidates.push(i);
+                self.g_start.push(Vec3::zeros());
+            }
+        }
+        let model = problem.model();
+        let masses = model.masses();
+        let cons = problem.constraints();
+        let tolerance = 1e-12 * model.h();
+        if verlet {
+            self.clear_contact_forces(contact);
+        }
+        let mut ok = true;
+        for k in 0..self.candidates.len() {
+            let i = self.candidates[k];
+            let n = contact.point_node(i) as usize;
+            let mask = cons.mask(n);
+            let free = |v: Vec3| Vec3::from_fn(|c, _| if mask[c] { 0.0 } else { v[c] });
+            // Velocity Verlet: x1 = x* + c (g1 - g0), c = dt^2 / 4m (the
+            // trapezoidal rule in the contact force); symplectic Euler:
+            // x1 = x* + c g1, c = dt^2 / m (backward Euler in it).
+            let c = if verlet { 0.25 } else { 1.0 } * dt * dt / masses[n];
+            let g0 = if verlet && k < started {
+                self.g_start[k]
+            } else {
+                Vec3::zeros()
+            };
+            let x_star = state.x[n];
+            let x_prev = x_star - state.v[n] * dt;
+            let target = x_star - free(g0) * c;
+            let mut x = target;
+            let mut g = Vec3::zeros();
+            // The first iterate is rarely the answer (it is where the node
+            // would be without its new contact force): its Jacobian is
+            // taken at once; later ones are checked before it is taken.
+            let mut with_jacobian = true;
+            for _ in 0..CONTACT_NEWTON_ITERATIONS {
+                let v_chord = (x - x_prev) / dt;
+                let force = |jacobian| {
+                    contact
+                        .node_point_force(i, t1, x, v_chord, 1.0 / dt, &state.contact, jacobian)
+                        .unwrap_or((Vec3::zeros(), crate::Mat3::zeros()))
+                };
+                let (mut gx, mut jac) = force(with_jacobian);
+                let mut r = free(x - target - gx * c);
+                if r.norm() <= tolerance {
+                    g = gx;
+                    break;
+                }
+                if !with_jacobian {
+                    (gx, jac) = force(true);
+                    r = free(x - target - gx * c);
+                }
+                g = gx;
+                with_jacobian = false;
+                let mut a = crate::Mat3::identity() - jac * c;
+                for d in 0..3 {
+                    if mask[d] {
+                        for e in 0..3 {
+                            a[(d, e)] = if d == e { 1.0 } else { 0.0 };
+                            a[(e, d)] = if d == e { 1.0 } else { 0.0 };
+                        }
+                    }
+                }
+                let Some(inverse) = a.try_inverse() else {
+                    break;
+                };
+                x -= free(inverse * r);
+            }
+            ok &= x.iter().all(|a| a.is_finite());
+            state.x[n] = x;
+            if verlet {
+                self.f_contact[n] += g;
+                self.contact_touched.push(n as u32);
+            } else {
+                state.v[n] += free(g) * (dt / masses[n]);
+            }
+        }
+        let surface = contact.surface_points();
+        if verlet && !surface.is_empty() {
+            let f = &mut self.f_contact;
+            contact.add_forces_of(surface, t1, &state.x, &state.v, &state.contact, f);
+        }
+        ok
+    }
+
+    /// After a sub-step: the friction anchors of the points that touched.
+    fn update_anchors(&mut self, problem: &Problem, state: &mut State) {
+        let Some(contact) = problem.contact() else {
+            return;
+        };
+        let (t, x, v) = (state.time, &state.x, &state.v);
+        contact.update_anchors_of(&self.candidates, t, x, v, &mut state.contact);
+        contact.update_anchors_of(contact.surface_points(), t, x, v, &mut state.contact);
     }
 
     fn check(&self, model: &Model, state: &State) -> Option<Divergence> {
@@ -556,7 +844,7 @@ fn positions_key(x: &[Vec3]) -> u64 {
 
 /// Layout of [`Explicit`]'s [`IntegratorMemory`](super::IntegratorMemory)
 /// (changed whenever its counters change).
-const EXPLICIT_MEMORY_VERSION: u64 = 2;
+const EXPLICIT_MEMORY_VERSION: u64 = 3;
 
 impl Integrator for Explicit {
     fn name(&self) -> &'static str {
@@ -584,9 +872,9 @@ impl Integrator for Explicit {
             counters: vec![
                 EXPLICIT_MEMORY_VERSION,
                 self.steps,
-                u64::from(self.halvings),
+                u64::from(self.substeps),
                 u64::from(self.fail_halvings),
-                u64::from(self.growth_halvings),
+                u64::from(self.growth_substeps),
                 u64::from(self.calm_checks),
                 self.good_substeps,
                 self.relax_after,
@@ -611,9 +899,9 @@ impl Integrator for Explicit {
         let &[
             version,
             steps,
-            halvings,
+            substeps,
             fail_halvings,
-            growth_halvings,
+            growth_substeps,
             calm_checks,
             good_substeps,
             relax_after,
@@ -632,15 +920,17 @@ impl Integrator for Explicit {
         }
         let n = self.f_cons.len();
         let small = |v: u64, max: u32| u32::try_from(v).ok().filter(|&v| v <= max);
-        let (Some(halvings), Some(fail_halvings), Some(growth_halvings)) = (
-            small(halvings, MAX_HALVINGS.max(MAX_GROWTH_HALVINGS)),
-            small(fail_halvings, MAX_HALVINGS),
-            small(growth_halvings, MAX_GROWTH_HALVINGS),
+        let base = self.base_substeps;
+        let (Some(fail_halvings), Some(growth_substeps)) = (
+            small(fail_halvings, MOST_HALVINGS),
+            u32::try_from(growth_substeps)
+                .ok()
+                .filter(|g| (base..=halved(base, MAX_GROWTH_HALVINGS)).contains(g)),
         ) else {
-            return Err(bad("halvings out of range"));
+            return Err(bad("sub-step counts out of range"));
         };
-        if halvings != fail_halvings.max(growth_halvings) {
-            return Err(bad("inconsistent halvings"));
+        if substeps != u64::from(growth_substeps.max(halved(base, fail_halvings))) {
+            return Err(bad("inconsistent sub-step counts"));
         }
         let cache_valid = cache_valid != 0;
         let expected_values = if cache_valid { 3 * n } else { 0 };
@@ -654,9 +944,8 @@ impl Integrator for Explicit {
             return Err(bad("a fallback state of another size"));
         }
         self.steps = steps;
-        self.halvings = halvings;
         self.fail_halvings = fail_halvings;
-        self.growth_halvings = growth_halvings;
+        self.growth_substeps = growth_substeps;
         self.calm_checks = u32::try_from(calm_checks).map_err(|_| bad("calm checks"))?;
         self.good_substeps = good_substeps;
         self.relax_after = relax_after;
@@ -666,7 +955,7 @@ impl Integrator for Explicit {
         self.last_time = f64::from_bits(last_time);
         self.cache_time = f64::from_bits(cache_time);
         self.cache_key = cache_key;
-        self.substeps = self.base_substeps << halvings;
+        self.substeps = self.wished_substeps();
         self.dt_sub = self.dt / f64::from(self.substeps);
         self.good.clone_from(good);
         if cache_valid {
@@ -698,10 +987,11 @@ impl Explicit {
             // back on, and it may already be far from rest.
             self.save_good(state);
             self.since_check = 0;
-            self.growth_halvings = self.halvings_for_growth(problem.model(), &state.x);
+            self.growth_substeps = self.substeps_for_growth(problem.model(), &state.x);
             self.update_substep();
         }
         self.steps += 1;
+        self.contact_fresh = true;
         let t_end = state.time + self.dt;
         self.start.x.copy_from_slice(&state.x);
         self.start.v.copy_from_slice(&state.v);
@@ -717,10 +1007,10 @@ impl Explicit {
                     log::debug!(
                         "explicit: step {} taken again in {} sub-steps (stiffness grew)",
                         self.steps,
-                        self.base_substeps << needed
+                        needed
                     );
                     self.restart_step(state, good_before);
-                    self.growth_halvings = needed;
+                    self.growth_substeps = needed;
                     self.calm_checks = 0;
                     self.update_substep();
                     continue;
@@ -737,7 +1027,7 @@ impl Explicit {
                 );
                 self.restart_step(state, good_before);
                 self.relax_after = self.relax_after.saturating_mul(2);
-                self.fail_halvings = self.halvings + 1;
+                self.fail_halvings = self.halvings() + 1;
                 self.update_substep();
                 continue;
             }
@@ -778,6 +1068,13 @@ impl Explicit {
             newton_iterations: 0,
         })
     }
+}
+
+/// Whether all three components are finite, without a branch (a
+/// short-circuiting test per value costs more than the kick it checks).
+#[inline(always)]
+fn all_finite(v: &Vec3) -> bool {
+    v.x.is_finite() & v.y.is_finite() & v.z.is_finite()
 }
 
 /// `out = a v`, rows in parallel (each row summed in a fixed order).

@@ -43,7 +43,8 @@ use std::sync::OnceLock;
 use thiserror::Error;
 
 pub use explicit::{
-    CONTACT_RESOLUTION, Explicit, ExplicitOptions, ExplicitScheme, explicit_time_step_limit,
+    CONTACT_RESOLUTION, Explicit, ExplicitOptions, ExplicitScheme, NODE_CONTACT_ANGLE,
+    explicit_time_step_limit,
 };
 pub use implicit::{Implicit, ImplicitOptions};
 pub use linear::{DIRECT_MAX_FREE_DOFS, LinearSolver, LinearSolverKind, LinearStats};
