@@ -264,6 +264,9 @@ pub struct Explicit {
     good_valid: bool,
     steps: u64,
     since_check: u32,
+    /// Sub-steps between checks: `check_interval`, fewer while the
+    /// stiffness has grown (see [`Explicit::substeps_for_growth`]).
+    check_every: u32,
     /// Whether the step under way ends with a check ([`Integrator::check_next_step`]).
     check_at_end: bool,
     /// `state.time` at the end of the last step (to notice external changes).
@@ -368,6 +371,7 @@ impl Explicit {
             good_valid: false,
             steps: 0,
             since_check: 0,
+            check_every: opts.check_interval,
             check_at_end: false,
             last_time: f64::NAN,
         })
@@ -404,16 +408,26 @@ impl Explicit {
 
     /// The sub-steps that the stiffness growth at `x` asks for: as many as
     /// needed, not a power of two, so that a little growth costs a little.
-    fn substeps_for_growth(&self, model: &Model, x: &[Vec3]) -> u32 {
+    /// Sets how soon the next check comes: a body whose stiffness has grown
+    /// g times (g >= 2: compressed cells on the barrier's steep side) can
+    /// stiffen much further within `check_interval` sub-steps, so it is
+    /// checked g times as often.
+    fn substeps_for_growth(&mut self, model: &Model, x: &[Vec3]) -> u32 {
         if self.opts.unchecked {
             return self.base_substeps;
         }
+        let stiffness_growth = model.stiffness_growth(x);
+        self.check_every = if stiffness_growth >= 2.0 {
+            ((f64::from(self.opts.check_interval) / stiffness_growth) as u32).max(1)
+        } else {
+            self.opts.check_interval
+        };
         // Growth may use up half the safety margin (in the step's logarithm)
         // before the sub-step shrinks, so that small vibrations, which
         // change the stiffness by their amplitude, do not shrink it; a step
         // at the limit (safety 1) has no margin to give, beyond round-off.
         // Only the lattice's part of omega^2 grows with its stiffness.
-        let growth = self.contact_share + (1.0 - self.contact_share) * model.stiffness_growth(x);
+        let growth = self.contact_share + (1.0 - self.contact_share) * stiffness_growth;
         let wanted = self.limit / (growth * self.opts.safety).sqrt() * (1.0 + 1e-9);
         let most = halved(self.base_substeps, MAX_GROWTH_HALVINGS);
         let needed = (self.dt / wanted).ceil();
@@ -434,7 +448,7 @@ impl Explicit {
                 return Attempt::Failed(Divergence::NonFinite);
             }
             let last = s + 1 == self.substeps;
-            if self.since_check >= self.opts.check_interval || (last && self.check_at_end) {
+            if self.since_check >= self.check_every || (last && self.check_at_end) {
                 if let Some(reason) = self.check(problem.model(), state) {
                     return Attempt::Failed(reason);
                 }
@@ -879,6 +893,7 @@ impl Integrator for Explicit {
                 self.good_substeps,
                 self.relax_after,
                 u64::from(self.since_check),
+                u64::from(self.check_every),
                 u64::from(self.good_valid),
                 u64::from(self.cache_valid),
                 self.last_time.to_bits(),
@@ -906,6 +921,7 @@ impl Integrator for Explicit {
             good_substeps,
             relax_after,
             since_check,
+            check_every,
             good_valid,
             cache_valid,
             last_time,
@@ -950,6 +966,10 @@ impl Integrator for Explicit {
         self.good_substeps = good_substeps;
         self.relax_after = relax_after;
         self.since_check = u32::try_from(since_check).map_err(|_| bad("checks"))?;
+        self.check_every = u32::try_from(check_every)
+            .ok()
+            .filter(|c| (1..=self.opts.check_interval).contains(c))
+            .ok_or_else(|| bad("check interval"))?;
         self.good_valid = good_valid != 0;
         self.cache_valid = cache_valid;
         self.last_time = f64::from_bits(last_time);
