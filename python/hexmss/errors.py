@@ -37,7 +37,9 @@ class VoxelizeError(HexmssError, ValueError):
 
 
 class ModelError(HexmssError, ValueError):
-    """A material, model or problem cannot be built."""
+    """A material, model or problem cannot be built, or a dynamic run was
+    refused up front because the chosen model would fold under the scene's
+    load (``[solver] accept_unstable = true`` runs it anyway)."""
 
 
 class SolverError(HexmssError, RuntimeError):

@@ -95,7 +95,7 @@ pub fn job(e: JobError) -> PyErr {
         JobError::Scene(_) | JobError::Setting { .. } | JobError::Resume { .. } => Kind::Scene,
         JobError::Mesh { .. } => Kind::Mesh,
         JobError::Voxelize { .. } => Kind::Voxelize,
-        JobError::Model { .. } => Kind::Model,
+        JobError::Model { .. } | JobError::WouldFold { .. } => Kind::Model,
         JobError::Solver { source, .. } => solver_kind(source),
         JobError::OutputFolder { .. } | JobError::Output(_) => Kind::Output,
         JobError::Memory { .. } | JobError::DiskSpace { .. } => Kind::Resource,

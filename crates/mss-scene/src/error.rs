@@ -26,6 +26,18 @@ pub enum JobError {
         /// What is wrong and what to do.
         message: String,
     },
+    /// A dynamic run refused before it starts: the static solve of the
+    /// scene's load says that the chosen model would fold or turn cells
+    /// inside out under it (docs/robustness.md, causes 1 to 3).
+    #[error("{scene}: not run: {reason}; {remedy}")]
+    WouldFold {
+        /// Scene name.
+        scene: String,
+        /// What the static solve of the load found, and what it means.
+        reason: String,
+        /// What to change, and the key that runs it anyway.
+        remedy: String,
+    },
     /// The mesh could not be loaded.
     #[error("{scene}: [mesh] path: {source}")]
     Mesh {

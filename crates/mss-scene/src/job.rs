@@ -13,6 +13,7 @@ use mss_core::solver::{Integrator, Problem, State, solve_static};
 use serde::Serialize;
 
 use crate::build::{SceneInput, TimePlan, load_mesh, prepare_output_folder};
+use crate::check::LoadCheck;
 use crate::checkpoint::{CHECKPOINT_FILE, Checkpoint};
 use crate::error::JobError;
 use crate::limits::{Limits, run_memory_estimate};
@@ -424,6 +425,55 @@ impl Job {
         self.run_from(out_dir, progress, cancel, Some(checkpoint))
     }
 
+    /// Before a dynamic run with a model that is not the default's kind
+    /// (hourglass control and the barrier volumetric law): solves the
+    /// scene's load statically ([`LoadCheck`]) and refuses the run when that
+    /// model would fold (an unstable equilibrium: a mechanism appears under
+    /// the load) or, without the barrier, collapse (the equilibrium path
+    /// ends before the full load). Those runs used to stop part way with
+    /// cells turned inside out or end zigzagging (docs/robustness.md);
+    /// `[solver] accept_unstable = true` runs them anyway.
+    fn refuse_if_it_would_fold(&self, progress: &ProgressFn<'_>) -> Result<(), JobError> {
+        let model = self.problem.model();
+        let barrier = (0..model.num_cells()).all(|c| {
+            let co = model.cell_coefficients(c);
+            co.volumetric_barrier && co.volumetric_lambda > 0.0
+        });
+        if self.input.scene.solver.accept_unstable
+            || (barrier && mss_core::modes::cells_are_rigid(model))
+        {
+            return Ok(());
+        }
+        progress(Progress::Solving);
+        let check = LoadCheck::new(self, false);
+        progress(Progress::StageDone);
+        let name = model.parameterization_name();
+        let reason = match check {
+            LoadCheck::Equilibrium {
+                stable: Some(false),
+                ..
+            } => format!(
+                "under the scene's load the static equilibrium of model {name:?} is unstable (a \
+                 mechanism of the lattice appears under load): a dynamic run leaves it and folds"
+            ),
+            LoadCheck::LoadLimit { load_factor } if !barrier => format!(
+                "the body carries only {:.0} % of the scene's load statically (it buckles or \
+                 collapses), and model {name:?} does not resist collapse (its volumetric law \
+                 has no barrier): its cells would be flattened through and turn inside out",
+                100.0 * load_factor
+            ),
+            _ => return Ok(()),
+        };
+        Err(JobError::WouldFold {
+            scene: self.input.name(),
+            reason,
+            remedy: "use parameterization = \"volumetric-barrier+hg\" with hourglass = 1.0 \
+                     (the default), a stiffer material or a larger held region \
+                     (docs/robustness.md); [solver] accept_unstable = true runs it anyway"
+                .to_owned(),
+        })
+    }
+
     fn run_from(
         &self,
         out_dir: &Path,
@@ -438,6 +488,9 @@ impl Job {
         let plan = self.plan;
         let s = &scene.solver;
         let integrator = self.input.integrator(&self.registry, problem, &plan)?;
+        if integrator.is_some() && resume.is_none() {
+            self.refuse_if_it_would_fold(&progress)?;
+        }
         self.check_disk_space(out_dir)?;
         let mut state = State::at_rest(problem.model());
         problem.apply_constraints(&mut state);

@@ -721,7 +721,10 @@ pub struct SolverSection {
     #[serde(default)]
     pub linear: bool,
     /// Static solves: keep an equilibrium that the stability test finds
-    /// unstable instead of failing (default false).
+    /// unstable instead of failing; dynamic runs: run a model (one without
+    /// hourglass control or the barrier) that the static solve of the
+    /// scene's load says would fold, instead of refusing it up front
+    /// (default false).
     #[serde(default)]
     pub accept_unstable: bool,
 }

@@ -137,3 +137,51 @@ fn the_time_estimate_times_the_runs_own_steps() {
     let t = r.time_estimate.expect("a solved static scene is estimated");
     assert_eq!(t.probe_steps, 0);
 }
+
+/// A dynamic run with a model that would fold under the scene's load is
+/// refused before it starts (docs/robustness.md), with the reason and the
+/// key that runs it anyway; the default model runs.
+#[test]
+fn dynamic_runs_that_would_fold_are_refused_up_front() {
+    use mss_scene::JobError;
+    let short = |toml: String| toml.replace("duration = 1.0", "duration = 0.01");
+    let run = |toml: &str| {
+        let out = tempfile::tempdir().unwrap();
+        job(toml).run(out.path(), &no_progress, &Cancel::new())
+    };
+    // Cause 1: springs without hourglass control, unstable under the
+    // default critter's own weight.
+    let springs = short(
+        default_scene("")
+            .replace("\"volumetric-barrier+hg\"", "\"springs\"")
+            .replace("hourglass = 1.0", ""),
+    );
+    match run(&springs) {
+        Err(JobError::WouldFold { reason, remedy, .. }) => {
+            assert!(
+                reason.contains("unstable") && reason.contains("springs"),
+                "{reason}"
+            );
+            assert!(remedy.contains("accept_unstable = true"), "{remedy}");
+        }
+        other => panic!("{other:?}"),
+    }
+    let accepted = springs.replace("[solver]", "[solver]\naccept_unstable = true");
+    assert!(run(&accepted).is_ok());
+    // Causes 2 and 3: the template's critter buckles, and the paper's
+    // model has no barrier against collapse.
+    let paper = short(
+        TEMPLATE_SCENE_TOML
+            .replace("\"volumetric-barrier+hg\"", "\"paper\"")
+            .replace("hourglass = 1.0 ", "# hourglass"),
+    );
+    match run(&paper) {
+        Err(e @ JobError::WouldFold { .. }) => {
+            let m = e.to_string();
+            assert!(m.contains("carries only") && m.contains("barrier"), "{m}");
+        }
+        other => panic!("{other:?}"),
+    }
+    // The default model buckles there too, but does not collapse: it runs.
+    assert!(run(&short(TEMPLATE_SCENE_TOML.to_owned())).is_ok());
+}

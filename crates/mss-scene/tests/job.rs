@@ -311,6 +311,7 @@ fn a_diverging_run_writes_only_checked_frames_in_time_order() {
                 "[model]\nparameterization = \"paper\"\n\
                  [[loads.forces]]\nselect = {{ kind = \"face\", face = \"z+\" }}\n\
                  force = [{force:e}, 0.0, 0.0]\n[solver]\nduration = 0.05\n\
+                 accept_unstable = true\n\
                  [output]\nevery_steps = {every}\n"
             )),
             Registry::default(),

@@ -49,7 +49,8 @@ pub use explicit::{
 pub use implicit::{Implicit, ImplicitOptions};
 pub use linear::{DIRECT_MAX_FREE_DOFS, LinearSolver, LinearSolverKind, LinearStats};
 pub use statics::{
-    STABILITY_TEST_MAX_FACTOR_BYTES, Stability, StaticInfo, StaticOptions, solve_static,
+    MAX_FAILED_INCREMENTS, STABILITY_TEST_MAX_FACTOR_BYTES, Stability, StaticInfo, StaticOptions,
+    solve_static,
 };
 
 use crate::constraints::{ConstraintError, ConstraintSpec, Constraints};
