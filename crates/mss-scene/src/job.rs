@@ -9,7 +9,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use mss_core::Model;
-use mss_core::solver::{Integrator, Problem, State, solve_static};
+use mss_core::solver::{Integrator, Problem, State, solve_static_cancellable};
 use serde::Serialize;
 
 use crate::build::{SceneInput, TimePlan, load_mesh, prepare_output_folder};
@@ -505,7 +505,7 @@ impl Job {
                 let opts = self.input.static_options();
                 state.time = s.duration;
                 progress(Progress::Solving);
-                let r = solve_static(problem, &mut state, &opts);
+                let r = solve_static_cancellable(problem, &mut state, &opts, &cancel.0);
                 progress(Progress::StageDone);
                 let info = r.map_err(|source| JobError::Solver {
                     scene: name.clone(),

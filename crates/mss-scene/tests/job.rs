@@ -788,3 +788,30 @@ fn uncompressed_frames_hold_the_same_lattice() {
         .to_string();
     assert!(bad.contains("lzma") && bad.contains("zlib"), "{bad}");
 }
+
+/// A static solve stops when the job is cancelled (Ctrl-C), before its next
+/// load increment, and writes nothing.
+#[test]
+fn a_cancelled_static_solve_stops_and_writes_nothing() {
+    let job = Job::prepare(
+        input("[solver]\nkind = \"static\"\n"),
+        Registry::default(),
+        &no_progress,
+    )
+    .unwrap();
+    let out = tempfile::tempdir().unwrap();
+    let cancel = Cancel::new();
+    cancel.cancel();
+    let err = job.run(out.path(), &no_progress, &cancel).unwrap_err();
+    match &err {
+        mss_scene::JobError::Solver { source, .. } => assert!(
+            matches!(**source, SolverError::Cancelled { load_factor } if load_factor == 0.0),
+            "{source:?}"
+        ),
+        other => panic!("{other:?}"),
+    }
+    assert!(err.to_string().contains("stopped"), "{err}");
+    assert_eq!(std::fs::read_dir(out.path()).unwrap().count(), 0);
+    // Not cancelled, the same job solves.
+    assert!(job.run(out.path(), &no_progress, &Cancel::new()).is_ok());
+}

@@ -50,7 +50,7 @@ pub use implicit::{Implicit, ImplicitOptions};
 pub use linear::{DIRECT_MAX_FREE_DOFS, LinearSolver, LinearSolverKind, LinearStats};
 pub use statics::{
     MAX_FAILED_INCREMENTS, STABILITY_TEST_MAX_FACTOR_BYTES, Stability, StaticInfo, StaticOptions,
-    solve_static,
+    solve_static, solve_static_cancellable,
 };
 
 use crate::constraints::{ConstraintError, ConstraintSpec, Constraints};
@@ -502,6 +502,12 @@ pub enum SolverError {
         load_factor: f64,
         /// Why the next increment failed.
         reason: Divergence,
+    },
+    /// A static solve was asked to stop ([`solve_static_cancellable`]).
+    #[error("the static solve was stopped at {:.1} % of the loads", 100.0 * load_factor)]
+    Cancelled {
+        /// The load factor reached (0..1).
+        load_factor: f64,
     },
     /// The sparse linear solver failed for another reason.
     #[error("linear solver failed: {0}")]

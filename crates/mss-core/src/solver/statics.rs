@@ -19,6 +19,7 @@ use super::{
     State, check_inverted, free_norm, newton,
 };
 use crate::{BlockCsr, Vec3};
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// The error text of a static problem that is singular at rest.
 const MECHANISM_MESSAGE: &str = "the stiffness matrix is singular: the boundary conditions leave a mechanism free (a rigid motion, or one of the 3 hourglass modes of the lattice); fix a whole face, or more nodes spread over the body";
@@ -141,14 +142,28 @@ pub fn solve_static(
     state: &mut State,
     opts: &StaticOptions,
 ) -> Result<StaticInfo, SolverError> {
-    crate::on_worker(|| solve_static_here(problem, state, opts))
+    solve_static_cancellable(problem, state, opts, &AtomicBool::new(false))
 }
 
-/// [`solve_static`], on the thread it is called on.
+/// [`solve_static`] that stops with [`SolverError::Cancelled`] at the next
+/// load increment once `cancel` is set (a Ctrl-C or a front end's stop
+/// button: a static solve that cannot follow its load path can take
+/// minutes).
+pub fn solve_static_cancellable(
+    problem: &Problem,
+    state: &mut State,
+    opts: &StaticOptions,
+    cancel: &AtomicBool,
+) -> Result<StaticInfo, SolverError> {
+    crate::on_worker(|| solve_static_here(problem, state, opts, cancel))
+}
+
+/// [`solve_static_cancellable`], on the thread it is called on.
 fn solve_static_here(
     problem: &Problem,
     state: &mut State,
     opts: &StaticOptions,
+    cancel: &AtomicBool,
 ) -> Result<StaticInfo, SolverError> {
     let model = problem.model();
     state.check_size(model)?;
@@ -237,6 +252,11 @@ fn solve_static_here(
     let mut cap: Option<(f64, f64)> = None;
     let mut failed_increments = 0;
     while lambda < 1.0 {
+        if cancel.load(Ordering::Relaxed) {
+            return Err(SolverError::Cancelled {
+                load_factor: lambda,
+            });
+        }
         let lt = if lambda + dl >= 1.0 - 1e-12 {
             1.0
         } else {
