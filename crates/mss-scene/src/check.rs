@@ -3,7 +3,9 @@
 //! nodes leave free, and whether the body has a stable equilibrium under its
 //! load.
 
-use mss_core::solver::{SolverError, Stability, State, StaticOptions, solve_static};
+use std::sync::atomic::AtomicBool;
+
+use mss_core::solver::{SolverError, Stability, State, StaticOptions, solve_static_cancellable};
 use serde::Serialize;
 
 use crate::job::Job;
@@ -182,6 +184,12 @@ pub enum LoadCheck {
 impl LoadCheck {
     /// Solves `job`'s load statically (see [`LoadCheck`]).
     pub fn new(job: &Job, mechanisms_at_rest: bool) -> Self {
+        Self::new_cancellable(job, mechanisms_at_rest, &AtomicBool::new(false))
+    }
+
+    /// [`LoadCheck::new`] that stops at the next load increment once
+    /// `cancel` is set (then [`LoadCheck::Skipped`]).
+    pub fn new_cancellable(job: &Job, mechanisms_at_rest: bool, cancel: &AtomicBool) -> Self {
         let problem = &job.problem;
         let model = problem.model();
         let s = &job.input.scene.solver;
@@ -222,7 +230,7 @@ impl LoadCheck {
         let mut state = State::at_rest(model);
         problem.apply_constraints(&mut state);
         state.time = s.duration;
-        match solve_static(problem, &mut state, &opts) {
+        match solve_static_cancellable(problem, &mut state, &opts, cancel) {
             Ok(info) => {
                 let u = state.displacements(model);
                 let max_displacement = u.iter().map(|v| v.norm()).fold(0.0, f64::max);
@@ -252,6 +260,7 @@ impl LoadCheck {
                 }
             }
             Err(SolverError::LoadLimit { load_factor, .. }) => LoadCheck::LoadLimit { load_factor },
+            Err(SolverError::Cancelled { .. }) => skipped("stopped"),
             Err(e) => LoadCheck::Failed {
                 reason: e.to_string(),
             },

@@ -433,7 +433,13 @@ impl Job {
     /// ends before the full load). Those runs used to stop part way with
     /// cells turned inside out or end zigzagging (docs/robustness.md);
     /// `[solver] accept_unstable = true` runs them anyway.
-    fn refuse_if_it_would_fold(&self, progress: &ProgressFn<'_>) -> Result<(), JobError> {
+    /// A cancelled check decides nothing: the run then stops at its first
+    /// step, as interrupted.
+    fn refuse_if_it_would_fold(
+        &self,
+        progress: &ProgressFn<'_>,
+        cancel: &Cancel,
+    ) -> Result<(), JobError> {
         let model = self.problem.model();
         let barrier = (0..model.num_cells()).all(|c| {
             let co = model.cell_coefficients(c);
@@ -445,7 +451,7 @@ impl Job {
             return Ok(());
         }
         progress(Progress::Solving);
-        let check = LoadCheck::new(self, false);
+        let check = LoadCheck::new_cancellable(self, false, &cancel.0);
         progress(Progress::StageDone);
         let name = model.parameterization_name();
         let reason = match check {
@@ -489,7 +495,7 @@ impl Job {
         let s = &scene.solver;
         let integrator = self.input.integrator(&self.registry, problem, &plan)?;
         if integrator.is_some() && resume.is_none() {
-            self.refuse_if_it_would_fold(&progress)?;
+            self.refuse_if_it_would_fold(&progress, cancel)?;
         }
         self.check_disk_space(out_dir)?;
         let mut state = State::at_rest(problem.model());

@@ -19,6 +19,10 @@ fn input(extra: &str) -> SceneInput {
     SceneInput::from_toml(&scene(extra), "test.toml").unwrap()
 }
 
+fn prepared(extra: &str) -> Job {
+    Job::prepare(input(extra), Registry::default(), &no_progress).unwrap()
+}
+
 /// Times listed in a `.pvd` file.
 fn pvd_times(path: &std::path::Path) -> Vec<f64> {
     let text = std::fs::read_to_string(path).unwrap();
@@ -793,12 +797,7 @@ fn uncompressed_frames_hold_the_same_lattice() {
 /// load increment, and writes nothing.
 #[test]
 fn a_cancelled_static_solve_stops_and_writes_nothing() {
-    let job = Job::prepare(
-        input("[solver]\nkind = \"static\"\n"),
-        Registry::default(),
-        &no_progress,
-    )
-    .unwrap();
+    let job = prepared("[solver]\nkind = \"static\"\n");
     let out = tempfile::tempdir().unwrap();
     let cancel = Cancel::new();
     cancel.cancel();
@@ -814,4 +813,25 @@ fn a_cancelled_static_solve_stops_and_writes_nothing() {
     assert_eq!(std::fs::read_dir(out.path()).unwrap().count(), 0);
     // Not cancelled, the same job solves.
     assert!(job.run(out.path(), &no_progress, &Cancel::new()).is_ok());
+}
+
+/// A run cancelled while the static check of a non-default model runs
+/// (docs/robustness.md, refused up front) skips the check and stops at its
+/// first step, as interrupted.
+#[test]
+fn a_cancelled_check_before_a_run_stops_it_as_interrupted() {
+    let job = prepared("[model]\nparameterization = \"springs\"\n[solver]\nduration = 0.05\n");
+    let out = tempfile::tempdir().unwrap();
+    // Not cancelled, the check refuses it (springs fold under the weight).
+    let err = job
+        .run(out.path(), &no_progress, &Cancel::new())
+        .unwrap_err();
+    assert!(
+        matches!(err, mss_scene::JobError::WouldFold { .. }),
+        "{err}"
+    );
+    let cancel = Cancel::new();
+    cancel.cancel();
+    let summary = job.run(out.path(), &no_progress, &cancel).unwrap();
+    assert!(summary.interrupted);
 }
