@@ -823,6 +823,16 @@ impl Contact {
         &self.surface_points
     }
 
+    /// Whether point `i` has a friction anchor on any obstacle in `anchors`
+    /// ([`State::contact`](crate::solver::State); false where it holds none).
+    pub fn is_anchored(&self, i: u32, anchors: &[Option<Vec3>]) -> bool {
+        let nobs = self.obstacles.len();
+        let i = i as usize;
+        anchors
+            .get(i * nobs..(i + 1) * nobs)
+            .is_some_and(|a| a.iter().any(Option::is_some))
+    }
+
     /// The node of a node point (see [`Contact::node_points`]); for a
     /// surface vertex, the first of its cell's nodes.
     pub fn point_node(&self, i: u32) -> u32 {

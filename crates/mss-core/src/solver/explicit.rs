@@ -645,7 +645,6 @@ impl Explicit {
         }
         self.candidates.clear();
         self.g_start.clear();
-        let nobs = contact.obstacles().count();
         let known = state.contact.len() == contact.num_anchors();
         // Within a call, a node point is anchored exactly when it was inside
         // an obstacle at the end of the last sub-step (`contact_end` and
@@ -654,10 +653,7 @@ impl Explicit {
         let anchors_tell = known && !self.contact_fresh;
         self.contact_fresh = false;
         for &i in contact.node_points() {
-            let anchored = known
-                && state.contact[i as usize * nobs..(i as usize + 1) * nobs]
-                    .iter()
-                    .any(Option::is_some);
+            let anchored = known && contact.is_anchored(i, &state.contact);
             if anchors_tell && !anchored {
                 continue;
             }
@@ -784,7 +780,7 @@ impl Explicit {
                 };
                 x -= free(inverse * r);
             }
-            ok &= x.iter().all(|a| a.is_finite());
+            ok &= all_finite(&x);
             state.x[n] = x;
             if verlet {
                 self.f_contact[n] += g;
