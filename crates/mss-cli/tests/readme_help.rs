@@ -22,6 +22,7 @@ fn generated() -> String {
         &["check"],
         &["init"],
         &["experiment"],
+        &["view"],
     ] {
         let out = Command::new(MSS)
             .args(cmd)

@@ -183,6 +183,15 @@ impl Simulation {
         }
     }
 
+    /// The nodes a pick holds (empty without a pick).
+    pub fn grabbed_nodes(&self) -> Vec<u32> {
+        self.grab
+            .read()
+            .unwrap_or_else(|e| e.into_inner())
+            .as_ref()
+            .map_or_else(Vec::new, |g| g.nodes.clone())
+    }
+
     /// Lets the picked nodes go.
     pub fn release(&mut self) {
         *self.grab.write().unwrap_or_else(|e| e.into_inner()) = None;

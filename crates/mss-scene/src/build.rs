@@ -141,12 +141,28 @@ impl SceneInput {
         loaders: &Loaders,
         surface: Option<&hexmesh::Embedding>,
     ) -> Result<Problem, JobError> {
+        self.problem_with_obstacles(model, loaders, surface, Vec::new())
+    }
+
+    /// [`SceneInput::problem_with`] with `extra` obstacles after the
+    /// scene's `[[obstacles]]` (the tools of an interactive front end).
+    pub fn problem_with_obstacles(
+        &self,
+        model: mss_core::Model,
+        loaders: &Loaders,
+        surface: Option<&hexmesh::Embedding>,
+        extra: Vec<(
+            Box<dyn mss_core::contact::Obstacle>,
+            mss_core::contact::ContactSettings,
+        )>,
+    ) -> Result<Problem, JobError> {
         let scene = &self.scene;
         let n_fixed = scene.fixed.len();
         let mesh_of = |path: &str| self.load_placed_mesh(path, loaders);
-        let contact = crate::obstacles::build_contact(
+        let contact = crate::obstacles::build_contact_with(
             &model,
             &scene.obstacles,
+            extra,
             &mesh_of,
             scene.contact.points.points(),
             surface,

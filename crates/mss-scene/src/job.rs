@@ -356,11 +356,24 @@ impl Job {
     /// interactive [`Simulation`](mss_core::simulation::Simulation), keeps
     /// the job's own for runs).
     pub fn rebuild_problem(&self) -> Result<Problem, JobError> {
+        self.interactive_problem(Vec::new())
+    }
+
+    /// [`Job::rebuild_problem`] with `extra` obstacles touching the body
+    /// after the scene's own (a viewer's poking sphere, a haptic tool),
+    /// usually [`Steered`](mss_core::contact::Steered) ones.
+    pub fn interactive_problem(
+        &self,
+        extra: Vec<(
+            Box<dyn mss_core::contact::Obstacle>,
+            mss_core::contact::ContactSettings,
+        )>,
+    ) -> Result<Problem, JobError> {
         let model = self.problem.model().clone();
         let surface = (self.input.scene.contact.points != crate::obstacles::PointsKey::Nodes)
             .then(|| hexmesh::Embedding::new(&self.lattice, &self.mesh));
         self.input
-            .problem_with(model, &self.registry.loaders, surface.as_ref())
+            .problem_with_obstacles(model, &self.registry.loaders, surface.as_ref(), extra)
     }
 
     /// Time-steps (or statically solves) the job, writing frames into

@@ -212,15 +212,30 @@ pub fn build_contact(
     points: ContactPoints,
     surface: Option<&hexmesh::Embedding>,
 ) -> Result<Option<Contact>, (usize, ObstacleError)> {
-    if specs.is_empty() {
+    build_contact_with(model, specs, Vec::new(), mesh_of, points, surface)
+}
+
+/// [`build_contact`] with `extra` obstacles after the scene's (an
+/// interactive front end's tools: a poking sphere, a cursor); a contact is
+/// built when either list is non-empty.
+pub fn build_contact_with(
+    model: &Model,
+    specs: &[ObstacleSpec],
+    extra: Vec<(Box<dyn Obstacle>, ContactSettings)>,
+    mesh_of: &dyn Fn(&str) -> Result<hexmesh::TriMesh, String>,
+    points: ContactPoints,
+    surface: Option<&hexmesh::Embedding>,
+) -> Result<Option<Contact>, (usize, ObstacleError)> {
+    if specs.is_empty() && extra.is_empty() {
         return Ok(None);
     }
-    let mut obstacles = Vec::with_capacity(specs.len());
+    let mut obstacles = Vec::with_capacity(specs.len() + extra.len());
     for (i, spec) in specs.iter().enumerate() {
         let o = spec.obstacle(model, mesh_of).map_err(|e| (i, e))?;
         let s = spec.settings(model).map_err(|e| (i, e))?;
         obstacles.push((o, s));
     }
+    obstacles.extend(extra);
     Ok(Some(Contact::with_points(
         model, obstacles, points, surface,
     )))

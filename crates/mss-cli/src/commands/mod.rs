@@ -8,6 +8,7 @@ pub mod check;
 pub mod experiment;
 pub mod init;
 pub mod run;
+pub mod view;
 pub mod voxelize;
 
 /// The subcommands of `mss`.
@@ -24,6 +25,9 @@ pub enum Command {
     /// Compare the model with the built-in FEM reference: the paper's beam and
     /// L-shape experiments and virtual material tests, or any scene (report, CSV, SVG, .vtu).
     Experiment(experiment::ExperimentArgs),
+    /// Watch, drag and poke a scene live in the browser, or replay a run's
+    /// folder (prints the page's address; Ctrl-C stops it).
+    View(view::ViewArgs),
 }
 
 /// Runs the parsed subcommand.
@@ -33,6 +37,7 @@ pub fn dispatch(cli: &Cli) -> anyhow::Result<()> {
         Command::Voxelize(a) => voxelize::run(a, &cli.global),
         Command::Check(a) => check::run(a, &cli.global),
         Command::Init(a) => init::run(a, &cli.global),
+        Command::View(a) => view::run(a, &cli.global),
         Command::Experiment(a) => {
             let out = cli
                 .global

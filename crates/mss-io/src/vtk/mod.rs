@@ -10,6 +10,7 @@
 
 mod legacy;
 mod pvd;
+pub mod read;
 mod series;
 mod vtu;
 

@@ -1,0 +1,249 @@
+//! Reading back the files of a run: the `.pvd` collection
+//! ([`read_pvd`]) and the lattice frames it lists ([`read_lattice_vtu`]),
+//! for replaying a run (the viewer) without ParaView.
+//!
+//! A run folder is input like any other: a `.pvd` may name files outside
+//! its folder or be truncated, a `.vtu` may be malformed. The `.pvd` is
+//! parsed as XML and only plain file names beside it are accepted; a `.vtu`
+//! is read by vtkio under `catch_unwind` (it is a pre-release that panics
+//! on some malformed files) after its size is checked against a limit, and
+//! its hexahedra and field lengths are checked before they are returned.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use super::{PvdEntry, VTK_HEXAHEDRON};
+
+/// Why a run's file could not be read.
+#[derive(Debug, thiserror::Error)]
+pub enum ReadError {
+    /// The operating system refused to read it.
+    #[error("cannot read {}: {source}", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// Underlying error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The file is not what the run writes.
+    #[error("{}: {reason}", path.display())]
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
+fn invalid(path: &Path, reason: impl Into<String>) -> ReadError {
+    ReadError::Invalid {
+        path: path.to_path_buf(),
+        reason: reason.into(),
+    }
+}
+
+/// The frames a `.pvd` collection lists, in file order. A file name must be
+/// a plain name in the `.pvd`'s own folder (no separators, no `..`), so that
+/// reading a collection never reaches outside that folder; times must be
+/// finite.
+pub fn read_pvd(path: &Path) -> Result<Vec<PvdEntry>, ReadError> {
+    let text = std::fs::read_to_string(path).map_err(|source| ReadError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let mut reader = quick_xml::Reader::from_str(&text);
+    let mut entries = Vec::new();
+    loop {
+        let event = reader
+            .read_event()
+            .map_err(|e| invalid(path, format!("not valid XML: {e}")))?;
+        match event {
+            quick_xml::events::Event::Eof => break,
+            quick_xml::events::Event::Empty(tag) | quick_xml::events::Event::Start(tag)
+                if tag.name().as_ref() == b"DataSet" =>
+            {
+                let mut time = None;
+                let mut file = None;
+                for attr in tag.attributes() {
+                    let attr = attr.map_err(|e| invalid(path, format!("bad attribute: {e}")))?;
+                    let value = attr
+                        .unescape_value()
+                        .map_err(|e| invalid(path, format!("bad attribute value: {e}")))?;
+                    match attr.key.as_ref() {
+                        b"timestep" => time = Some(value.trim().parse::<f64>().ok()),
+                        b"file" => file = Some(value.into_owned()),
+                        _ => {}
+                    }
+                }
+                let n = entries.len() + 1;
+                let time = match time {
+                    Some(Some(t)) if t.is_finite() => t,
+                    Some(_) => {
+                        return Err(invalid(
+                            path,
+                            format!("DataSet #{n}: timestep is not a finite number"),
+                        ));
+                    }
+                    None => return Err(invalid(path, format!("DataSet #{n} has no timestep"))),
+                };
+                let file =
+                    file.ok_or_else(|| invalid(path, format!("DataSet #{n} has no file")))?;
+                let plain =
+                    !file.is_empty() && !file.contains(['/', '\\']) && file != "." && file != "..";
+                if !plain {
+                    return Err(invalid(
+                        path,
+                        format!(
+                            "DataSet #{n}: file \"{file}\" is not a plain file name beside the .pvd"
+                        ),
+                    ));
+                }
+                entries.push(PvdEntry { time, file });
+            }
+            _ => {}
+        }
+    }
+    if entries.is_empty() {
+        return Err(invalid(path, "the collection lists no frame"));
+    }
+    Ok(entries)
+}
+
+/// A lattice frame read back from a `.vtu`.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct LatticeFrameData {
+    /// Point positions (m).
+    pub points: Vec<[f64; 3]>,
+    /// Hexahedra, VTK_HEXAHEDRON node order.
+    pub cells: Vec<[u32; 8]>,
+    /// Point fields by name: the values, flattened, and their components.
+    pub point_fields: HashMap<String, (Vec<f64>, usize)>,
+    /// Cell fields by name, as `point_fields`.
+    pub cell_fields: HashMap<String, (Vec<f64>, usize)>,
+}
+
+impl LatticeFrameData {
+    /// A point field with `components` values per point, if present.
+    pub fn point_field(&self, name: &str, components: usize) -> Option<&[f64]> {
+        self.point_fields
+            .get(name)
+            .filter(|(_, c)| *c == components)
+            .map(|(v, _)| v.as_slice())
+    }
+
+    /// A cell field with `components` values per cell, if present.
+    pub fn cell_field(&self, name: &str, components: usize) -> Option<&[f64]> {
+        self.cell_fields
+            .get(name)
+            .filter(|(_, c)| *c == components)
+            .map(|(v, _)| v.as_slice())
+    }
+}
+
+fn fields(
+    path: &Path,
+    attributes: Vec<vtkio::model::Attribute>,
+    count: usize,
+    what: &str,
+) -> Result<HashMap<String, (Vec<f64>, usize)>, ReadError> {
+    let mut out = HashMap::new();
+    for a in attributes {
+        if let vtkio::model::Attribute::DataArray(d) = a {
+            let components = d.elem.num_comp() as usize;
+            let values = d
+                .data
+                .cast_into::<f64>()
+                .ok_or_else(|| invalid(path, format!("{what} field {} is not numeric", d.name)))?;
+            if components == 0 || values.len() != components * count {
+                return Err(invalid(
+                    path,
+                    format!(
+                        "{what} field {} has {} values for {count} entries of {components} components",
+                        d.name,
+                        values.len()
+                    ),
+                ));
+            }
+            out.insert(d.name, (values, components));
+        }
+    }
+    Ok(out)
+}
+
+/// Reads a lattice frame written by [`super::write_vtu`] (any encoding):
+/// hexahedra only, every index in range, fields of the right lengths. Files
+/// larger than `max_bytes` are refused before they are read.
+pub fn read_lattice_vtu(path: &Path, max_bytes: u64) -> Result<LatticeFrameData, ReadError> {
+    let size = std::fs::metadata(path)
+        .map_err(|source| ReadError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?
+        .len();
+    if size > max_bytes {
+        return Err(invalid(
+            path,
+            format!("{size} bytes, more than the {max_bytes} a frame may have here"),
+        ));
+    }
+    let imported = std::panic::catch_unwind(|| vtkio::Vtk::import(path))
+        .map_err(|_| {
+            invalid(
+                path,
+                "the VTK reader failed on this file (malformed XML VTK)",
+            )
+        })?
+        .map_err(|e| invalid(path, format!("not a readable VTK file: {e}")))?;
+    let vtkio::model::DataSet::UnstructuredGrid { mut pieces, .. } = imported.data else {
+        return Err(invalid(path, "not an unstructured grid (.vtu)"));
+    };
+    if pieces.len() != 1 {
+        return Err(invalid(
+            path,
+            format!("{} pieces, expected 1", pieces.len()),
+        ));
+    }
+    let vtkio::model::Piece::Inline(piece) = pieces.remove(0) else {
+        return Err(invalid(path, "the piece is not inline"));
+    };
+    let piece = *piece;
+    let flat = piece
+        .points
+        .cast_into::<f64>()
+        .ok_or_else(|| invalid(path, "points are not numeric"))?;
+    if flat.len() % 3 != 0 {
+        return Err(invalid(path, "points do not come in triples"));
+    }
+    let points: Vec<[f64; 3]> = flat.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect();
+    let (_, legacy) = piece.cells.cell_verts.into_legacy();
+    let types = piece.cells.types;
+    let mut cells = Vec::with_capacity(types.len());
+    let mut at = 0usize;
+    for (c, t) in types.iter().enumerate() {
+        if *t as u8 != VTK_HEXAHEDRON {
+            return Err(invalid(path, format!("cell {c} is not a hexahedron")));
+        }
+        if legacy.get(at) != Some(&8) || legacy.len() < at + 9 {
+            return Err(invalid(path, format!("cell {c} does not have 8 nodes")));
+        }
+        let mut cell = [0u32; 8];
+        cell.copy_from_slice(&legacy[at + 1..at + 9]);
+        if cell.iter().any(|&n| n as usize >= points.len()) {
+            return Err(invalid(
+                path,
+                format!("cell {c} names a node beyond the {} points", points.len()),
+            ));
+        }
+        cells.push(cell);
+        at += 9;
+    }
+    let point_fields = fields(path, piece.data.point, points.len(), "point")?;
+    let cell_fields = fields(path, piece.data.cell, cells.len(), "cell")?;
+    Ok(LatticeFrameData {
+        points,
+        cells,
+        point_fields,
+        cell_fields,
+    })
+}

@@ -1,0 +1,491 @@
+//! The replay source: the frames of a folder written by `mss run`, played
+//! at their simulated times (times the page's scale), with seeking.
+//!
+//! The lattice frames listed by `lattice.pvd` are the source of truth: the
+//! skin is the boundary of their hexahedra (faces that belong to one cell),
+//! coloured by the `displacement` point field and by J = 1 +
+//! `volumetric_strain` averaged from the cells to the nodes. When every
+//! frame also has its embedded surface (`surface_NNNN.obj` beside
+//! `lattice_NNNN.vtu`), it is offered as well, coloured by its
+//! displacement from the first frame. Frames are read when shown, so a
+//! long run costs no memory up front.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use mss_scene::mss_io::vtk::read::{LatticeFrameData, read_lattice_vtu, read_pvd};
+
+use crate::protocol::{
+    ClientMessage, SceneInfo, Status, SurfaceFrame, SurfaceInfo, encode_frame, encode_topology,
+};
+use crate::{RateMeter, SourceContext, ViewError};
+
+/// Largest frame file read (bytes).
+const MAX_FRAME_BYTES: u64 = 2 << 30;
+
+/// A run folder, checked when the viewer starts.
+#[derive(Debug)]
+pub struct RunFolder {
+    dir: PathBuf,
+    frames: Vec<(f64, String)>,
+    surface_files: Option<Vec<String>>,
+}
+
+fn not_a_run(dir: &Path, reason: impl Into<String>) -> ViewError {
+    ViewError::NotARun {
+        path: dir.to_path_buf(),
+        reason: reason.into(),
+    }
+}
+
+impl RunFolder {
+    /// Reads the folder's `lattice.pvd` (and notes the surface frames).
+    pub fn open(dir: &Path) -> Result<RunFolder, ViewError> {
+        let pvd = dir.join("lattice.pvd");
+        if !pvd.is_file() {
+            return Err(not_a_run(
+                dir,
+                "no lattice.pvd: replay needs a folder written by `mss run` with [output] vtu and pvd",
+            ));
+        }
+        let entries = read_pvd(&pvd).map_err(|e| not_a_run(dir, e.to_string()))?;
+        let frames: Vec<(f64, String)> = entries.into_iter().map(|e| (e.time, e.file)).collect();
+        let surface_files: Option<Vec<String>> = frames
+            .iter()
+            .map(|(_, f)| {
+                let s = f.strip_prefix("lattice_")?.strip_suffix(".vtu")?;
+                let name = format!("surface_{s}.obj");
+                dir.join(&name).is_file().then_some(name)
+            })
+            .collect();
+        Ok(RunFolder {
+            dir: dir.to_path_buf(),
+            frames,
+            surface_files,
+        })
+    }
+
+    /// The frames' times (s).
+    pub fn times(&self) -> Vec<f64> {
+        self.frames.iter().map(|f| f.0).collect()
+    }
+}
+
+/// Positions and triangles of a surface.
+type SurfaceMesh = (Vec<[f64; 3]>, Vec<[u32; 3]>);
+
+/// A surface OBJ as written by the run: positions and triangles.
+fn read_obj(path: &Path) -> Result<SurfaceMesh, String> {
+    let size = std::fs::metadata(path)
+        .map_err(|e| format!("{}: {e}", path.display()))?
+        .len();
+    if size > MAX_FRAME_BYTES {
+        return Err(format!(
+            "{}: {size} bytes is too large for a frame",
+            path.display()
+        ));
+    }
+    let options = tobj::LoadOptions {
+        triangulate: true,
+        single_index: false,
+        ..tobj::LoadOptions::default()
+    };
+    let (models, _) =
+        tobj::load_obj(path, &options).map_err(|e| format!("{}: {e}", path.display()))?;
+    let mut positions = Vec::new();
+    let mut triangles = Vec::new();
+    for m in models {
+        let base = positions.len() as u32;
+        let mesh = m.mesh;
+        positions.extend(mesh.positions.chunks_exact(3).map(|p| [p[0], p[1], p[2]]));
+        for t in mesh.indices.chunks_exact(3) {
+            triangles.push([t[0] + base, t[1] + base, t[2] + base]);
+        }
+    }
+    if triangles
+        .iter()
+        .flatten()
+        .any(|&i| i as usize >= positions.len())
+    {
+        return Err(format!("{}: a face names a missing vertex", path.display()));
+    }
+    Ok((positions, triangles))
+}
+
+/// The boundary of the frame's hexahedra: the skin vertices (lattice
+/// nodes) and triangles.
+fn boundary(cells: &[[u32; 8]]) -> (Vec<u32>, Vec<[u32; 3]>) {
+    let mut count: HashMap<[u32; 4], (u32, [u32; 4])> = HashMap::new();
+    for cell in cells {
+        for f in mss_scene::hexmesh::lattice::CELL_FACES {
+            let quad = f.map(|k| cell[k]);
+            let mut key = quad;
+            key.sort_unstable();
+            count
+                .entry(key)
+                .and_modify(|e| e.0 += 1)
+                .or_insert((1, quad));
+        }
+    }
+    let mut quads: Vec<[u32; 4]> = count
+        .into_values()
+        .filter(|(n, _)| *n == 1)
+        .map(|(_, q)| q)
+        .collect();
+    quads.sort_unstable();
+    let mut vertex_of: HashMap<u32, u32> = HashMap::new();
+    let mut nodes = Vec::new();
+    let mut index = |n: u32| {
+        *vertex_of.entry(n).or_insert_with(|| {
+            nodes.push(n);
+            nodes.len() as u32 - 1
+        })
+    };
+    let mut triangles = Vec::with_capacity(2 * quads.len());
+    for q in quads {
+        let v = q.map(&mut index);
+        triangles.push([v[0], v[1], v[2]]);
+        triangles.push([v[0], v[2], v[3]]);
+    }
+    (nodes, triangles)
+}
+
+struct Loaded {
+    skin_nodes: Vec<u32>,
+    node_cell_count: Vec<u32>,
+    surface_rest: Option<Vec<[f64; 3]>>,
+}
+
+fn skin_frame(data: &LatticeFrameData, loaded: &Loaded) -> SurfaceFrame {
+    let n = data.points.len();
+    let disp = data.point_field("displacement", 3);
+    let mut j = vec![0.0; n];
+    if let Some(vol) = data.cell_field("volumetric_strain", 1) {
+        for (cell, e) in data.cells.iter().zip(vol) {
+            for &i in cell {
+                j[i as usize] += 1.0 + e;
+            }
+        }
+        for (j, &c) in j.iter_mut().zip(&loaded.node_cell_count) {
+            *j /= c.max(1) as f64;
+        }
+    } else {
+        j.fill(1.0);
+    }
+    let nodes = &loaded.skin_nodes;
+    SurfaceFrame {
+        positions: nodes
+            .iter()
+            .map(|&i| data.points[i as usize].map(|c| c as f32))
+            .collect(),
+        displacement: nodes
+            .iter()
+            .map(|&i| {
+                disp.map_or(0.0, |d| {
+                    let i = 3 * i as usize;
+                    (d[i] * d[i] + d[i + 1] * d[i + 1] + d[i + 2] * d[i + 2]).sqrt() as f32
+                })
+            })
+            .collect(),
+        jacobian: nodes.iter().map(|&i| j[i as usize] as f32).collect(),
+    }
+}
+
+fn surface_frame(positions: &[[f64; 3]], rest: &[[f64; 3]]) -> SurfaceFrame {
+    SurfaceFrame {
+        positions: positions.iter().map(|p| p.map(|c| c as f32)).collect(),
+        displacement: positions
+            .iter()
+            .zip(rest)
+            .map(|(p, r)| {
+                ((p[0] - r[0]).powi(2) + (p[1] - r[1]).powi(2) + (p[2] - r[2]).powi(2)).sqrt()
+                    as f32
+            })
+            .collect(),
+        jacobian: vec![1.0; positions.len()],
+    }
+}
+
+fn load_first(run: &RunFolder) -> Result<(Loaded, SceneInfo, Vec<u8>), String> {
+    let first = run.dir.join(&run.frames[0].1);
+    let data = read_lattice_vtu(&first, MAX_FRAME_BYTES).map_err(|e| e.to_string())?;
+    let (skin_nodes, skin_tris) = boundary(&data.cells);
+    let mut node_cell_count = vec![0u32; data.points.len()];
+    for cell in &data.cells {
+        for &i in cell {
+            node_cell_count[i as usize] += 1;
+        }
+    }
+    // The rest shape: the first frame less its displacement.
+    let rest: Vec<[f64; 3]> = match data.point_field("displacement", 3) {
+        Some(d) => data
+            .points
+            .iter()
+            .zip(d.chunks_exact(3))
+            .map(|(p, u)| [p[0] - u[0], p[1] - u[1], p[2] - u[2]])
+            .collect(),
+        None => data.points.clone(),
+    };
+    let mut bounds = [[f64::INFINITY; 3], [f64::NEG_INFINITY; 3]];
+    for p in &rest {
+        for k in 0..3 {
+            bounds[0][k] = bounds[0][k].min(p[k]);
+            bounds[1][k] = bounds[1][k].max(p[k]);
+        }
+    }
+    let cell_size = data
+        .cells
+        .first()
+        .map(|c| {
+            let (a, b) = (rest[c[0] as usize], rest[c[1] as usize]);
+            ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+        })
+        .unwrap_or(0.0);
+    let mut surfaces = Vec::new();
+    let mut topology: Vec<Vec<[u32; 3]>> = Vec::new();
+    let mut surface_rest = None;
+    if let Some(files) = &run.surface_files {
+        match read_obj(&run.dir.join(&files[0])) {
+            Ok((positions, triangles)) => {
+                surfaces.push(SurfaceInfo {
+                    name: "surface".into(),
+                    vertices: positions.len() as u32,
+                    triangles: triangles.len() as u32,
+                    has_jacobian: false,
+                });
+                topology.push(triangles);
+                surface_rest = Some(positions);
+            }
+            Err(e) => log::warn!("viewer: the embedded surface is not shown: {e}"),
+        }
+    }
+    surfaces.push(SurfaceInfo {
+        name: "skin".into(),
+        vertices: skin_nodes.len() as u32,
+        triangles: skin_tris.len() as u32,
+        has_jacobian: data.cell_field("volumetric_strain", 1).is_some(),
+    });
+    topology.push(skin_tris);
+    let info = SceneInfo {
+        kind: "scene".into(),
+        generation: 1,
+        mode: "replay".into(),
+        name: run.dir.display().to_string(),
+        cells: data.cells.len(),
+        nodes: data.points.len(),
+        cell_size,
+        bounds,
+        surfaces,
+        obstacles: Vec::new(),
+        poke_radius: 0.0,
+        frame_times: run.times(),
+        error: None,
+    };
+    let refs: Vec<&[[u32; 3]]> = topology.iter().map(|t| t.as_slice()).collect();
+    Ok((
+        Loaded {
+            skin_nodes,
+            node_cell_count,
+            surface_rest,
+        },
+        info,
+        encode_topology(&refs),
+    ))
+}
+
+/// Reads frame `k` and encodes it; an error names the file.
+fn encode(run: &RunFolder, loaded: &Loaded, k: usize, seq: u64) -> Result<(Vec<u8>, f64), String> {
+    let data = read_lattice_vtu(&run.dir.join(&run.frames[k].1), MAX_FRAME_BYTES)
+        .map_err(|e| e.to_string())?;
+    if data.points.len() != loaded.node_cell_count.len() {
+        return Err(format!(
+            "{}: {} points where the first frame has {}",
+            run.frames[k].1,
+            data.points.len(),
+            loaded.node_cell_count.len()
+        ));
+    }
+    let max_disp = data.point_field("displacement", 3).map_or(0.0, |d| {
+        d.chunks_exact(3)
+            .map(|u| (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt())
+            .fold(0.0, f64::max)
+    });
+    let mut surfaces = Vec::new();
+    if let (Some(rest), Some(files)) = (&loaded.surface_rest, &run.surface_files) {
+        let (positions, _) = read_obj(&run.dir.join(&files[k]))?;
+        if positions.len() != rest.len() {
+            return Err(format!(
+                "{}: {} vertices where the first frame has {}",
+                files[k],
+                positions.len(),
+                rest.len()
+            ));
+        }
+        surfaces.push(surface_frame(&positions, rest));
+    }
+    surfaces.push(skin_frame(&data, loaded));
+    Ok((encode_frame(1, seq, run.frames[k].0, &surfaces), max_disp))
+}
+
+/// Runs the replay until the viewer stops.
+pub(crate) fn run(run: RunFolder, ctx: SourceContext) {
+    let frame_period = Duration::from_secs_f64(1.0 / ctx.options.frame_rate);
+    let (loaded, info, topology) = match load_first(&run) {
+        Ok(x) => x,
+        Err(e) => {
+            log::error!("viewer: {e}");
+            ctx.publish_scene(
+                SceneInfo {
+                    frame_times: run.times(),
+                    ..SceneInfo::failed(1, "replay", run.dir.display().to_string(), e)
+                },
+                encode_topology(&[]),
+            );
+            while !ctx.stopped() {
+                let _ = ctx.next_command(frame_period);
+            }
+            return;
+        }
+    };
+    ctx.publish_scene(info, topology);
+    let times = run.times();
+    let last = times.len() - 1;
+    let mut playing = !ctx.options.paused;
+    let mut time_scale = 1.0;
+    let mut playhead = times[0];
+    let mut shown: Option<usize> = None;
+    let mut seq = 0u64;
+    let mut meter = RateMeter::default();
+    let mut error: Option<String> = None;
+    let mut clock = Instant::now();
+    while !ctx.stopped() {
+        let mut target: Option<usize> = None;
+        let wait = if playing {
+            frame_period
+        } else {
+            frame_period * 4
+        };
+        let mut first = true;
+        while let Some(m) = ctx.next_command(if first { wait } else { Duration::ZERO }) {
+            first = false;
+            match m {
+                ClientMessage::Play => {
+                    if shown == Some(last) {
+                        playhead = times[0];
+                    }
+                    playing = true;
+                    clock = Instant::now();
+                    meter.reset();
+                }
+                ClientMessage::Pause => playing = false,
+                ClientMessage::Step => {
+                    playing = false;
+                    let k = shown.map_or(0, |k| (k + 1).min(last));
+                    target = Some(k);
+                }
+                ClientMessage::Reset => {
+                    playing = false;
+                    target = Some(0);
+                }
+                ClientMessage::Seek { frame } => {
+                    playing = false;
+                    target = Some((frame as usize).min(last));
+                }
+                ClientMessage::TimeScale { value } => {
+                    time_scale = value;
+                    meter.reset();
+                }
+                _ => {}
+            }
+        }
+        if let Some(k) = target {
+            playhead = times[k];
+        } else if playing {
+            let now = Instant::now();
+            playhead += now.duration_since(clock).as_secs_f64() * time_scale;
+        }
+        clock = Instant::now();
+        // The latest frame whose time has come.
+        let k = times.partition_point(|&t| t <= playhead).saturating_sub(1);
+        if playing && k == last {
+            playing = false;
+        }
+        let needs = shown != Some(k) || target.is_some() || seq == 0;
+        if !needs {
+            continue;
+        }
+        match encode(&run, &loaded, k, seq + 1) {
+            Ok((binary, max_displacement)) => {
+                seq += 1;
+                shown = Some(k);
+                error = None;
+                let status = Status {
+                    kind: "status".into(),
+                    generation: 1,
+                    seq,
+                    time: times[k],
+                    playing,
+                    time_scale,
+                    real_time_factor: if playing { meter.record(playhead) } else { 0.0 },
+                    frame: k as u32,
+                    max_displacement,
+                    ..Status::default()
+                };
+                ctx.publish_frame(status, binary);
+            }
+            Err(e) => {
+                if error.as_deref() != Some(e.as_str()) {
+                    log::error!("viewer: {e}");
+                }
+                error = Some(e.clone());
+                playing = false;
+                shown = Some(k);
+                ctx.publish_frame(
+                    Status {
+                        kind: "status".into(),
+                        generation: 1,
+                        seq,
+                        time: times[k],
+                        frame: k as u32,
+                        time_scale,
+                        error: Some(e),
+                        ..Status::default()
+                    },
+                    Vec::new(),
+                );
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_boundary_of_a_block_is_its_outside() {
+        let lattice = mss_scene::hexmesh::Lattice::block([3, 2, 2], 0.1, [0.0; 3]).unwrap();
+        let (nodes, tris) = boundary(lattice.cells());
+        // A 3x2x2 block: 2 * (3*2 + 3*2 + 2*2) = 32 quads, and every node
+        // but none inside (a 3x2x2 block has one interior... none: 4x3x3 = 36
+        // nodes, interior (2x1x1) = 2).
+        assert_eq!(tris.len(), 64);
+        assert_eq!(nodes.len(), 36 - 2);
+        // Outward: the signed volume of the closed skin is the block's.
+        let p = lattice.nodes();
+        let vol: f64 = tris
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|v| p[nodes[v as usize] as usize]);
+                let cross = [
+                    b[1] * c[2] - b[2] * c[1],
+                    b[2] * c[0] - b[0] * c[2],
+                    b[0] * c[1] - b[1] * c[0],
+                ];
+                (a[0] * cross[0] + a[1] * cross[1] + a[2] * cross[2]) / 6.0
+            })
+            .sum();
+        assert!((vol - 0.3 * 0.2 * 0.2).abs() < 1e-12, "{vol}");
+    }
+}
