@@ -9,7 +9,7 @@
   const token = new URLSearchParams(location.search).get("token") || "";
   const $ = (id) => document.getElementById(id);
   const canvas = $("view");
-  const gl = canvas.getContext("webgl2", { antialias: true, preserveDrawingBuffer: true });
+  const gl = canvas.getContext("webgl2", { antialias: false, preserveDrawingBuffer: false });
 
   // State visible to tests and tools.
   const api = {
@@ -309,7 +309,12 @@
     return api.colour === "displacement" ? [0, Math.max(displayRange.displacement, 1e-12)]
       : [1 - displayRange.jacobian, 1 + displayRange.jacobian];
   }
+  let legendKey = "";
   function drawLegend(s) {
+    const [lo0, hi0] = valueRange();
+    const key = `${api.colour} ${lo0.toPrecision(3)} ${hi0.toPrecision(3)} ${s && s.info.has_jacobian}`;
+    if (key === legendKey) return;
+    legendKey = key;
     const c = $("legend-bar"), g = c.getContext("2d");
     const grad = g.createLinearGradient(0, c.height, 0, 0);
     const stops = api.colour === "displacement"
@@ -440,6 +445,19 @@
     return null;
   };
   api.camera = () => ({ eye, target, distance, yaw, pitch });
+  // The fraction of the canvas in saturated colour (the body's colour
+  // map; background, grid and text are grey), read right after a draw.
+  api.colouredFraction = function () {
+    dirty = true; draw();
+    const w = canvas.width, h = canvas.height, px = new Uint8Array(4 * w * h);
+    gl.readPixels(0, 0, w, h, gl.RGBA, gl.UNSIGNED_BYTE, px);
+    let n = 0;
+    for (let i = 0; i < px.length; i += 4) {
+      const mx = Math.max(px[i], px[i + 1], px[i + 2]), mn = Math.min(px[i], px[i + 1], px[i + 2]);
+      if (mx - mn > 40) n++;
+    }
+    return n / (w * h);
+  };
 
   // ---- input -----------------------------------------------------------
   let ws = null, grab = null, orbit = null, pendingDrag = null;
@@ -521,6 +539,7 @@
     }
   });
 
+  let hudText = "";
   function hud(st) {
     const sc = api.scene;
     const lines = [];
@@ -534,8 +553,10 @@
     }
     lines.push(`real-time factor ${st.real_time_factor.toFixed(2)} (asked ${st.time_scale.toFixed(2)})`);
     lines.push(`max |u| ${formatLength(st.max_displacement)}`);
-    $("hud").textContent = lines.join("\n");
-    $("play").textContent = st.playing ? "Pause" : "Play";
+    const text = lines.join("\n");
+    if (text !== hudText) { hudText = text; $("hud").textContent = text; }
+    const label = st.playing ? "Pause" : "Play";
+    if ($("play").textContent !== label) $("play").textContent = label;
     if (sc.mode === "replay") {
       $("frame").value = st.frame;
       $("frame-value").textContent = `t = ${(sc.frame_times[st.frame] || 0).toFixed(3)} s`;
