@@ -449,3 +449,18 @@ def write_obj(
 
 def write_stl(path: PathLike, vertices: Points, triangles: npt.ArrayLike) -> None:
     """Writes a triangle surface as binary STL (atomically)."""
+
+def view(
+    scene_or_path: Union[Scene, PathLike, None] = None,
+    port: int = 0,
+    open_browser: bool = True,
+    host: str = "127.0.0.1",
+    paused: bool = False,
+) -> str:
+    """Starts the live browser viewer of ``mss view`` and returns its
+    address with its token: a Scene, a scene file or None (the bundled
+    scene) runs live (drag it, poke it); a run's folder is replayed. It
+    serves from a background thread until ``stop_views()``."""
+
+def stop_views() -> int:
+    """Stops every viewer ``view`` started; returns how many."""

@@ -27,6 +27,7 @@ mod io;
 mod physics;
 mod scene;
 mod threads;
+mod view;
 
 /// The extension module.
 #[pymodule]
@@ -38,5 +39,6 @@ fn _hexmss(m: &Bound<'_, PyModule>) -> PyResult<()> {
     physics::register(m)?;
     scene::register(m)?;
     io::register(m)?;
+    view::register(m)?;
     Ok(())
 }

@@ -13,7 +13,7 @@
 
   // State visible to tests and tools.
   const api = {
-    ready: false, connected: false, framesReceived: 0, framesDrawn: 0,
+    ready: false, connected: false, framesReceived: 0, framesDrawn: 0, framesShown: 0,
     scene: null, status: null, error: null, surface: 0, colour: "displacement",
   };
   window.mssView = api;
@@ -283,6 +283,7 @@
     }
     api.framesReceived++;
     api.ready = true;
+    freshFrame = true;
     uploadValues();
     dirty = true;
   }
@@ -332,7 +333,7 @@
   }
 
   // ---- camera and drawing ---------------------------------------------
-  let dirty = true, viewProj = null, eye = [0, 0, 1];
+  let dirty = true, freshFrame = false, viewProj = null, eye = [0, 0, 1];
   function camera() {
     const w = canvas.clientWidth, h = canvas.clientHeight;
     eye = add(target, scale([Math.cos(pitch) * Math.cos(yaw), Math.cos(pitch) * Math.sin(yaw), Math.sin(pitch)], distance));
@@ -378,6 +379,8 @@
     }
     gl.bindVertexArray(null);
     api.framesDrawn++;
+    // Frames of the simulation that reached the screen.
+    if (freshFrame) { api.framesShown++; freshFrame = false; }
   }
 
   function loop() { draw(); requestAnimationFrame(loop); }
