@@ -124,7 +124,10 @@ where
             use clap::error::ErrorKind;
             return match e.kind() {
                 ErrorKind::DisplayHelp | ErrorKind::DisplayVersion => {
-                    e.print().context("cannot print the help text")?;
+                    e.print().map_err(|io| match io.kind() {
+                        std::io::ErrorKind::BrokenPipe => StdoutError::BrokenPipe,
+                        _ => StdoutError::Write(io),
+                    })?;
                     Ok(())
                 }
                 _ => Err(UsageError(clap_error_line(&e)).into()),
@@ -213,13 +216,62 @@ pub fn error_report(e: &anyhow::Error) -> String {
     out
 }
 
-/// Process exit code for an error: 2 for a refused command line, 1 otherwise.
+/// Printing to standard output failed.
+#[derive(Debug, thiserror::Error)]
+pub enum StdoutError {
+    /// The reader went away (`mss check | head -1`): not worth a message.
+    #[error("standard output was closed")]
+    BrokenPipe,
+    /// Standard output cannot take more (`>/dev/full`).
+    #[error("cannot print to standard output: {0}")]
+    Write(std::io::Error),
+}
+
+/// Writes to standard output, returning an error where `print!` would
+/// panic (a closed pipe, a full disk).
+pub fn write_stdout(args: std::fmt::Arguments<'_>) -> Result<(), StdoutError> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    out.write_fmt(args).map_err(|e| match e.kind() {
+        std::io::ErrorKind::BrokenPipe => StdoutError::BrokenPipe,
+        _ => StdoutError::Write(e),
+    })
+}
+
+/// `println!` for the subcommands: a failed print is an error that the
+/// command returns (through `?`), never a panic.
+#[macro_export]
+macro_rules! outln {
+    ($($arg:tt)*) => {
+        $crate::write_stdout(format_args!("{}\n", format_args!($($arg)*)))?
+    };
+}
+
+/// Exit status of a process whose output pipe was closed (128 + SIGPIPE),
+/// as the shell reports a program that SIGPIPE ended.
+pub const BROKEN_PIPE_EXIT: u8 = 141;
+
+/// Process exit code for an error: 2 for a refused command line,
+/// [`BROKEN_PIPE_EXIT`] when standard output was closed, 1 otherwise.
 pub fn exit_code(e: &anyhow::Error) -> u8 {
     if e.downcast_ref::<UsageError>().is_some() {
         2
+    } else if is_broken_pipe(e) {
+        BROKEN_PIPE_EXIT
     } else {
         1
     }
+}
+
+/// Whether the error is a closed standard output, which ends `mss`
+/// quietly.
+pub fn is_broken_pipe(e: &anyhow::Error) -> bool {
+    e.chain().any(|c| {
+        matches!(
+            c.downcast_ref::<StdoutError>(),
+            Some(StdoutError::BrokenPipe)
+        )
+    })
 }
 
 #[cfg(test)]

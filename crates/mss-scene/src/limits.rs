@@ -63,7 +63,10 @@ pub fn physical_memory_bytes() -> Option<u64> {
 /// Free space (bytes) for an unprivileged user on the file system holding
 /// `dir` (or its nearest existing ancestor).
 pub fn free_disk_bytes(dir: &Path) -> Option<u64> {
-    let mut p = dir;
+    // A relative folder ("out", the template's) has no parent to climb to
+    // once its own name is gone: resolve it against the working directory.
+    let absolute = std::path::absolute(dir).ok()?;
+    let mut p = absolute.as_path();
     loop {
         if p.exists() {
             break;
@@ -179,5 +182,12 @@ mod tests {
         assert!(physical_memory_bytes().is_some_and(|b| b > 1 << 28));
         let dir = tempfile::tempdir().unwrap();
         assert!(free_disk_bytes(&dir.path().join("not/yet/there")).is_some_and(|b| b > 0));
+        // Relative folders, existing or not (the template's "out").
+        for relative in ["out", "not/yet/there", ".", "./out"] {
+            assert!(
+                free_disk_bytes(Path::new(relative)).is_some_and(|b| b > 0),
+                "{relative}"
+            );
+        }
     }
 }

@@ -42,9 +42,9 @@ pub fn run(args: &CheckArgs, global: &GlobalArgs) -> anyhow::Result<()> {
         }
         return Ok(());
     }
-    println!("scene            {}: OK", job.input.name());
+    crate::outln!("scene            {}: OK", job.input.name());
     let [ex, ey, ez] = job.mesh.bounding_box().map_or([0.0; 3], |b| b.extent());
-    println!(
+    crate::outln!(
         "mesh             {}: {} vertices, {} triangles, {ex:.4} x {ey:.4} x {ez:.4} m \
          (placement: {})",
         job.mesh_name,
@@ -52,7 +52,7 @@ pub fn run(args: &CheckArgs, global: &GlobalArgs) -> anyhow::Result<()> {
         job.mesh.triangles.len(),
         scene.mesh.placement()
     );
-    println!(
+    crate::outln!(
         "lattice          {} cells, {} nodes, {} springs, cell size {:.4} m",
         model.num_cells(),
         model.num_nodes(),
@@ -60,7 +60,7 @@ pub fn run(args: &CheckArgs, global: &GlobalArgs) -> anyhow::Result<()> {
         model.h()
     );
     let m = &scene.material;
-    println!(
+    crate::outln!(
         "material         E = {} Pa, nu = {}, density = {} kg/m^3, model \"{}\"{}",
         m.young,
         m.poisson,
@@ -78,7 +78,7 @@ pub fn run(args: &CheckArgs, global: &GlobalArgs) -> anyhow::Result<()> {
     if let Some(a) = &job.regions {
         let cells = a.cells_per_material();
         for (k, m) in a.materials.iter().enumerate().skip(1) {
-            println!(
+            crate::outln!(
                 "region #{k:<8} E = {} Pa, nu = {}, density = {} kg/m^3: {} cells ({} selected)",
                 m.young,
                 m.poisson,
@@ -87,43 +87,46 @@ pub fn run(args: &CheckArgs, global: &GlobalArgs) -> anyhow::Result<()> {
                 a.selected[k - 1]
             );
         }
-        println!("[material]       {} cells", cells[0]);
+        crate::outln!("[material]       {} cells", cells[0]);
     }
-    println!("mass             {:.4} kg", model.total_mass());
-    println!("held nodes       {}", report.held_nodes);
-    println!(
+    crate::outln!("mass             {:.4} kg", model.total_mass());
+    crate::outln!("held nodes       {}", report.held_nodes);
+    crate::outln!(
         "stable time step {:.3e} s (critical {:.3e} s, safety {}, damping included)",
         plan.stable_dt,
         model.critical_time_step(),
         scene.solver.safety
     );
-    println!(
+    crate::outln!(
         "time stepping    {}, dt = {:.3e} s, {} steps for {} s",
-        scene.solver.kind, plan.dt, plan.steps, scene.solver.duration
+        scene.solver.kind,
+        plan.dt,
+        plan.steps,
+        scene.solver.duration
     );
-    println!(
+    crate::outln!(
         "memory estimate  {} (limit {})",
         human_bytes(report.memory_bytes),
         human_bytes(job.limits.memory_bytes)
     );
     match &report.time_estimate {
-        Some(t) if t.probe_steps > 0 => println!(
+        Some(t) if t.probe_steps > 0 => crate::outln!(
             "time estimate    {} ({:.3e} s per step, timed on {} steps; writing {})",
             human_seconds(t.seconds),
             t.seconds_per_step,
             t.probe_steps,
             human_seconds(t.writing_seconds)
         ),
-        Some(t) => println!(
+        Some(t) => crate::outln!(
             "time estimate    {} (the static solve took {}; writing {})",
             human_seconds(t.seconds),
             human_seconds(t.seconds_per_step),
             human_seconds(t.writing_seconds)
         ),
-        None => println!("time estimate    not estimated (a probe step would cost too much)"),
+        None => crate::outln!("time estimate    not estimated (a probe step would cost too much)"),
     }
     let (free, disk_warning) = report.disk(&out_dir);
-    println!(
+    crate::outln!(
         "output estimate  {} frames x {} = {} in {}{}",
         report.frames,
         human_bytes(report.frame_bytes),
@@ -132,15 +135,15 @@ pub fn run(args: &CheckArgs, global: &GlobalArgs) -> anyhow::Result<()> {
         free.map_or_else(String::new, |f| format!(" ({} free)", human_bytes(f)))
     );
     if let Some(w) = &disk_warning {
-        println!("warning          {w}");
+        crate::outln!("warning          {w}");
     }
     match &report.mechanism_warning {
-        Some(w) => println!("warning          {w}"),
-        None => println!("mechanisms       none expected"),
+        Some(w) => crate::outln!("warning          {w}"),
+        None => crate::outln!("mechanisms       none expected"),
     }
-    println!("under load       {}", report.load_check.describe());
+    crate::outln!("under load       {}", report.load_check.describe());
     if let Some(w) = report.load_check.warning() {
-        println!("warning          {w}");
+        crate::outln!("warning          {w}");
     }
     Ok(())
 }

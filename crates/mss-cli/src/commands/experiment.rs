@@ -118,9 +118,9 @@ pub fn run(
     }
     if chatty {
         for line in &outcome.headlines {
-            println!("{line}");
+            crate::outln!("{line}");
         }
-        println!(
+        crate::outln!(
             "report           {}{} ({:.1} s)",
             out_dir.join("report.md").display(),
             args.report
@@ -214,7 +214,7 @@ fn run_scene(
         report::write_text(rep, &md)?;
     }
     for run in r.runs.iter().filter(|_| chatty) {
-        println!(
+        crate::outln!(
             "{}: M {:.3} %, SD {:.3} %, MAX {:.3} % ({})",
             run.model,
             run.stats.mean,

@@ -38,7 +38,7 @@ pub fn run(args: &InitArgs, global: &GlobalArgs) -> anyhow::Result<()> {
     })
     .with_context(|| format!("cannot write the template scene {}", path.display()))?;
     if global.chatty() {
-        println!(
+        crate::outln!(
             "wrote {}: edit it, then `mss check {0}` and `mss run {0}`",
             path.display()
         );

@@ -89,7 +89,7 @@ pub fn run(args: &RunArgs, global: &GlobalArgs) -> anyhow::Result<()> {
     let summary = result?;
     write_summary(&out_dir, &summary)?;
     if show {
-        print_summary(&summary);
+        print_summary(&summary)?;
     }
     if summary.interrupted {
         bail!(
@@ -125,47 +125,59 @@ fn interrupt_on_signals(cancel: &Cancel) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn print_summary(s: &RunSummary) {
-    println!("scene            {}", s.scene);
+fn print_summary(s: &RunSummary) -> Result<(), crate::StdoutError> {
+    crate::outln!("scene            {}", s.scene);
     let [ex, ey, ez] = s.mesh_extent;
-    println!(
+    crate::outln!(
         "mesh             {} ({ex:.4} x {ey:.4} x {ez:.4} m; placement: {})",
-        s.mesh, s.placement
+        s.mesh,
+        s.placement
     );
-    println!(
+    crate::outln!(
         "lattice          {} cells, {} nodes, {} springs, cell size {:.4} m",
-        s.cells, s.nodes, s.springs, s.cell_size
+        s.cells,
+        s.nodes,
+        s.springs,
+        s.cell_size
     );
     if s.cells_per_material.len() > 1 {
-        println!(
+        crate::outln!(
             "materials        cells per material ([material], then each region): {:?}",
             s.cells_per_material
         );
     }
-    println!(
+    crate::outln!(
         "mass             {:.4} kg, {} held nodes",
-        s.mass, s.held_nodes
+        s.mass,
+        s.held_nodes
     );
-    println!(
+    crate::outln!(
         "solver           {}, time step {:.3e} s (stable limit {:.3e} s), {} steps, {:.4} s simulated",
-        s.solver, s.time_step, s.stable_time_step, s.steps, s.simulated_time
+        s.solver,
+        s.time_step,
+        s.stable_time_step,
+        s.steps,
+        s.simulated_time
     );
-    println!(
+    crate::outln!(
         "wall time        {:.2} s (voxelize {:.2} s, simulate and write {:.2} s)",
-        s.wall_seconds, s.voxelize_seconds, s.simulate_seconds
+        s.wall_seconds,
+        s.voxelize_seconds,
+        s.simulate_seconds
     );
-    println!(
+    crate::outln!(
         "peak memory      {}",
         s.peak_memory_bytes
             .map(progress::human_bytes)
             .unwrap_or_else(|| "unknown".into())
     );
-    println!("max displacement {:.4e} m", s.max_displacement);
-    println!(
+    crate::outln!("max displacement {:.4e} m", s.max_displacement);
+    crate::outln!(
         "output           {}: {} frames, {} files, {} (open lattice.pvd in ParaView)",
         s.output_folder,
         s.frames,
         s.files,
         progress::human_bytes(s.bytes_written)
     );
+    Ok(())
 }

@@ -80,13 +80,7 @@ pub fn run(args: &ViewArgs, global: &GlobalArgs) -> anyhow::Result<()> {
             .context("cannot install the Ctrl-C handler")?;
     }
     let viewer = Viewer::start(source, options)?;
-    {
-        use std::io::Write;
-        let mut out = std::io::stdout().lock();
-        writeln!(out, "mss view: {}", viewer.url())
-            .and_then(|()| out.flush())
-            .context("cannot print the viewer's address")?;
-    }
+    crate::outln!("mss view: {}", viewer.url());
     if !args.no_open {
         open_browser(viewer.url());
     }

@@ -206,7 +206,7 @@ pub fn run(args: &VoxelizeArgs, global: &GlobalArgs) -> anyhow::Result<()> {
         w.write_all(b"\n")
     })?;
     if global.chatty() {
-        print_summary(&summary);
+        print_summary(&summary)?;
     }
     Ok(())
 }
@@ -247,31 +247,42 @@ fn write_outputs(
     Ok(())
 }
 
-fn print_summary(s: &VoxelizeSummary) {
-    println!(
+fn print_summary(s: &VoxelizeSummary) -> Result<(), crate::StdoutError> {
+    crate::outln!(
         "mesh         {}: {} vertices, {} triangles, volume {:.4e} m^3",
-        s.mesh, s.mesh_vertices, s.mesh_triangles, s.mesh_volume
+        s.mesh,
+        s.mesh_vertices,
+        s.mesh_triangles,
+        s.mesh_volume
     );
-    println!(
+    crate::outln!(
         "lattice      {} cells, {} nodes, {} springs, cell size {:.4} m, grid {:?}",
-        s.cells, s.nodes, s.springs, s.cell_size, s.grid
+        s.cells,
+        s.nodes,
+        s.springs,
+        s.cell_size,
+        s.grid
     );
-    println!(
+    crate::outln!(
         "volume       {:.4e} m^3 ({:+.1}% of the mesh)",
         s.lattice_volume,
         100.0 * (s.lattice_volume / s.mesh_volume - 1.0)
     );
-    println!(
+    crate::outln!(
         "components   {} kept, {} dropped",
-        s.components_kept, s.components_dropped
+        s.components_kept,
+        s.components_dropped
     );
-    println!(
+    crate::outln!(
         "timings      load {:.3} s, voxelize {:.3} s, write {:.3} s",
-        s.load_seconds, s.voxelize_seconds, s.write_seconds
+        s.load_seconds,
+        s.voxelize_seconds,
+        s.write_seconds
     );
-    println!(
+    crate::outln!(
         "output       {}: {}, stats.json",
         s.output_folder,
         s.files.join(", ")
     );
+    Ok(())
 }

@@ -311,7 +311,9 @@ impl Explicit {
             if n > u32::MAX as f64 {
                 return Err(SolverError::TimeStepTooLarge { dt, limit });
             }
-            log::warn!(
+            // Sub-stepping was asked for (an interactive frame): expected,
+            // so not a warning.
+            log::info!(
                 "explicit step {dt:.3e} s is above the stability limit {limit:.3e} s: taking {n} sub-steps of {:.3e} s",
                 dt / n
             );
