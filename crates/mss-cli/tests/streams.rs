@@ -97,3 +97,39 @@ fn the_free_space_of_a_relative_output_folder_is_reported() {
     );
     assert!(!dir.path().join("out").exists(), "check wrote the folder");
 }
+
+#[test]
+fn ctrl_c_stops_mss_check_within_a_second() {
+    let template = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../data/scenes/template.toml"
+    );
+    let mut child = Command::new(MSS)
+        .args(["-q", "check", template])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Past the preparation (well under a second), inside the static solve
+    // of the load check (seconds on this scene).
+    std::thread::sleep(std::time::Duration::from_secs(3));
+    if child.try_wait().unwrap().is_some() {
+        eprintln!("skipped: the check finished within 3 s on this machine");
+        return;
+    }
+    let sent = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(sent.success());
+    let asked = std::time::Instant::now();
+    let out = child.wait_with_output().unwrap();
+    let waited = asked.elapsed();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        waited.as_secs_f64() < 1.5,
+        "stopped {waited:?} after Ctrl-C"
+    );
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("interrupted"), "{stderr}");
+}

@@ -329,6 +329,13 @@ impl CheckReport {
     /// scene's load statically ([`LoadCheck`]; seconds on large lattices)
     /// and times a few of the run's steps ([`TimeEstimate`]).
     pub fn new(job: &Job) -> Self {
+        Self::new_cancellable(job, &AtomicBool::new(false))
+    }
+
+    /// [`CheckReport::new`] that stops its static solve within a Newton
+    /// iteration once `cancel` is set (a Ctrl-C), and then times no steps:
+    /// the report says "not solved: stopped" and has no time estimate.
+    pub fn new_cancellable(job: &Job, cancel: &AtomicBool) -> Self {
         let model = job.problem.model();
         let (frame_bytes, frames) = job.output_estimate();
         let held_nodes = (0..model.num_nodes())
@@ -337,7 +344,7 @@ impl CheckReport {
         let needs_matrix = !job.input.scene.solver.is_explicit();
         let mechanism_warning = mechanism_warning(job);
         let started = std::time::Instant::now();
-        let load_check = LoadCheck::new(job, mechanism_warning.is_some());
+        let load_check = LoadCheck::new_cancellable(job, mechanism_warning.is_some(), cancel);
         let static_seconds = matches!(load_check, LoadCheck::Equilibrium { .. })
             .then(|| started.elapsed().as_secs_f64());
         CheckReport {
@@ -347,7 +354,11 @@ impl CheckReport {
             frames,
             frame_bytes,
             hourglass_stiffness: model.cell_coefficients(0).hourglass,
-            time_estimate: TimeEstimate::new(job, static_seconds),
+            time_estimate: if cancel.load(std::sync::atomic::Ordering::Relaxed) {
+                None
+            } else {
+                TimeEstimate::new(job, static_seconds)
+            },
             load_check,
             mechanism_warning,
         }

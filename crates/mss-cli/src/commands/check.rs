@@ -28,7 +28,15 @@ pub fn run(args: &CheckArgs, global: &GlobalArgs) -> anyhow::Result<()> {
     let bars = JobBars::new(&label, global.chatty());
     // The same preparation as `mss run`: whatever it refuses, check refuses.
     let job = super::run::prepare(args.scene.as_deref(), None, global.limits(), &bars)?;
-    let report = CheckReport::new(&job);
+    let cancel = mss_scene::Cancel::new();
+    super::run::interrupt_on_signals(&cancel)?;
+    let report = CheckReport::new_cancellable(&job, &cancel.flag());
+    if cancel.is_cancelled() {
+        anyhow::bail!(
+            "{}: mss check interrupted before its checks finished (nothing was written)",
+            job.input.name()
+        );
+    }
     let scene = &job.input.scene;
     let model = job.problem.model();
     let plan = job.plan;

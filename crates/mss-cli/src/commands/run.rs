@@ -113,7 +113,7 @@ pub fn run(args: &RunArgs, global: &GlobalArgs) -> anyhow::Result<()> {
 /// SIGINT and SIGTERM set `cancel`: the run stops after the step under way,
 /// writes the state reached and its summary, and `mss` exits with 1. A second
 /// SIGINT or SIGTERM while it winds down ends the process at once (exit 130).
-fn interrupt_on_signals(cancel: &Cancel) -> anyhow::Result<()> {
+pub(crate) fn interrupt_on_signals(cancel: &Cancel) -> anyhow::Result<()> {
     use signal_hook::consts::{SIGINT, SIGTERM};
     let flag = cancel.flag();
     for signal in [SIGINT, SIGTERM] {

@@ -137,7 +137,9 @@ impl Implicit {
         .map_err(|e| match e {
             NewtonFailure::Diverged(d) => d,
             // A singular Jacobian with mass on the diagonal means garbage values.
-            NewtonFailure::Singular(_) | NewtonFailure::Linear(_) => Divergence::NonFinite,
+            NewtonFailure::Singular(_) | NewtonFailure::Linear(_) | NewtonFailure::Cancelled => {
+                Divergence::NonFinite
+            }
         })?;
         if let Some(d) = check_inverted(model, &x) {
             return Err(d);

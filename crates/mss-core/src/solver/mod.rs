@@ -847,6 +847,11 @@ pub trait NonlinearSystem {
     fn residual(&mut self, x: &[Vec3], r: &mut [Vec3]) -> f64;
     /// The Jacobian at `x`.
     fn jacobian(&mut self, x: &[Vec3]) -> BlockCsr;
+    /// Whether the caller asked to stop (checked before every Newton
+    /// iteration, so that a stop takes one iteration, not a whole solve).
+    fn cancelled(&self) -> bool {
+        false
+    }
 }
 
 /// Why [`newton`] stopped without converging.
@@ -858,6 +863,8 @@ pub enum NewtonFailure {
     Singular(Vec<u32>),
     /// The linear solver failed otherwise.
     Linear(String),
+    /// [`NonlinearSystem::cancelled`] said stop.
+    Cancelled,
 }
 
 fn free_norm(r: &[Vec3], free: &[bool]) -> f64 {
@@ -903,6 +910,9 @@ pub fn newton(
     for it in 0..opts.max_iterations {
         if norm == 0.0 || (it > 0 && norm <= target.max(floor)) {
             return Ok(it);
+        }
+        if sys.cancelled() {
+            return Err(NewtonFailure::Cancelled);
         }
         let jac = sys.jacobian(x);
         if it == 0 {

@@ -95,9 +95,15 @@ struct StaticSystem<'a> {
     anchors: Vec<Option<Vec3>>,
     /// Zero velocities (statics has no contact damping).
     still: Vec<Vec3>,
+    /// Set by the caller to stop.
+    cancel: &'a AtomicBool,
 }
 
 impl NonlinearSystem for StaticSystem<'_> {
+    fn cancelled(&self) -> bool {
+        self.cancel.load(Ordering::Relaxed)
+    }
+
     fn residual(&mut self, x: &[Vec3], r: &mut [Vec3]) -> f64 {
         let p = self.problem;
         p.model().internal_forces(x, r);
@@ -227,6 +233,7 @@ fn solve_static_here(
         free: &free,
         anchors,
         still: vec![Vec3::zeros(); n],
+        cancel,
     };
     let newton_opts = NewtonOptions {
         max_iterations: opts.max_newton,
@@ -328,6 +335,11 @@ fn solve_static_here(
                         nodes,
                     },
                     NewtonFailure::Linear(m) => return Err(SolverError::LinearSolver(m)),
+                    NewtonFailure::Cancelled => {
+                        return Err(SolverError::Cancelled {
+                            load_factor: lambda,
+                        });
+                    }
                     NewtonFailure::Diverged(reason) => reason,
                 };
                 if let Divergence::NewtonFailed { iterations, .. } = &reason {
