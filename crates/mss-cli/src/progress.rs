@@ -134,6 +134,21 @@ pub fn spinner(what: &str, show: bool) -> ProgressBar {
     pb
 }
 
+/// A length with 4 significant digits in m or mm, and in exponent form
+/// below a millimetre (a 1e-12 m cell is not "0.0000 m").
+pub fn human_length(metres: f64) -> String {
+    let a = metres.abs();
+    if a == 0.0 || !a.is_finite() {
+        format!("{metres} m")
+    } else if a >= 1.0 {
+        format!("{metres:.4} m")
+    } else if a >= 1e-3 {
+        format!("{:.3} mm", metres * 1e3)
+    } else {
+        format!("{metres:.3e} m")
+    }
+}
+
 /// Bytes as a short human-readable size (binary units), as the library's
 /// messages write them.
 pub fn human_bytes(bytes: u64) -> String {
@@ -169,6 +184,9 @@ mod tests {
     #[test]
     fn human_sizes() {
         assert_eq!(human_bytes(512), "512 B");
+        assert_eq!(human_length(0.0087), "8.700 mm");
+        assert_eq!(human_length(1e-12), "1.000e-12 m");
+        assert_eq!(human_length(2.5), "2.5000 m");
         assert_eq!(human_bytes(1536), "1.5 KiB");
         assert_eq!(human_bytes(3 << 20), "3.0 MiB");
     }

@@ -61,11 +61,11 @@ pub fn run(args: &CheckArgs, global: &GlobalArgs) -> anyhow::Result<()> {
         scene.mesh.placement()
     );
     crate::outln!(
-        "lattice          {} cells, {} nodes, {} springs, cell size {:.4} m",
+        "lattice          {} cells, {} nodes, {} springs, cell size {}",
         model.num_cells(),
         model.num_nodes(),
         model.num_springs(),
-        model.h()
+        crate::progress::human_length(model.h())
     );
     let m = &scene.material;
     crate::outln!(

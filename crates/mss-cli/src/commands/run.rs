@@ -134,11 +134,11 @@ fn print_summary(s: &RunSummary) -> Result<(), crate::StdoutError> {
         s.placement
     );
     crate::outln!(
-        "lattice          {} cells, {} nodes, {} springs, cell size {:.4} m",
+        "lattice          {} cells, {} nodes, {} springs, cell size {}",
         s.cells,
         s.nodes,
         s.springs,
-        s.cell_size
+        crate::progress::human_length(s.cell_size)
     );
     if s.cells_per_material.len() > 1 {
         crate::outln!(

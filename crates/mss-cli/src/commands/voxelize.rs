@@ -25,7 +25,7 @@ pub struct VoxelizeArgs {
     #[arg(long, value_name = "N", conflicts_with = "size")]
     pub cells: Option<u32>,
     /// Cell edge in metres (instead of --cells).
-    #[arg(long, value_name = "H")]
+    #[arg(long, value_name = "H", allow_negative_numbers = true)]
     pub size: Option<f64>,
     /// Occupancy rule: centre (cell centre inside), any (cell overlaps the
     /// solid), fraction (at least --fraction of the cell inside).
@@ -256,11 +256,11 @@ fn print_summary(s: &VoxelizeSummary) -> Result<(), crate::StdoutError> {
         s.mesh_volume
     );
     crate::outln!(
-        "lattice      {} cells, {} nodes, {} springs, cell size {:.4} m, grid {:?}",
+        "lattice      {} cells, {} nodes, {} springs, cell size {}, grid {:?}",
         s.cells,
         s.nodes,
         s.springs,
-        s.cell_size,
+        crate::progress::human_length(s.cell_size),
         s.grid
     );
     crate::outln!(

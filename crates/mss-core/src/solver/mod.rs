@@ -517,7 +517,7 @@ pub enum SolverError {
 const EXPLICIT_HINT: &str = "Try a smaller time step, the implicit solver, or more damping.";
 const IMPLICIT_HINT: &str = "Try a smaller time step, more damping, or smaller loads (the deformation may be beyond what the lattice can represent).";
 const STATIC_HINT: &str =
-    "Try more load steps (StaticOptions::min_load_increment), a smaller load, or more fixed nodes.";
+    "Try more load steps (a scene's [solver] load_steps), a smaller load, or more fixed nodes.";
 
 /// A time-stepping scheme: the plugin point for integrators.
 ///
