@@ -429,6 +429,28 @@ impl Job {
                     _ => e.to_string(),
                 })
             })?;
+        // A checkpoint with a valid checksum can still disagree with the
+        // scene's time plan (written by hand, or by another version).
+        let expected = checkpoint.step as f64 * self.plan.dt;
+        let t = checkpoint.state.time;
+        if !(t.is_finite()
+            && (t - expected).abs()
+                <= 1e-6 * self.plan.dt.max(f64::MIN_POSITIVE) * (1.0 + checkpoint.step as f64))
+        {
+            return Err(resume_error(format!(
+                "the checkpoint's time {t} s does not match its step {} at the scene's dt {} s ({expected} s)",
+                checkpoint.step, self.plan.dt
+            )));
+        }
+        if let Some(&late) = checkpoint
+            .frame_times
+            .iter()
+            .find(|&&f| f < 0.0 || f > t + 1e-9 * self.plan.dt)
+        {
+            return Err(resume_error(format!(
+                "the checkpoint lists a frame at {late} s, outside the {t} s simulated so far"
+            )));
+        }
         if checkpoint.step >= self.plan.steps {
             return Err(resume_error(format!(
                 "the checkpoint is at step {} of {}: the run is complete",

@@ -835,3 +835,48 @@ fn a_cancelled_check_before_a_run_stops_it_as_interrupted() {
     let summary = job.run(out.path(), &no_progress, &cancel).unwrap();
     assert!(summary.interrupted);
 }
+
+#[test]
+fn resuming_refuses_a_forged_time_and_a_lost_frame() {
+    use mss_scene::checkpoint::{CHECKPOINT_FILE, Checkpoint, fingerprint};
+    let job = Job::prepare(resumable_scene(), Registry::default(), &no_progress).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let cancel = Cancel::new();
+    let stop_at = job.plan.steps / 2;
+    let progress = |p: Progress| {
+        if let Progress::Stepping { done, .. } = p
+            && done == stop_at
+        {
+            cancel.cancel();
+        }
+    };
+    assert!(job.run(dir.path(), &progress, &cancel).unwrap().interrupted);
+    let nodes = job.problem.model().num_nodes();
+    let print = fingerprint(&job.input.scene);
+    let good = Checkpoint::read(dir.path(), print, nodes).unwrap();
+    let kept = std::fs::read(dir.path().join(CHECKPOINT_FILE)).unwrap();
+    let refused = |what: &str| {
+        job.resume(dir.path(), &no_progress, &Cancel::new())
+            .map(|_| ())
+            .unwrap_err()
+            .to_string()
+            .contains(what)
+    };
+
+    // A valid checksum over a negative time.
+    let mut forged = good.clone();
+    forged.state.time = -4.98;
+    forged.write(dir.path()).unwrap();
+    assert!(refused("does not match its step"));
+    // A frame time beyond the time reached.
+    let mut forged = good.clone();
+    forged.frame_times.push(good.state.time + 1.0);
+    forged.write(dir.path()).unwrap();
+    assert!(refused("outside the"));
+
+    // A frame file deleted after the interruption.
+    std::fs::write(dir.path().join(CHECKPOINT_FILE), &kept).unwrap();
+    std::fs::remove_file(dir.path().join("lattice_0001.vtu")).unwrap();
+    assert!(refused("lattice_0001.vtu"));
+    assert!(refused("missing"));
+}

@@ -133,6 +133,18 @@ impl FrameExporter for VtuSeries {
             .map(|(i, &time)| (time, self.frame_file_name(i)))
             .collect::<Vec<_>>();
         if self.write_pvd {
+            // The collection lists every frame: each must still be there,
+            // or the resumed run would end with a .pvd naming a lost file.
+            if let Some((_, missing)) = entries
+                .iter()
+                .find(|(_, name)| !self.dir.join(name).is_file())
+            {
+                return Err(IoError::invalid(
+                    &self.dir.join(missing),
+                    "this frame, written before the checkpoint, is missing: the folder \
+                     changed since; run the scene again without --resume",
+                ));
+            }
             self.pvd.set_frames(entries)?;
         }
         self.last_index = frame_times.len().checked_sub(1);
