@@ -66,7 +66,10 @@ pub struct GlobalArgs {
     /// not depend on it.
     #[arg(long, value_name = "N", global = true)]
     pub threads: Option<usize>,
-    /// Output folder (overrides the scene's `[output] folder`).
+    /// Output folder: `run` writes there instead of the scene's `[output]
+    /// folder` (and `check` estimates its free space); `voxelize` writes
+    /// there (default ./out); `experiment` (default out/experiments).
+    /// `init` and `view` write nothing and ignore it.
     #[arg(long, value_name = "DIR", global = true)]
     pub out: Option<PathBuf>,
     /// Memory a job may use, like 8GiB or 500MB (default: three quarters of
@@ -123,6 +126,17 @@ where
         Err(e) => {
             use clap::error::ErrorKind;
             return match e.kind() {
+                ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => {
+                    // Bare `mss`: the help, on standard error, then one line
+                    // saying what was missing.
+                    use std::io::Write;
+                    let _ = write!(std::io::stderr(), "{}", e.render());
+                    return Err(UsageError(
+                        "no subcommand given: `mss run` runs the bundled scene; the others are listed above"
+                            .into(),
+                    )
+                    .into());
+                }
                 ErrorKind::DisplayHelp | ErrorKind::DisplayVersion => {
                     e.print().map_err(|io| match io.kind() {
                         std::io::ErrorKind::BrokenPipe => StdoutError::BrokenPipe,
@@ -170,13 +184,36 @@ where
 
 fn clap_error_line(e: &clap::Error) -> String {
     let text = e.render().to_string();
-    let first = text
-        .lines()
-        .find(|l| !l.trim().is_empty())
-        .unwrap_or("invalid command line")
-        .trim();
+    let mut lines = text.lines().map(str::trim).filter(|l| !l.is_empty());
+    let first = lines.next().unwrap_or("invalid command line");
     let first = first.strip_prefix("error: ").unwrap_or(first);
-    format!("{first} (see `mss --help`)")
+    // "the following required arguments were not provided:" names them on
+    // the next line.
+    let first = match (first.strip_suffix(':'), lines.next()) {
+        (Some(head), Some(next)) if !next.starts_with("Usage:") => format!("{head}: {next}"),
+        _ => first.to_owned(),
+    };
+    // clap's suggestions ("a similar subcommand exists: 'run'") follow on
+    // lines of their own: keep them on the one line.
+    let tips: Vec<&str> = text
+        .lines()
+        .filter_map(|l| l.trim().strip_prefix("tip: "))
+        .filter(|t| !t.starts_with("to pass"))
+        .collect();
+    // The help of the subcommand the error is about, when there is one.
+    let help = text
+        .lines()
+        .find_map(|l| l.trim().strip_prefix("Usage: mss "))
+        .and_then(|u| {
+            u.split_whitespace()
+                .find(|w| !w.starts_with('[') && !w.starts_with('-') && !w.starts_with('<'))
+        })
+        .map_or("mss --help".to_owned(), |sub| format!("mss {sub} --help"));
+    if tips.is_empty() {
+        format!("{first} (see `{help}`)")
+    } else {
+        format!("{first}; {} (see `{help}`)", tips.join("; "))
+    }
 }
 
 fn init_logger(g: &GlobalArgs) {
