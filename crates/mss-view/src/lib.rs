@@ -237,6 +237,21 @@ impl SourceContext {
     }
 }
 
+/// The bounding box (min, max) of `points`; zeros for none.
+pub(crate) fn bounds_of(points: impl Iterator<Item = [f64; 3]>) -> [[f64; 3]; 2] {
+    let mut b = [[f64::INFINITY; 3], [f64::NEG_INFINITY; 3]];
+    for p in points {
+        for k in 0..3 {
+            b[0][k] = b[0][k].min(p[k]);
+            b[1][k] = b[1][k].max(p[k]);
+        }
+    }
+    if !b[0][0].is_finite() {
+        return [[0.0; 3]; 2];
+    }
+    b
+}
+
 /// Simulated seconds per wall second over the last second or so.
 #[derive(Debug, Default)]
 pub(crate) struct RateMeter {

@@ -27,7 +27,7 @@ use crate::protocol::{
     ClientMessage, ObstacleDraw, SceneInfo, Status, SurfaceFrame, SurfaceInfo, encode_frame,
     encode_topology,
 };
-use crate::{RateMeter, Source, SourceContext};
+use crate::{RateMeter, Source, SourceContext, bounds_of};
 
 /// Where the poking sphere waits while it is not used (m).
 const PARKED: f64 = 1.0e4;
@@ -68,13 +68,16 @@ fn arr(v: Vec3) -> [f64; 3] {
 }
 
 fn scene_input(source: &Source) -> Result<SceneInput, String> {
-    let result = match source {
+    let one_line = |e: mss_scene::JobError| mss_scene::error::one_line(&e);
+    match source {
         Source::Bundled => Ok(SceneInput::bundled_default()),
-        Source::SceneFile(path) => SceneInput::load(Some(path)),
+        Source::SceneFile(path) => SceneInput::load(Some(path)).map_err(one_line),
         Source::Input(input) => Ok((**input).clone()),
-        Source::Replay(_) => unreachable!("a replay is not a live source"),
-    };
-    result.map_err(|e| mss_scene::error::one_line(&e))
+        Source::Replay(p) => Err(format!(
+            "{}: a run folder is replayed, not run live",
+            p.display()
+        )),
+    }
 }
 
 fn source_name(source: &Source) -> String {
@@ -136,20 +139,6 @@ pub(crate) fn obstacle_draws(
             }
         })
         .collect()
-}
-
-fn bounds_of(points: impl Iterator<Item = [f64; 3]>) -> [[f64; 3]; 2] {
-    let mut b = [[f64::INFINITY; 3], [f64::NEG_INFINITY; 3]];
-    for p in points {
-        for k in 0..3 {
-            b[0][k] = b[0][k].min(p[k]);
-            b[1][k] = b[1][k].max(p[k]);
-        }
-    }
-    if !b[0][0].is_finite() {
-        return [[0.0; 3]; 2];
-    }
-    b
 }
 
 impl Body {

@@ -75,7 +75,10 @@ impl RunFolder {
 /// Positions and triangles of a surface.
 type SurfaceMesh = (Vec<[f64; 3]>, Vec<[u32; 3]>);
 
-/// A surface OBJ as written by the run: positions and triangles.
+/// A surface OBJ as written by the run: positions and triangles, as they
+/// are in the file. hexmesh's loaders are not used here: they weld and drop
+/// vertices, which may differ from frame to frame of a deformed surface,
+/// while every frame must keep the first frame's vertex numbering.
 fn read_obj(path: &Path) -> Result<SurfaceMesh, String> {
     let size = std::fs::metadata(path)
         .map_err(|e| format!("{}: {e}", path.display()))?
@@ -227,13 +230,7 @@ fn load_first(run: &RunFolder) -> Result<(Loaded, SceneInfo, Vec<u8>), String> {
             .collect(),
         None => data.points.clone(),
     };
-    let mut bounds = [[f64::INFINITY; 3], [f64::NEG_INFINITY; 3]];
-    for p in &rest {
-        for k in 0..3 {
-            bounds[0][k] = bounds[0][k].min(p[k]);
-            bounds[1][k] = bounds[1][k].max(p[k]);
-        }
-    }
+    let bounds = crate::bounds_of(rest.iter().copied());
     let cell_size = data
         .cells
         .first()

@@ -17,7 +17,7 @@ use std::sync::mpsc::{SyncSender, TrySendError};
 
 use axum::Router;
 use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
-use axum::extract::{Query, Request, State};
+use axum::extract::{Request, State};
 use axum::http::{HeaderValue, StatusCode, header};
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
@@ -118,11 +118,7 @@ async fn not_found() -> Response {
     (StatusCode::NOT_FOUND, "404 not found\n").into_response()
 }
 
-async fn websocket(
-    State(state): State<ServerState>,
-    Query(_): Query<std::collections::HashMap<String, String>>,
-    upgrade: WebSocketUpgrade,
-) -> Response {
+async fn websocket(State(state): State<ServerState>, upgrade: WebSocketUpgrade) -> Response {
     upgrade
         .max_message_size(MAX_CLIENT_MESSAGE_BYTES)
         .max_frame_size(MAX_CLIENT_MESSAGE_BYTES)
