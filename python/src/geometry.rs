@@ -208,7 +208,7 @@ fn voxelize(
     let section: VoxelizeSection = from_py("voxelize", kwargs_dict(py, options).as_any())?;
     let opts = section.options();
     let m = Arc::clone(&mesh.mesh);
-    let reporter = crate::scene::Reporter::new(progress);
+    let reporter = crate::progress::Reporter::new(progress);
     let hook = |done: u64, total: u64| reporter.report("voxelizing", done, total);
     let vox = detached(py, || hexmesh::voxelize_with_progress(&m, &opts, &hook));
     reporter.finish()?;

@@ -25,6 +25,7 @@ mod errors;
 mod geometry;
 mod io;
 mod physics;
+mod progress;
 mod scene;
 mod threads;
 mod view;

@@ -64,12 +64,15 @@ pub mod embed;
 pub mod generate;
 pub mod lattice;
 pub mod load;
+pub mod loader;
 pub mod mesh;
 pub mod placement;
+#[cfg(feature = "ply")]
 pub mod ply;
 pub mod skin;
 pub mod springs;
 pub mod voxelize;
+#[cfg(feature = "vtk")]
 pub mod vtk;
 pub mod winding;
 

@@ -14,142 +14,8 @@ use std::io::{BufRead, Cursor};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use thiserror::Error;
-
 use crate::TriMesh;
-
-/// Why a mesh could not be loaded. Every variant names the file (or the name
-/// given to [`load_mesh_bytes`]).
-#[derive(Debug, Error)]
-pub enum LoadError {
-    /// The file could not be read (missing, permissions, ...).
-    #[error("cannot read mesh file {file}: {source}")]
-    Io {
-        /// The file.
-        file: PathBuf,
-        /// The underlying error.
-        source: std::io::Error,
-    },
-    /// The file has no bytes.
-    #[error("mesh file {file} is empty")]
-    Empty {
-        /// The file.
-        file: PathBuf,
-    },
-    /// Coordinates so large that the body's volume and cell counts overflow.
-    #[error(
-        "mesh {file} spans {} .. {}: coordinates beyond {limit:e} (m) are not a physical body; scale the mesh",
-        fmt3(min),
-        fmt3(max)
-    )]
-    HugeCoordinates {
-        /// The file.
-        file: PathBuf,
-        /// Bounding box minimum.
-        min: [f64; 3],
-        /// Bounding box maximum.
-        max: [f64; 3],
-        /// The largest coordinate accepted.
-        limit: f64,
-    },
-    /// The path is not a regular file (a folder, a device, a FIFO, ...).
-    #[error("mesh path {file} is not a regular file (a folder, device or pipe); give a mesh file")]
-    NotAFile {
-        /// The path.
-        file: PathBuf,
-    },
-    /// The file is larger than the loaders' limit.
-    #[error("mesh file {file} is {size} bytes, more than the limit of {limit} bytes")]
-    TooLarge {
-        /// The file.
-        file: PathBuf,
-        /// Its size (bytes).
-        size: u64,
-        /// The limit (bytes).
-        limit: u64,
-    },
-    /// No loader is registered for the file's extension.
-    #[error("mesh file {file}: unknown format (extension {extension:?}); known: {known}")]
-    UnknownFormat {
-        /// The file.
-        file: PathBuf,
-        /// Its extension (lower case, possibly empty).
-        extension: String,
-        /// The registered extensions, comma separated.
-        known: String,
-    },
-    /// A binary STL file is shorter than its triangle count says.
-    #[error(
-        "binary STL {file} is truncated: header announces {triangles} triangles \
-         ({expected} bytes) but the file has {actual} bytes"
-    )]
-    TruncatedStl {
-        /// The file.
-        file: PathBuf,
-        /// Triangle count in the header.
-        triangles: u32,
-        /// Expected file length.
-        expected: u64,
-        /// Actual file length.
-        actual: u64,
-    },
-    /// Text that could not be parsed.
-    #[error("cannot parse {file}{}: {message}", line.map(|l| format!(" (line {l})")).unwrap_or_default())]
-    Parse {
-        /// The file.
-        file: PathBuf,
-        /// 1-based line number, where known.
-        line: Option<usize>,
-        /// What is wrong.
-        message: String,
-    },
-    /// A vertex coordinate is NaN or infinite.
-    #[error("mesh {file}: vertex {vertex} has a non-finite coordinate {value:?}")]
-    NonFinite {
-        /// The file.
-        file: PathBuf,
-        /// 0-based vertex index.
-        vertex: usize,
-        /// The vertex.
-        value: [f64; 3],
-    },
-    /// A triangle refers to a vertex that does not exist.
-    #[error(
-        "mesh {file}: triangle {triangle} refers to vertex {index}, but there are {vertices} vertices"
-    )]
-    IndexOutOfRange {
-        /// The file.
-        file: PathBuf,
-        /// 0-based triangle index.
-        triangle: usize,
-        /// The offending 0-based index.
-        index: u64,
-        /// Number of vertices.
-        vertices: usize,
-    },
-    /// No (non-degenerate) triangle is left.
-    #[error("mesh {file} has no triangles ({dropped} degenerate triangles dropped)")]
-    NoTriangles {
-        /// The file.
-        file: PathBuf,
-        /// Degenerate triangles dropped.
-        dropped: usize,
-    },
-    /// The bounding box is flat along some axis: the surface encloses no volume.
-    #[error(
-        "mesh {file} has zero extent along {axis} (bounding box {min:?} .. {max:?}): it encloses no volume"
-    )]
-    ZeroExtent {
-        /// The file.
-        file: PathBuf,
-        /// "x", "y" or "z".
-        axis: &'static str,
-        /// Bounding box minimum.
-        min: [f64; 3],
-        /// Bounding box maximum.
-        max: [f64; 3],
-    },
-}
+pub use crate::loader::{LoadError, LoadReport, LoadedMesh, MeshLoader};
 
 /// Built-in mesh formats.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -165,6 +31,26 @@ pub enum MeshFormat {
 }
 
 impl MeshFormat {
+    /// The format's name, as errors print it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Obj => "OBJ",
+            Self::Stl => "STL",
+            Self::Ply => "PLY",
+            Self::Vtk => "VTK",
+        }
+    }
+
+    /// The cargo feature of hexmesh that builds the format's reader in
+    /// (`None`: always built).
+    pub fn feature(self) -> Option<&'static str> {
+        match self {
+            Self::Obj | Self::Stl => None,
+            Self::Ply => Some("ply"),
+            Self::Vtk => Some("vtk"),
+        }
+    }
+
     /// The format for a file extension (case-insensitive), if built in.
     pub fn from_extension(ext: &str) -> Option<Self> {
         match ext.to_ascii_lowercase().as_str() {
@@ -175,48 +61,6 @@ impl MeshFormat {
             _ => None,
         }
     }
-}
-
-/// What cleaning did to a loaded mesh.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct LoadReport {
-    /// Vertices as read.
-    pub vertices_read: usize,
-    /// Triangles as read (after polygon triangulation).
-    pub triangles_read: usize,
-    /// Vertices removed by welding.
-    pub vertices_welded: usize,
-    /// Triangles dropped for a repeated vertex index.
-    pub degenerate_repeated: usize,
-    /// Triangles dropped for zero area.
-    pub degenerate_zero_area: usize,
-    /// Vertices not used by any triangle (kept, but ignored by everything else).
-    pub unused_vertices: usize,
-}
-
-/// A loaded, cleaned mesh and what cleaning did.
-#[derive(Debug, Clone)]
-pub struct LoadedMesh {
-    /// The cleaned mesh.
-    pub mesh: TriMesh,
-    /// Counts of what was read, welded and dropped.
-    pub report: LoadReport,
-}
-
-/// A mesh file format, the plug point for new formats: implement it and
-/// [`Loaders::register`] it.
-///
-/// Contract: [`load`](Self::load) parses the whole file's bytes into a raw
-/// [`TriMesh`] and never panics; malformed input is a [`LoadError`] naming
-/// `name` (and the line, where the format has lines). It does not need to
-/// weld, drop degenerate triangles or check finiteness: [`clean_mesh`] does
-/// that for every loader. See [`Loaders`] for an example.
-pub trait MeshLoader: Send + Sync {
-    /// File extensions served, lower case, without the dot.
-    fn extensions(&self) -> &[&str];
-    /// Parses `bytes` (the whole file) into a raw mesh; `name` is used in
-    /// errors. Cleaning and checks are done by the caller.
-    fn load(&self, bytes: &[u8], name: &str) -> Result<TriMesh, LoadError>;
 }
 
 /// The built-in OBJ loader (tobj; all objects and groups merged, polygons
@@ -513,16 +357,6 @@ pub struct Loaders {
     pub max_bytes: u64,
 }
 
-/// A message on one line (a parser's text may span several).
-pub(crate) fn one_line(s: &str) -> String {
-    s.split_whitespace().collect::<Vec<_>>().join(" ")
-}
-
-/// A point as `[x, y, z]` with 4 significant digits.
-fn fmt3(p: &[f64; 3]) -> String {
-    format!("[{:.3e}, {:.3e}, {:.3e}]", p[0], p[1], p[2])
-}
-
 /// Largest coordinate magnitude accepted (m).
 pub const MAX_COORDINATE: f64 = 1e9;
 
@@ -536,7 +370,9 @@ impl Default for Loaders {
             loaders: vec![
                 Arc::new(ObjLoader),
                 Arc::new(StlLoader),
+                #[cfg(feature = "ply")]
                 Arc::new(crate::ply::PlyLoader),
+                #[cfg(feature = "vtk")]
                 Arc::new(crate::vtk::VtkLoader),
             ],
             max_bytes: MAX_MESH_BYTES,
@@ -587,13 +423,21 @@ impl Loaders {
             .and_then(|e| e.to_str())
             .unwrap_or("")
             .to_ascii_lowercase();
-        let loader = self
-            .for_extension(&ext)
-            .ok_or_else(|| LoadError::UnknownFormat {
-                file: path.to_path_buf(),
-                extension: ext.clone(),
-                known: self.known_extensions(),
-            })?;
+        let loader = self.for_extension(&ext).ok_or_else(|| {
+            match MeshFormat::from_extension(&ext).filter(|f| f.feature().is_some()) {
+                // A built-in format compiled out says so, rather than "unknown".
+                Some(format) => LoadError::FormatNotBuilt {
+                    file: path.to_path_buf(),
+                    format: format.name(),
+                    feature: format.feature(),
+                },
+                None => LoadError::UnknownFormat {
+                    file: path.to_path_buf(),
+                    extension: ext.clone(),
+                    known: self.known_extensions(),
+                },
+            }
+        })?;
         let io = |source| LoadError::Io {
             file: path.to_path_buf(),
             source,
@@ -648,8 +492,16 @@ pub fn load_mesh_bytes(
     match format {
         MeshFormat::Obj => load_with(&ObjLoader, bytes, name),
         MeshFormat::Stl => load_with(&StlLoader, bytes, name),
+        #[cfg(feature = "ply")]
         MeshFormat::Ply => load_with(&crate::ply::PlyLoader, bytes, name),
+        #[cfg(feature = "vtk")]
         MeshFormat::Vtk => load_with(&crate::vtk::VtkLoader, bytes, name),
+        #[cfg(not(all(feature = "ply", feature = "vtk")))]
+        other => Err(LoadError::FormatNotBuilt {
+            file: file(name),
+            format: other.name(),
+            feature: other.feature(),
+        }),
     }
 }
 

@@ -33,7 +33,7 @@ use ply_rs_bw::parser::{Parser, Reader};
 use ply_rs_bw::ply::{Property, PropertyAccess, PropertyAccessResult, PropertyType};
 
 use crate::TriMesh;
-use crate::load::{LoadError, MeshLoader, one_line};
+use crate::loader::{LoadError, MeshLoader, one_line};
 
 /// The built-in PLY loader (ASCII, binary little-endian, binary big-endian).
 #[derive(Debug, Clone, Copy, Default)]

@@ -38,7 +38,7 @@ use std::path::PathBuf;
 use vtkio::model::{CellType, DataSet, Piece, VertexNumbers, Vtk};
 
 use crate::TriMesh;
-use crate::load::{LoadError, MeshLoader, one_line};
+use crate::loader::{LoadError, MeshLoader, one_line};
 
 /// The built-in VTK loader (`.vtk`, `.vtu`, `.vtp`).
 #[derive(Debug, Clone, Copy, Default)]

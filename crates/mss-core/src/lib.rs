@@ -33,6 +33,7 @@ pub fn on_worker<R: Send>(f: impl FnOnce() -> R + Send) -> R {
     }
 }
 pub mod contact;
+mod krylov;
 pub mod loads;
 pub mod material;
 pub mod model;

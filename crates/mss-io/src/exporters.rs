@@ -43,7 +43,9 @@ use std::sync::Arc;
 
 use crate::IoError;
 use crate::skin::{SkinExporter, SkinFormat, SkinFrames, SkinSeries};
-use crate::vtk::{FrameExporter, LegacyFormat, LegacyVtkSeries, VtuEncoding, VtuSeries};
+use crate::vtk::{FrameExporter, VtuEncoding, VtuSeries};
+#[cfg(feature = "legacy-vtk")]
+use crate::vtk::{LegacyFormat, LegacyVtkSeries};
 
 /// Creates a frame exporter writing `PREFIX_NNNN.*` files into a folder.
 pub type FrameExporterFactory =
@@ -80,6 +82,7 @@ fn vtu(encoding: VtuEncoding, pvd: bool) -> FrameExporterFactory {
     })
 }
 
+#[cfg(feature = "legacy-vtk")]
 fn legacy(format: LegacyFormat) -> FrameExporterFactory {
     Arc::new(move |dir: &Path, prefix: &str| {
         Ok(Box::new(LegacyVtkSeries::new(dir, prefix, format)?) as Box<dyn FrameExporter>)
@@ -103,8 +106,11 @@ impl Default for Exporters {
         e.register_frames("vtu-base64", vtu(VtuEncoding::Base64, true));
         e.register_frames("vtu-base64-no-pvd", vtu(VtuEncoding::Base64, false));
         e.register_frames("vtu-ascii", vtu(VtuEncoding::Ascii, true));
-        e.register_frames("vtk", legacy(LegacyFormat::Binary));
-        e.register_frames("vtk-ascii", legacy(LegacyFormat::Ascii));
+        #[cfg(feature = "legacy-vtk")]
+        {
+            e.register_frames("vtk", legacy(LegacyFormat::Binary));
+            e.register_frames("vtk-ascii", legacy(LegacyFormat::Ascii));
+        }
         e.register_skins("obj", skin(SkinFormat::Obj));
         e.register_skins("obj-flat", skin(SkinFormat::ObjFlat));
         e.register_skins("stl", skin(SkinFormat::Stl));

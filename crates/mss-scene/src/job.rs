@@ -13,10 +13,10 @@ use mss_core::solver::{Integrator, Problem, State, solve_static_cancellable};
 use serde::Serialize;
 
 use crate::build::{SceneInput, TimePlan, load_mesh, prepare_output_folder};
-use crate::check::LoadCheck;
 use crate::checkpoint::{CHECKPOINT_FILE, Checkpoint};
 use crate::error::JobError;
 use crate::limits::{Limits, run_memory_estimate};
+use crate::load_check::LoadCheck;
 use crate::output::{FrameWriter, remove_previous_run};
 use crate::registry::Registry;
 
@@ -459,6 +459,29 @@ impl Job {
         self.run_from(out_dir, progress, cancel, Some(checkpoint))
     }
 
+    /// Solves the job's load statically at the scene's end time (see
+    /// [`LoadCheck`]); stops at the next load increment once `cancel` is
+    /// set. `mechanisms_at_rest` (the held nodes leave zero-energy modes)
+    /// skips the solve, which would fail.
+    pub fn load_check(
+        &self,
+        mechanisms_at_rest: bool,
+        cancel: &std::sync::atomic::AtomicBool,
+    ) -> LoadCheck {
+        let extent = self
+            .mesh
+            .bounding_box()
+            .map(|b| b.extent().into_iter().fold(0.0, f64::max));
+        LoadCheck::solve(
+            &self.problem,
+            self.input.static_options(),
+            self.input.scene.solver.duration,
+            extent,
+            mechanisms_at_rest,
+            cancel,
+        )
+    }
+
     /// Before a dynamic run with a model that is not the default's kind
     /// (hourglass control and the barrier volumetric law): solves the
     /// scene's load statically ([`LoadCheck`]) and refuses the run when that
@@ -485,7 +508,7 @@ impl Job {
             return Ok(());
         }
         progress(Progress::Solving);
-        let check = LoadCheck::new_cancellable(self, false, &cancel.0);
+        let check = self.load_check(false, &cancel.0);
         progress(Progress::StageDone);
         let name = model.parameterization_name();
         let reason = match check {

@@ -65,6 +65,7 @@ pub mod checkpoint;
 pub mod error;
 pub mod job;
 pub mod limits;
+pub mod load_check;
 pub mod obstacles;
 pub mod output;
 pub mod regions;

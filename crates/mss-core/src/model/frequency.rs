@@ -20,7 +20,7 @@
 use rayon::prelude::*;
 
 use crate::Vec3;
-use crate::solver::multigrid::dot;
+use crate::krylov::{dot, extreme_ritz, start_vector};
 
 /// Factor on the estimated `omega_max^2` (covers what the iteration has not
 /// converged).
@@ -35,53 +35,6 @@ const MIN_STEPS: usize = 20;
 /// Stop when the residual norm of the top Ritz pair is below this fraction
 /// of its value.
 const RELATIVE_RESIDUAL: f64 = 1e-3;
-
-/// The largest (or, with `smallest`, the smallest) eigenvalue of the
-/// symmetric tridiagonal matrix of a Lanczos iteration (`alpha` on the
-/// diagonal, `beta` beside it) and the last component of its eigenvector,
-/// whose product with the next `beta` is the Ritz pair's residual norm.
-pub(crate) fn extreme_ritz(alpha: &[f64], beta: &[f64], smallest: bool) -> (f64, f64) {
-    let m = alpha.len();
-    let t = nalgebra::DMatrix::<f64>::from_fn(m, m, |i, j| {
-        if i == j {
-            alpha[i]
-        } else if i + 1 == j {
-            beta[i]
-        } else if j + 1 == i {
-            beta[j]
-        } else {
-            0.0
-        }
-    });
-    let eig = nalgebra::SymmetricEigen::new(t);
-    let order = |a: &(usize, &f64), b: &(usize, &f64)| {
-        if smallest {
-            b.1.total_cmp(a.1)
-        } else {
-            a.1.total_cmp(b.1)
-        }
-    };
-    let (k, &theta) = eig
-        .eigenvalues
-        .iter()
-        .enumerate()
-        .max_by(order)
-        .expect("at least one Lanczos step");
-    (theta, eig.eigenvectors[(m - 1, k)])
-}
-
-/// A fixed, rough start vector for `n` nodes (a hash of the index): it has
-/// components along every mode, the localized ones included.
-pub(crate) fn start_vector(n: usize) -> Vec<Vec3> {
-    (0..n)
-        .map(|i| {
-            Vec3::from_fn(|d, _| {
-                let s = ((3 * i + d) as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 40;
-                s as f64 / (1u64 << 24) as f64 - 0.5
-            })
-        })
-        .collect()
-}
 
 /// Estimate of the largest eigenvalue of `M^-1 K` (1/s^2) for the symmetric
 /// positive semi-definite `K` given by `mul_k` (`out = K v`) and the lumped

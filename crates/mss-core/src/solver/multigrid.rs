@@ -38,6 +38,7 @@ use std::collections::HashMap;
 
 use rayon::prelude::*;
 
+use crate::krylov::dot;
 use crate::sparse::{BlockCsr, Factorization};
 use crate::{Mat3, Vec3};
 
@@ -347,16 +348,6 @@ fn mul_smoothing_rows(a: &BlockCsr, blocks: &[f32], x: &[Vec3], y: &mut [Vec3], 
         }
         *yi = Vec3::new(acc[0], acc[1], acc[2]);
     }
-}
-
-/// `a . b` summed in fixed chunks, in order: the same bits for any thread count.
-pub(crate) fn dot(a: &[Vec3], b: &[Vec3]) -> f64 {
-    let partial: Vec<f64> = a
-        .par_chunks(CHUNK)
-        .zip(b.par_chunks(CHUNK))
-        .map(|(x, y)| x.iter().zip(y).map(|(p, q)| p.dot(q)).sum::<f64>())
-        .collect();
-    partial.iter().sum()
 }
 
 fn axpy(y: &mut [Vec3], alpha: f64, x: &[Vec3]) {
@@ -981,7 +972,7 @@ pub(crate) fn definiteness(a: &BlockCsr, mg: &Multigrid) -> (Definiteness, f64) 
     let mask = mg.mask();
     let n = a.num_rows();
     let masked = |v: &mut [Vec3]| zero_held(v, mask);
-    let mut v = crate::model::frequency::start_vector(n);
+    let mut v = crate::krylov::start_vector(n);
     masked(&mut v);
     let mut w = vec![Vec3::zeros(); n];
     mg.apply(&v, &mut w);
@@ -1010,7 +1001,7 @@ pub(crate) fn definiteness(a: &BlockCsr, mg: &Multigrid) -> (Definiteness, f64) 
         mg.apply(&u, &mut z);
         masked(&mut z);
         let bb = dot(&u, &z);
-        let (theta, last) = crate::model::frequency::extreme_ritz(&alpha, &beta, true);
+        let (theta, last) = crate::krylov::extreme_ritz(&alpha, &beta, true);
         if theta <= -DEFINITENESS_MARGIN {
             return (Definiteness::NotPositive, theta);
         }

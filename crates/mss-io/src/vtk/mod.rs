@@ -8,15 +8,20 @@
 //! writer validates the frame (indices in range, field lengths, names) before
 //! creating any file, and writes atomically.
 
+#[cfg(feature = "legacy-vtk")]
 mod legacy;
 mod pvd;
+#[cfg(feature = "read")]
 pub mod read;
 mod series;
 mod vtu;
 
+#[cfg(feature = "legacy-vtk")]
 pub use legacy::{LegacyFormat, write_legacy_vtk};
 pub use pvd::{PvdEntry, PvdWriter};
-pub use series::{FrameExporter, LegacyVtkSeries, VtuSeries};
+#[cfg(feature = "legacy-vtk")]
+pub use series::LegacyVtkSeries;
+pub use series::{FrameExporter, VtuSeries};
 pub use vtu::{VtuEncoding, write_lines_vtu, write_vtu};
 
 use crate::IoError;

@@ -1,6 +1,8 @@
 //! Frame exporters: plugins that write a time series of lattice frames.
 
-use super::{LatticeFrame, LegacyFormat, PvdWriter, VtuEncoding, write_legacy_vtk, write_vtu};
+use super::{LatticeFrame, PvdWriter, VtuEncoding, write_vtu};
+#[cfg(feature = "legacy-vtk")]
+use super::{LegacyFormat, write_legacy_vtk};
 use crate::IoError;
 use crate::atomic::{check_prefix, ensure_dir};
 use std::path::{Path, PathBuf};
@@ -165,6 +167,7 @@ impl FrameExporter for VtuSeries {
 /// Legacy `.vtk` series: `DIR/PREFIX_NNNN.vtk` per frame (ParaView groups
 /// numbered files into a series; the legacy format cannot be listed in a
 /// `.pvd`). The simulated time is written in each file's title line.
+#[cfg(feature = "legacy-vtk")]
 #[derive(Debug)]
 pub struct LegacyVtkSeries {
     dir: PathBuf,
@@ -173,6 +176,7 @@ pub struct LegacyVtkSeries {
     last_index: Option<usize>,
 }
 
+#[cfg(feature = "legacy-vtk")]
 impl LegacyVtkSeries {
     /// A series in `dir` (created if missing) named after `prefix`.
     pub fn new(dir: &Path, prefix: &str, format: LegacyFormat) -> Result<Self, IoError> {
@@ -192,6 +196,7 @@ impl LegacyVtkSeries {
     }
 }
 
+#[cfg(feature = "legacy-vtk")]
 impl FrameExporter for LegacyVtkSeries {
     fn name(&self) -> &'static str {
         match self.format {
