@@ -2,7 +2,7 @@
 //! points and indices, and Python dicts as the serde values the scene
 //! schema deserializes (so keyword options take exactly the scene's keys).
 
-use mss_core::Vec3;
+use mss_scene::mss_core::Vec3;
 use numpy::ndarray::Array2;
 use numpy::{AllowTypeChange, IntoPyArray, PyArray2, PyArrayLike2};
 use pyo3::exceptions::{PyTypeError, PyValueError};

@@ -5,8 +5,8 @@
 //! message is the line the `mss` CLI prints after `error: `
 //! ([`mss_scene::error::one_line`]).
 
-use mss_core::SolverError;
 use mss_scene::JobError;
+use mss_scene::mss_core::SolverError;
 use pyo3::prelude::*;
 
 /// The exception classes of `hexmss.errors`.

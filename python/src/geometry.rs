@@ -3,8 +3,12 @@
 
 use std::sync::{Arc, OnceLock};
 
-use hexmesh::{Embedding, Lattice, TriMesh};
+use mss_scene::hexmesh::Placement;
+use mss_scene::hexmesh::load::Loaders;
+use mss_scene::hexmesh::{Embedding, Lattice, TriMesh};
+use mss_scene::limits::Limits;
 use mss_scene::scene::{MeshSection, VoxelizeSection};
+use mss_scene::stages::{self, StageError};
 use numpy::PyArray2;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -79,8 +83,8 @@ impl PyMesh {
             vertices: v,
             triangles: t,
         };
-        let loaded =
-            hexmesh::load::clean_mesh(raw, 0.0, &name).map_err(|e| from_error(Kind::Mesh, &e))?;
+        let loaded = mss_scene::hexmesh::load::clean_mesh(raw, 0.0, &name)
+            .map_err(|e| from_error(Kind::Mesh, &e))?;
         Ok(Self::wrap(loaded.mesh, name))
     }
 
@@ -146,19 +150,36 @@ impl PyMesh {
     }
 }
 
-/// Applies `[mesh]`-style placement keys to `mesh`.
-fn place(mesh: &mut TriMesh, name: &str, placement: Option<&Bound<'_, PyDict>>) -> PyResult<()> {
-    let Some(kw) = placement else { return Ok(()) };
+/// The placement that `[mesh]`-style keys describe (identity without keys).
+fn placement_of(name: &str, placement: Option<&Bound<'_, PyDict>>) -> PyResult<Placement> {
+    let Some(kw) = placement else {
+        return Ok(Placement::default());
+    };
     if kw.is_empty() {
-        return Ok(());
+        return Ok(Placement::default());
     }
     let d = kw.copy()?;
     d.set_item("path", name)?;
     let section: MeshSection = from_py("placement", d.as_any())?;
-    section
-        .placement()
+    Ok(section.placement())
+}
+
+/// Applies `[mesh]`-style placement keys to `mesh`.
+fn place(mesh: &mut TriMesh, name: &str, placement: Option<&Bound<'_, PyDict>>) -> PyResult<()> {
+    placement_of(name, placement)?
         .apply(mesh)
         .map_err(|e| raise(Kind::Scene, format!("{name}: {e}")))
+}
+
+/// The exception of a stage's error.
+fn stage_error(e: &StageError) -> PyErr {
+    let kind = match e {
+        StageError::Source(_) => Kind::Mesh,
+        StageError::Placement { .. } => Kind::Scene,
+        StageError::Memory { .. } => Kind::Resource,
+        StageError::Voxelize { .. } => Kind::Voxelize,
+    };
+    from_error(kind, e)
 }
 
 /// load_mesh(path, **placement)
@@ -180,13 +201,12 @@ fn load_mesh(
         &text,
         &mss_scene::scene::SceneOrigin::Text("load_mesh".into()),
     );
-    let loaded = detached(py, || {
-        mss_scene::build::load_mesh(&source, &hexmesh::load::Loaders::default())
+    let placement = placement_of(&text, placement)?;
+    let placed = detached(py, || {
+        stages::load_placed(&source, &placement, &Loaders::default())
     });
-    let (name, loaded) = loaded.map_err(|e| from_error(Kind::Mesh, &e))?;
-    let mut mesh = loaded.mesh;
-    place(&mut mesh, &name, placement)?;
-    Ok(PyMesh::wrap(mesh, name))
+    let placed = placed.map_err(|e| stage_error(&e))?;
+    Ok(PyMesh::wrap(placed.mesh, placed.name))
 }
 
 /// voxelize(mesh, *, cells=None, cell_size=None, rule="centre", fraction=0.5, components="largest", max_cells=10_000_000, progress=None)
@@ -196,6 +216,8 @@ fn load_mesh(
 /// table: `cells` along the longest axis (default 24) or `cell_size` (m),
 /// the occupancy `rule` (`"centre"`, `"any"`, `"fraction"`), the kept
 /// `components` (`"largest"`, `"all"`) and the largest lattice accepted.
+/// Refused with ResourceError when the bounding grid or an explicit run of
+/// the lattice would need more than three quarters of the machine's memory.
 /// `progress(stage, done, total)` is called as grid rows are classified.
 #[pyfunction]
 #[pyo3(signature = (mesh, *, progress=None, **options))]
@@ -206,13 +228,27 @@ fn voxelize(
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<PyLattice> {
     let section: VoxelizeSection = from_py("voxelize", kwargs_dict(py, options).as_any())?;
+    section.check().map_err(|e| {
+        let key = if e.key.is_empty() { "voxelize" } else { e.key };
+        raise(Kind::Voxelize, format!("{key} {}", e.message))
+    })?;
     let opts = section.options();
     let m = Arc::clone(&mesh.mesh);
     let reporter = crate::progress::Reporter::new(progress);
     let hook = |done: u64, total: u64| reporter.report("voxelizing", done, total);
-    let vox = detached(py, || hexmesh::voxelize_with_progress(&m, &opts, &hook));
+    let limits = Limits::default();
+    let vox = detached(py, || {
+        stages::lattice_within(
+            &m,
+            &mesh.name,
+            &opts,
+            &limits,
+            stages::RunNeeds::EXPLICIT,
+            &hook,
+        )
+    });
     reporter.finish()?;
-    let vox = vox.map_err(|e| from_error(Kind::Voxelize, &e))?;
+    let vox = vox.map_err(|e| stage_error(&e))?;
     Ok(PyLattice::wrap(vox.lattice))
 }
 
@@ -318,7 +354,7 @@ impl PyLattice {
     /// The boundary faces as a triangle skin bound to the nodes.
     fn skin(&self) -> PySkin {
         PySkin {
-            skin: hexmesh::boundary_skin(&self.lattice),
+            skin: mss_scene::hexmesh::boundary_skin(&self.lattice),
         }
     }
 
@@ -348,7 +384,7 @@ impl PyLattice {
 /// The lattice's boundary as triangles whose vertices follow nodes.
 #[pyclass(name = "Skin", module = "hexmss", frozen)]
 pub struct PySkin {
-    pub skin: hexmesh::Skin,
+    pub skin: mss_scene::hexmesh::Skin,
 }
 
 #[pymethods]

@@ -3,8 +3,8 @@
 
 use std::path::PathBuf;
 
-use mss_io::skin::Normals;
-use mss_io::vtk::{Field, LatticeFrame, VtuEncoding};
+use mss_scene::mss_io::skin::Normals;
+use mss_scene::mss_io::vtk::{Field, LatticeFrame, VtuEncoding};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -112,7 +112,7 @@ fn write_vtu(
         for (name, v) in &cf {
             frame = frame.with_cell_field(field(name, v));
         }
-        mss_io::vtk::write_vtu(&path, &frame, encoding)
+        mss_scene::mss_io::vtk::write_vtu(&path, &frame, encoding)
     })
     .map_err(|e| from_error(Kind::Output, &e))
 }
@@ -151,8 +151,10 @@ fn write_obj(
             ));
         }
     };
-    detached(py, || mss_io::skin::write_obj_with(&path, &v, &t, normals))
-        .map_err(|e| from_error(Kind::Output, &e))
+    detached(py, || {
+        mss_scene::mss_io::skin::write_obj_with(&path, &v, &t, normals)
+    })
+    .map_err(|e| from_error(Kind::Output, &e))
 }
 
 /// write_stl(path, vertices, triangles)
@@ -168,6 +170,6 @@ fn write_stl(
 ) -> PyResult<()> {
     let v = points_in("vertices", vertices)?;
     let t = indices_in::<3>("triangles", triangles, Some(v.len()))?;
-    detached(py, || mss_io::skin::write_stl(&path, &v, &t))
+    detached(py, || mss_scene::mss_io::skin::write_stl(&path, &v, &t))
         .map_err(|e| from_error(Kind::Output, &e))
 }

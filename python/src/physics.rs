@@ -3,16 +3,18 @@
 
 use std::sync::{Arc, Mutex};
 
-use mss_core::constraints::{ConstraintSpec, NodeSelector};
-use mss_core::loads::Damping;
-use mss_core::simulation::Simulation;
-use mss_core::solver::{
+use mss_scene::hexmesh::load::Loaders;
+use mss_scene::mss_core::constraints::{ConstraintSpec, NodeSelector};
+use mss_scene::mss_core::loads::Damping;
+use mss_scene::mss_core::simulation::Simulation;
+use mss_scene::mss_core::solver::{
     Integrator, IntegratorSettings, Integrators, LinearSolverKind, Problem, Stability, State,
     StaticOptions, solve_static,
 };
-use mss_core::{LoadSpec, Material, Model, Parameterizations, Vec3};
+use mss_scene::mss_core::{LoadSpec, Material, Model, Parameterizations, Vec3};
 use mss_scene::obstacles::{ObstacleSpec, PointsKey};
 use mss_scene::scene::{LoadsSection, MotionSpec};
+use mss_scene::stages;
 use numpy::{PyArray2, PyArrayMethods, PyReadwriteArray2};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -111,12 +113,6 @@ fn integrators() -> Vec<String> {
     Integrators::default().names()
 }
 
-/// The model of new models unless one is named: the bundled default
-/// scene's (inversion-resistant volumetric energy, hourglass control at the
-/// factor that holds soft bodies' zigzag below 2 % of h; docs/robustness.md).
-const DEFAULT_PARAMETERIZATION: &str = "volumetric-barrier+hg";
-const DEFAULT_HOURGLASS: f64 = 1.0;
-
 /// A lattice turned into a mass-spring model (masses, springs, the chosen
 /// parameterization's coefficients).
 #[pyclass(name = "Model", module = "hexmss", frozen)]
@@ -143,15 +139,10 @@ impl PyModel {
         parameterization: Option<String>,
         hourglass: Option<f64>,
     ) -> PyResult<Self> {
-        let (parameterization, hourglass) = match parameterization {
-            Some(p) => (p, hourglass),
-            None => (
-                DEFAULT_PARAMETERIZATION.to_owned(),
-                Some(hourglass.unwrap_or(DEFAULT_HOURGLASS)),
-            ),
-        };
+        // A scene's [model] table means the same, defaults included.
+        let section = mss_scene::scene::ModelSection::new(parameterization, hourglass);
         let param = Parameterizations::default()
-            .build(&parameterization, hourglass)
+            .build(&section.parameterization, section.hourglass)
             .map_err(|e| from_error(Kind::Model, &e))?;
         param
             .validate(&material.material)
@@ -326,7 +317,7 @@ pub enum Recipe {
         damping: Damping,
         obstacles: Vec<ObstacleSpec>,
         points: PointsKey,
-        surface: Option<Arc<hexmesh::Embedding>>,
+        surface: Option<Arc<mss_scene::hexmesh::Embedding>>,
     },
     /// The problem of a prepared scene.
     Job(Arc<mss_scene::Job>),
@@ -344,28 +335,33 @@ impl Recipe {
                 points,
                 surface,
             } => {
-                let model = (**model).clone();
-                let loaders = hexmesh::load::Loaders::default();
+                let loaders = Loaders::default();
                 let origin = mss_scene::scene::SceneOrigin::Text("Problem".into());
                 let mesh_of = |path: &str| {
                     let source = mss_scene::Scene::source_of(path, &origin);
-                    mss_scene::build::load_mesh(&source, &loaders)
-                        .map(|(_, m)| m.mesh)
+                    stages::load_placed(&source, &Default::default(), &loaders)
+                        .map(|placed| placed.mesh)
                         .map_err(|e| e.to_string())
                 };
-                let contact = mss_scene::obstacles::build_contact(
-                    &model,
+                let specs = stages::ProblemSpecs {
+                    constraints,
+                    loads,
+                    damping: *damping,
                     obstacles,
+                    points: *points,
+                };
+                stages::problem(
+                    (**model).clone(),
+                    &specs,
                     &mesh_of,
-                    points.points(),
                     surface.as_deref(),
+                    Vec::new(),
                 )
-                .map_err(|(i, e)| raise(Kind::Scene, format!("obstacles[{i}]: {e}")))?;
-                let p = Problem::from_specs(model, constraints, loads, *damping)
-                    .map_err(|e| from_error(Kind::Model, &e))?;
-                Ok(match contact {
-                    Some(c) => p.with_contact(c),
-                    None => p,
+                .map_err(|e| match e {
+                    stages::ProblemStageError::Obstacle { index, source } => {
+                        raise(Kind::Scene, format!("obstacles[{index}]: {source}"))
+                    }
+                    stages::ProblemStageError::Problem(p) => from_error(Kind::Model, &p),
                 })
             }
             Recipe::Job(job) => job.rebuild_problem().map_err(crate::errors::job),
@@ -536,7 +532,7 @@ impl PyProblem {
     /// Stable explicit time step with damping and contact (safety 1) (s).
     #[getter]
     fn stable_time_step(&self) -> f64 {
-        mss_core::solver::explicit_time_step_limit(self.problem.get(), 1.0)
+        mss_scene::mss_core::solver::explicit_time_step_limit(self.problem.get(), 1.0)
     }
 
     /// external_forces(x, t=0.0)
@@ -880,11 +876,14 @@ impl PyIntegrator {
 #[pyclass(name = "Simulation", module = "hexmss", frozen)]
 pub struct PySimulation {
     sim: Mutex<Simulation>,
-    surface: Option<Arc<hexmesh::Embedding>>,
+    surface: Option<Arc<mss_scene::hexmesh::Embedding>>,
 }
 
 impl PySimulation {
-    pub fn build(problem: Problem, surface: Option<Arc<hexmesh::Embedding>>) -> PyResult<Self> {
+    pub fn build(
+        problem: Problem,
+        surface: Option<Arc<mss_scene::hexmesh::Embedding>>,
+    ) -> PyResult<Self> {
         Ok(Self {
             sim: Mutex::new(Simulation::new(problem).map_err(solver)?),
             surface,

@@ -313,7 +313,7 @@ impl PyJob {
     fn simulation(&self, py: Python<'_>) -> PyResult<PySimulation> {
         let job = Arc::clone(&self.job);
         let (problem, surface) = detached(py, || {
-            let surface = hexmesh::Embedding::new(&job.lattice, &job.mesh);
+            let surface = mss_scene::hexmesh::Embedding::new(&job.lattice, &job.mesh);
             (job.rebuild_problem(), surface)
         });
         PySimulation::build(problem.map_err(job_error)?, Some(Arc::new(surface)))

@@ -30,8 +30,8 @@ fn main() {
     let threads: usize = args.first().and_then(|s| s.parse().ok()).unwrap_or(1);
     let largest: u32 = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(64);
     let dir = tempfile::tempdir().expect("a temporary folder");
-    let cube = hexmesh::generate::box_mesh([0.0; 3], [1.0; 3]);
-    mss_io::skin::write_obj(
+    let cube = mss_scene::hexmesh::generate::box_mesh([0.0; 3], [1.0; 3]);
+    mss_scene::mss_io::skin::write_obj(
         &dir.path().join("cube.obj"),
         &cube.vertices,
         &cube.triangles,

@@ -318,7 +318,7 @@ mod tests {
     #[test]
     fn a_cause_already_in_the_message_is_not_repeated() {
         let os = std::io::Error::new(std::io::ErrorKind::NotFound, "No such file or directory");
-        let lib = mss_io::IoError::io(std::path::Path::new("out/a.vtu"), os);
+        let lib = mss_scene::mss_io::IoError::io(std::path::Path::new("out/a.vtu"), os);
         let e = anyhow::Error::new(lib).context("frame 3");
         let line = error_report(&e);
         assert_eq!(

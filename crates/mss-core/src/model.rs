@@ -264,7 +264,7 @@ impl HourglassControl {
     /// Default factor `alpha` of the built-in `"*+hg"` parameterizations.
     ///
     /// Chosen from a sweep of the nu = 0.3 small-load cantilever (alpha 0.01
-    /// to 1; tests/experiments.rs keeps the criterion): any alpha > 0 removes
+    /// to 1; mss-validate/tests/fast/experiments.rs keeps the criterion): any alpha > 0 removes
     /// the mechanisms of the one-cell-thick 4x1x1 beam (volumetric: M 15.9 % ->
     /// 5.3 %, MAX 46.6 % -> 11.2 %; paper: M 72 % -> 25 %), while 16x4x4 moves
     /// by a few tenths of a percent of its error (M up, MAX down) at 0.05 and

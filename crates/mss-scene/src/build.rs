@@ -16,6 +16,7 @@ use crate::scene::{
     BUILTIN_MESHES, BUNDLED_CRITTER_OBJ, DEFAULT_SCENE_TOML, IMPLICIT_AUTO_STEPS, MeshSource,
     Scene, SceneOrigin, TimeStep,
 };
+use crate::stages::ProblemStageError;
 
 /// A scene and where it came from.
 #[derive(Debug, Clone)]
@@ -123,13 +124,9 @@ impl SceneInput {
         loaders: &Loaders,
     ) -> Result<hexmesh::TriMesh, String> {
         let source = Scene::source_of(path, &self.origin);
-        let (name, mut loaded) = load_mesh(&source, loaders).map_err(|e| e.to_string())?;
-        self.scene
-            .mesh
-            .placement()
-            .apply(&mut loaded.mesh)
-            .map_err(|e| format!("{name}: {e}"))?;
-        Ok(loaded.mesh)
+        crate::stages::load_placed(&source, &self.scene.mesh.placement(), loaders)
+            .map(|placed| placed.mesh)
+            .map_err(|e| e.to_string())
     }
 
     /// [`SceneInput::problem`] with `loaders` for the meshes that
@@ -159,34 +156,31 @@ impl SceneInput {
         let scene = &self.scene;
         let n_fixed = scene.fixed.len();
         let mesh_of = |path: &str| self.load_placed_mesh(path, loaders);
-        let contact = crate::obstacles::build_contact_with(
-            &model,
-            &scene.obstacles,
-            extra,
-            &mesh_of,
-            scene.contact.points.points(),
-            surface,
-        )
-        .map_err(|(i, e)| self.setting(&format!("[[obstacles]] #{}", i + 1), e))?;
-        let problem = Problem::from_specs(
-            model,
-            &scene.constraint_specs(),
-            &scene.loads.specs(),
-            scene.solver.damping(),
-        )
-        .map_err(|e| match e {
-            ProblemError::Constraint { index, source } if index < n_fixed => {
+        let constraints = scene.constraint_specs();
+        let loads = scene.loads.specs();
+        let specs = crate::stages::ProblemSpecs {
+            constraints: &constraints,
+            loads: &loads,
+            damping: scene.solver.damping(),
+            obstacles: &scene.obstacles,
+            points: scene.contact.points,
+        };
+        crate::stages::problem(model, &specs, &mesh_of, surface, extra).map_err(|e| match e {
+            ProblemStageError::Obstacle { index, source } => {
+                self.setting(&format!("[[obstacles]] #{}", index + 1), source)
+            }
+            ProblemStageError::Problem(ProblemError::Constraint { index, source })
+                if index < n_fixed =>
+            {
                 self.setting(&format!("[[fixed]] #{}", index + 1), source)
             }
-            ProblemError::Constraint { index, source } => {
+            ProblemStageError::Problem(ProblemError::Constraint { index, source }) => {
                 self.setting(&format!("[[motions]] #{}", index - n_fixed + 1), source)
             }
-            ProblemError::Load { source, .. } => self.setting("[loads]", source),
-            other => self.setting("[solver]", other),
-        })?;
-        Ok(match contact {
-            Some(c) => problem.with_contact(c),
-            None => problem,
+            ProblemStageError::Problem(ProblemError::Load { source, .. }) => {
+                self.setting("[loads]", source)
+            }
+            ProblemStageError::Problem(other) => self.setting("[solver]", other),
         })
     }
 

@@ -12,13 +12,14 @@ use mss_core::Model;
 use mss_core::solver::{Integrator, Problem, State, solve_static_cancellable};
 use serde::Serialize;
 
-use crate::build::{SceneInput, TimePlan, load_mesh, prepare_output_folder};
+use crate::build::{SceneInput, TimePlan, prepare_output_folder};
 use crate::checkpoint::{CHECKPOINT_FILE, Checkpoint};
 use crate::error::JobError;
-use crate::limits::{Limits, run_memory_estimate};
+use crate::limits::Limits;
 use crate::load_check::LoadCheck;
 use crate::output::{FrameWriter, remove_previous_run};
 use crate::registry::Registry;
+use crate::stages::{PlacedMesh, RunNeeds, StageError, lattice_within, load_placed};
 
 /// What a running job reports, through the callback given to
 /// [`Job::prepare`] and [`Job::run`].
@@ -198,101 +199,70 @@ impl Job {
         progress: ProgressFn<'_>,
     ) -> Result<Job, JobError> {
         let scene_name = input.name();
-        let memory_error = |what: String, needed: u64, hint: &'static str| JobError::Memory {
-            scene: scene_name.clone(),
-            what,
-            needed,
-            limit: limits.memory_bytes,
-            limit_origin: if limits.memory_bytes == Limits::default().memory_bytes {
-                "three quarters of this machine's memory; --max-memory sets it"
-            } else {
-                "as set"
-            },
-            hint,
-        };
         let scene = &input.scene;
         let t0 = Instant::now();
-        let (mesh_name, mut loaded) =
-            load_mesh(&input.mesh_source(), &registry.loaders).map_err(|e| match e {
-                crate::build::MeshSourceError::Load(source) => JobError::Mesh {
-                    scene: scene_name.clone(),
-                    source,
-                },
-                other => JobError::Setting {
-                    scene: scene_name.clone(),
-                    key: "[mesh] path".into(),
-                    message: other.to_string(),
-                },
-            })?;
-        let placement = scene.mesh.placement();
-        placement
-            .apply(&mut loaded.mesh)
-            .map_err(|e| JobError::Setting {
+        let stage_error = |e: StageError| match e {
+            StageError::Source(crate::build::MeshSourceError::Load(source)) => JobError::Mesh {
                 scene: scene_name.clone(),
-                key: "[mesh]".into(),
-                message: format!("{mesh_name}: {e}"),
-            })?;
-        if !placement.is_identity() {
-            log::info!("{mesh_name}: placed with {placement}");
-        }
-        let mut opts = scene.voxelize.options();
-        // The lattice is built only below the cells the memory allows.
-        let needs_matrix = !scene.solver.is_explicit();
-        let budget = crate::limits::cell_budget(limits.memory_bytes, needs_matrix);
-        let memory_binds = budget < opts.max_cells;
-        opts.max_cells = opts.max_cells.min(budget);
-        // The grid is allocated whole while classifying: estimate it first.
-        if let Ok(grid) = hexmesh::voxelize::plan_grid(&loaded.mesh, &opts) {
-            let needed = grid.len() as u64 * hexmesh::voxelize::GRID_BYTES_PER_CELL;
-            if needed > limits.memory_bytes {
-                return Err(memory_error(
-                    format!("voxelizing (a bounding grid of {:?} cells)", grid.dims),
-                    needed,
-                    "",
-                ));
-            }
-        }
-        let hook = |done: u64, total: u64| progress(Progress::Voxelizing { done, total });
-        let vox = hexmesh::voxelize_with_progress(&loaded.mesh, &opts, &hook);
-        progress(Progress::StageDone);
-        let vox = vox.map_err(|source| match source {
-            hexmesh::VoxelizeError::TooManyCells { cells, .. } if memory_binds => memory_error(
-                format!("a lattice of {cells} cells"),
-                run_memory_estimate(cells as usize, cells as usize, needs_matrix)
-                    + cells * hexmesh::voxelize::LATTICE_BYTES_PER_CELL,
-                if needs_matrix {
-                    ", or the explicit solver (no matrices)"
-                } else {
-                    ""
-                },
-            ),
-            source => JobError::Voxelize {
-                scene: scene_name.clone(),
-                mesh: mesh_name.clone(),
                 source,
             },
-        })?;
-        let voxelize_seconds = t0.elapsed().as_secs_f64();
-        let needed = run_memory_estimate(
-            vox.lattice.num_cells(),
-            vox.lattice.num_nodes(),
-            needs_matrix,
-        ) + crate::limits::mesh_memory_estimate(loaded.mesh.vertices.len());
-        if needed > limits.memory_bytes {
-            return Err(memory_error(
-                format!(
-                    "the {} run of {} cells",
-                    scene.solver.kind,
-                    vox.lattice.num_cells()
-                ),
+            StageError::Source(other) => JobError::Setting {
+                scene: scene_name.clone(),
+                key: "[mesh] path".into(),
+                message: other.to_string(),
+            },
+            e @ StageError::Placement { .. } => JobError::Setting {
+                scene: scene_name.clone(),
+                key: "[mesh]".into(),
+                message: e.to_string(),
+            },
+            StageError::Memory {
+                what,
                 needed,
-                if needs_matrix {
-                    ", or the explicit solver (no matrices)"
-                } else {
-                    ""
-                },
-            ));
-        }
+                limit,
+                limit_origin,
+                hint,
+            } => JobError::Memory {
+                scene: scene_name.clone(),
+                what,
+                needed,
+                limit,
+                limit_origin,
+                hint,
+            },
+            StageError::Voxelize { mesh, source } => JobError::Voxelize {
+                scene: scene_name.clone(),
+                mesh,
+                source,
+            },
+        };
+        let placed = load_placed(
+            &input.mesh_source(),
+            &scene.mesh.placement(),
+            &registry.loaders,
+        )
+        .map_err(stage_error)?;
+        let needs = RunNeeds {
+            solver: &scene.solver.kind,
+            needs_matrix: !scene.solver.is_explicit(),
+        };
+        let hook = |done: u64, total: u64| progress(Progress::Voxelizing { done, total });
+        let vox = lattice_within(
+            &placed.mesh,
+            &placed.name,
+            &scene.voxelize.options(),
+            &limits,
+            needs,
+            &hook,
+        );
+        progress(Progress::StageDone);
+        let vox = vox.map_err(stage_error)?;
+        let voxelize_seconds = t0.elapsed().as_secs_f64();
+        let PlacedMesh {
+            name: mesh_name,
+            mesh,
+            ..
+        } = placed;
         let (material, param) = input.material(&registry)?;
         let regions = if scene.regions.is_empty() {
             None
@@ -330,7 +300,7 @@ impl Job {
             source,
         })?;
         let surface = (scene.contact.points != crate::obstacles::PointsKey::Nodes)
-            .then(|| hexmesh::Embedding::new(&vox.lattice, &loaded.mesh));
+            .then(|| hexmesh::Embedding::new(&vox.lattice, &mesh));
         let problem = input.problem_with(model, &registry.loaders, surface.as_ref())?;
         let plan = input.time_plan(&problem)?;
         // Refuse a bad integrator choice (unknown name, a dt above the
@@ -338,7 +308,7 @@ impl Job {
         input.integrator(&registry, &problem, &plan)?;
         Ok(Job {
             mesh_name,
-            mesh: loaded.mesh,
+            mesh,
             lattice: vox.lattice,
             vox_stats: vox.stats,
             regions,

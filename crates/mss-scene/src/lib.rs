@@ -71,6 +71,7 @@ pub mod output;
 pub mod regions;
 pub mod registry;
 pub mod scene;
+pub mod stages;
 
 pub use build::{SceneInput, TimePlan};
 pub use error::JobError;

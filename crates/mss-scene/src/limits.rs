@@ -52,6 +52,17 @@ impl Default for Limits {
     }
 }
 
+impl Limits {
+    /// Where [`Limits::memory_bytes`] comes from, in messages.
+    pub fn memory_origin(&self) -> &'static str {
+        if self.memory_bytes == Limits::default().memory_bytes {
+            "three quarters of this machine's memory; --max-memory sets it"
+        } else {
+            "as set"
+        }
+    }
+}
+
 /// The machine's physical memory (bytes), from `/proc/meminfo` (Linux).
 pub fn physical_memory_bytes() -> Option<u64> {
     let text = std::fs::read_to_string("/proc/meminfo").ok()?;

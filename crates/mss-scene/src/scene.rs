@@ -327,6 +327,28 @@ impl std::str::FromStr for OccupancyKind {
     }
 }
 
+/// A key of a scene table with a bad value, found by the table's own check;
+/// the front end names the key its way (`[voxelize] cells` in a scene,
+/// `--cells` on the command line, `cells=` in Python).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct KeyError {
+    /// The key as the table spells it (empty: the table as a whole).
+    pub key: &'static str,
+    /// What is wrong with its value, starting with the value (`= 0; ...`).
+    pub message: String,
+}
+
+impl KeyError {
+    /// The key as a scene file names it inside `table` (`"[voxelize] cells"`).
+    pub fn scene_key(&self, table: &str) -> String {
+        if self.key.is_empty() {
+            table.to_owned()
+        } else {
+            format!("{table} {}", self.key)
+        }
+    }
+}
+
 /// `[voxelize]`: how the surface becomes a lattice. Give `cells` or
 /// `cell_size`, not both; with neither, `cells = 24` ([`DEFAULT_CELLS`]).
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -396,6 +418,43 @@ impl VoxelizeSection {
         }
     }
 
+    /// Checks the ranges of the keys: `cells` or `cell_size` (not both),
+    /// `cells >= 1`, a positive finite `cell_size`, `fraction` in (0, 1],
+    /// `max_cells >= 1`. Every front end that fills this table (a scene,
+    /// `mss voxelize`, Python's `voxelize`) checks it here and names the
+    /// key its own way ([`KeyError::key`]).
+    pub fn check(&self) -> Result<(), KeyError> {
+        let bad = |key: &'static str, message: String| Err(KeyError { key, message });
+        match (self.cells, self.cell_size) {
+            (Some(_), Some(_)) => {
+                return bad("", "give either `cells` or `cell_size`, not both".into());
+            }
+            (Some(0), _) => {
+                return bad(
+                    "cells",
+                    "= 0; the number of cells along the longest axis must be at least 1".into(),
+                );
+            }
+            (_, Some(h)) if !(h.is_finite() && h > 0.0) => {
+                return bad(
+                    "cell_size",
+                    format!("= {h}; the cell edge must be a positive length in metres"),
+                );
+            }
+            _ => {}
+        }
+        if !(self.fraction > 0.0 && self.fraction <= 1.0) {
+            return bad(
+                "fraction",
+                format!("= {}; must be in (0, 1]", self.fraction),
+            );
+        }
+        if self.max_cells == 0 {
+            return bad("max_cells", "= 0; must be at least 1".into());
+        }
+        Ok(())
+    }
+
     /// The voxelizer's options for this table (ranges are checked by
     /// [`Scene::validate`]).
     pub fn options(&self) -> VoxelizeOptions {
@@ -452,14 +511,23 @@ struct RawModelSection {
 
 impl From<RawModelSection> for ModelSection {
     fn from(raw: RawModelSection) -> Self {
-        match raw.parameterization {
+        ModelSection::new(raw.parameterization, raw.hourglass)
+    }
+}
+
+impl ModelSection {
+    /// The table with these keys given or left out: without a
+    /// parameterization, [`DEFAULT_PARAMETERIZATION`] with the hourglass
+    /// factor given or [`DEFAULT_HOURGLASS`].
+    pub fn new(parameterization: Option<String>, hourglass: Option<f64>) -> Self {
+        match parameterization {
             Some(parameterization) => ModelSection {
                 parameterization,
-                hourglass: raw.hourglass,
+                hourglass,
             },
             None => ModelSection {
                 parameterization: DEFAULT_PARAMETERIZATION.to_owned(),
-                hourglass: Some(raw.hourglass.unwrap_or(DEFAULT_HOURGLASS)),
+                hourglass: Some(hourglass.unwrap_or(DEFAULT_HOURGLASS)),
             },
         }
     }
@@ -1163,36 +1231,8 @@ impl Scene {
             };
             return bad(key, e.to_string());
         }
-        let v = &self.voxelize;
-        match (v.cells, v.cell_size) {
-            (Some(_), Some(_)) => {
-                return bad(
-                    "[voxelize]",
-                    "give either `cells` or `cell_size`, not both".into(),
-                );
-            }
-            (Some(0), _) => {
-                return bad(
-                    "[voxelize] cells",
-                    "= 0; the number of cells along the longest axis must be at least 1".into(),
-                );
-            }
-            (_, Some(h)) if !(h.is_finite() && h > 0.0) => {
-                return bad(
-                    "[voxelize] cell_size",
-                    format!("= {h}; the cell edge must be a positive length in metres"),
-                );
-            }
-            _ => {}
-        }
-        if !(v.fraction > 0.0 && v.fraction <= 1.0) {
-            return bad(
-                "[voxelize] fraction",
-                format!("= {}; must be in (0, 1]", v.fraction),
-            );
-        }
-        if v.max_cells == 0 {
-            return bad("[voxelize] max_cells", "= 0; must be at least 1".into());
+        if let Err(e) = self.voxelize.check() {
+            return bad(&e.scene_key("[voxelize]"), e.message);
         }
         let m = &self.material;
         for (key, value) in [

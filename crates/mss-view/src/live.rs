@@ -16,7 +16,7 @@
 
 use std::time::{Duration, Instant};
 
-use mss_scene::hexmesh::{self, Embedding, Skin};
+use mss_scene::hexmesh::{Embedding, Skin};
 use mss_scene::mss_core::contact::{ContactSettings, Obstacle, Sphere, SteerHandle, Steered};
 use mss_scene::mss_core::simulation::Simulation;
 use mss_scene::mss_core::{Model, Vec3};
@@ -168,7 +168,7 @@ impl Body {
         let sim = Simulation::new(problem).map_err(|e| e.to_string())?;
 
         let embedding = Embedding::new(&job.lattice, &job.mesh);
-        let skin = hexmesh::skin::boundary_skin(&job.lattice);
+        let skin = mss_scene::hexmesh::skin::boundary_skin(&job.lattice);
         let n = model.num_nodes();
         let mut node_cell = vec![0u32; n];
         let mut node_cell_count = vec![0u32; n];

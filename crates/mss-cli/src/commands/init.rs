@@ -33,7 +33,7 @@ pub fn run(args: &InitArgs, global: &GlobalArgs) -> anyhow::Result<()> {
             path.display()
         );
     }
-    mss_io::atomic::write_atomic(path, |w| {
+    mss_scene::mss_io::atomic::write_atomic(path, |w| {
         w.write_all(mss_scene::scene::TEMPLATE_SCENE_TOML.as_bytes())
     })
     .with_context(|| format!("cannot write the template scene {}", path.display()))?;

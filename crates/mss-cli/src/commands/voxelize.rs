@@ -5,11 +5,11 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{Context, bail};
+use anyhow::Context;
 use clap::Args;
-use mss_io::vtk::{Field, LatticeFrame, VtuEncoding, write_lines_vtu, write_vtu};
+use mss_scene::mss_io::vtk::{Field, LatticeFrame, VtuEncoding, write_lines_vtu, write_vtu};
 use mss_scene::scene::{KeepComponents, MeshSource, OccupancyKind, VoxelizeSection};
-use mss_scene::{Progress, Registry};
+use mss_scene::{Progress, Registry, stages};
 use serde::Serialize;
 
 use crate::GlobalArgs;
@@ -106,17 +106,6 @@ pub struct VoxelizeSummary {
 /// Runs `mss voxelize`.
 pub fn run(args: &VoxelizeArgs, global: &GlobalArgs) -> anyhow::Result<()> {
     let out_dir = global.out.clone().unwrap_or_else(|| PathBuf::from("out"));
-    if !(args.fraction > 0.0 && args.fraction <= 1.0) {
-        bail!("--fraction {}: must be in (0, 1]", args.fraction);
-    }
-    if let Some(h) = args.size
-        && !(h.is_finite() && h > 0.0)
-    {
-        bail!("--size {h}: give a positive cell edge in metres");
-    }
-    if args.cells == Some(0) {
-        bail!("--cells 0: the number of cells along the longest axis must be at least 1");
-    }
     // The same table a scene's [voxelize] is, so both mean the same.
     let section = VoxelizeSection {
         cells: args.cells,
@@ -130,45 +119,62 @@ pub fn run(args: &VoxelizeArgs, global: &GlobalArgs) -> anyhow::Result<()> {
         },
         max_cells: args.max_cells,
     };
-    let mut opts = section.options();
-    // Grid and lattice within the memory limit (the lattice and its
-    // outputs cost about as much per cell as an explicit run).
-    let limits = global.limits();
-    opts.max_grid_cells = opts
-        .max_grid_cells
-        .min(limits.memory_bytes / hexmesh::voxelize::GRID_BYTES_PER_CELL);
-    opts.max_cells = opts
-        .max_cells
-        .min(mss_scene::limits::cell_budget(limits.memory_bytes, false));
+    section.check().map_err(|e| {
+        let flag = match e.key {
+            "cell_size" => "size",
+            "max_cells" => "max-cells",
+            other => other,
+        };
+        let value = match flag {
+            "cells" => format!("{}", args.cells.unwrap_or_default()),
+            "size" => format!("{}", args.size.unwrap_or_default()),
+            "fraction" => format!("{}", args.fraction),
+            _ => format!("{}", args.max_cells),
+        };
+        // The table's message starts with "= VALUE; ": the flag prints it.
+        let reason = e
+            .message
+            .split_once("; ")
+            .map_or(e.message.as_str(), |(_, r)| r);
+        anyhow::anyhow!("--{flag} {value}: {reason}")
+    })?;
     let source = match args.mesh.strip_prefix(mss_scene::scene::BUILTIN_PREFIX) {
         Some(name) => MeshSource::Builtin(name.to_owned()),
         None => MeshSource::File(PathBuf::from(&args.mesh)),
     };
-    mss_scene::build::prepare_output_folder(&out_dir)?;
-    let t0 = Instant::now();
-    let (mesh_name, mut loaded) =
-        mss_scene::build::load_mesh(&source, &Registry::default().loaders)?;
-    let placement = hexmesh::Placement {
-        units: hexmesh::Units::from_symbol(&args.units).unwrap_or_default(),
+    // clap admits only the values these know.
+    let placement = mss_scene::hexmesh::Placement {
+        units: mss_scene::hexmesh::Units::from_symbol(&args.units).unwrap_or_default(),
         scale: [args.scale; 3],
         up: match args.up.as_str() {
-            "x" => hexmesh::UpAxis::X,
-            "y" => hexmesh::UpAxis::Y,
-            _ => hexmesh::UpAxis::Z,
+            "x" => mss_scene::hexmesh::UpAxis::X,
+            "y" => mss_scene::hexmesh::UpAxis::Y,
+            _ => mss_scene::hexmesh::UpAxis::Z,
         },
-        ..hexmesh::Placement::default()
+        ..mss_scene::hexmesh::Placement::default()
     };
-    placement
-        .apply(&mut loaded.mesh)
-        .with_context(|| format!("cannot place {mesh_name} (--units, --scale, --up)"))?;
+    mss_scene::build::prepare_output_folder(&out_dir)?;
+    let t0 = Instant::now();
+    let placed = stages::load_placed(&source, &placement, &Registry::default().loaders)
+        .context("cannot load the mesh (--units, --scale, --up)")?;
     let load_seconds = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
-    let bars = JobBars::new(&mesh_name, global.chatty());
+    let bars = JobBars::new(&placed.name, global.chatty());
     let hook = |done: u64, total: u64| bars.report(Progress::Voxelizing { done, total });
-    let vox = hexmesh::voxelize_with_progress(&loaded.mesh, &opts, &hook);
+    // The lattice within the memory limit an explicit run of it needs.
+    let vox = stages::lattice_within(
+        &placed.mesh,
+        &placed.name,
+        &section.options(),
+        &global.limits(),
+        stages::RunNeeds::EXPLICIT,
+        &hook,
+    );
     bars.clear();
-    let vox = vox.with_context(|| format!("cannot voxelize {mesh_name}"))?;
+    let vox = vox?;
     let voxelize_seconds = t1.elapsed().as_secs_f64();
+    let mesh_name = placed.name.clone();
+    let loaded = placed;
     let t2 = Instant::now();
     let lattice = &vox.lattice;
     let encoding = if args.compression == "none" {
@@ -201,7 +207,7 @@ pub fn run(args: &VoxelizeArgs, global: &GlobalArgs) -> anyhow::Result<()> {
             .collect(),
     };
     let json = serde_json::to_string_pretty(&summary).context("cannot encode the statistics")?;
-    mss_io::atomic::write_atomic(&out_dir.join("stats.json"), |w| {
+    mss_scene::mss_io::atomic::write_atomic(&out_dir.join("stats.json"), |w| {
         w.write_all(json.as_bytes())?;
         w.write_all(b"\n")
     })?;
@@ -213,8 +219,8 @@ pub fn run(args: &VoxelizeArgs, global: &GlobalArgs) -> anyhow::Result<()> {
 
 fn write_outputs(
     dir: &Path,
-    lattice: &hexmesh::Lattice,
-    mesh: &hexmesh::TriMesh,
+    lattice: &mss_scene::hexmesh::Lattice,
+    mesh: &mss_scene::hexmesh::TriMesh,
     springs: bool,
     encoding: VtuEncoding,
 ) -> anyhow::Result<()> {
@@ -222,14 +228,14 @@ fn write_outputs(
     let frame = LatticeFrame::new(lattice.nodes(), lattice.cells())
         .with_cell_field(Field::scalars("layer", &coords));
     write_vtu(&dir.join("lattice.vtu"), &frame, encoding)?;
-    let skin = hexmesh::boundary_skin(lattice);
+    let skin = mss_scene::hexmesh::boundary_skin(lattice);
     let skin_pos = skin.positions(lattice.nodes());
-    mss_io::skin::write_obj(&dir.join("skin.obj"), &skin_pos, &skin.triangles)?;
-    let embedding = hexmesh::Embedding::new(lattice, mesh);
+    mss_scene::mss_io::skin::write_obj(&dir.join("skin.obj"), &skin_pos, &skin.triangles)?;
+    let embedding = mss_scene::hexmesh::Embedding::new(lattice, mesh);
     let surface = embedding.deform(lattice.nodes());
-    mss_io::skin::write_obj(&dir.join("surface.obj"), &surface, &mesh.triangles)?;
+    mss_scene::mss_io::skin::write_obj(&dir.join("surface.obj"), &surface, &mesh.triangles)?;
     if springs {
-        let topology = hexmesh::SpringTopology::new(lattice.cells());
+        let topology = mss_scene::hexmesh::SpringTopology::new(lattice.cells());
         let rest_length = topology
             .lengths(lattice.nodes())
             .context("the lattice's springs refer to missing nodes")?;

@@ -7,9 +7,8 @@
 //! `MSS_VIEW_SCREENSHOT=path.png` also writes the live page's screenshot
 //! there (the README's picture is made this way).
 
-#[path = "common/cdp.rs"]
-mod cdp;
-mod common;
+use crate::cdp;
+use crate::common;
 
 use std::time::Duration;
 

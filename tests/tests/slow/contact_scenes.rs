@@ -5,8 +5,8 @@
 use mss_core::{State, Vec3};
 use mss_scene::{Job, Registry, SceneInput, no_progress};
 
-const DROP: &str = include_str!("../../data/scenes/drop.toml");
-const PRESS: &str = include_str!("../../data/scenes/press.toml");
+const DROP: &str = include_str!("../../../data/scenes/drop.toml");
+const PRESS: &str = include_str!("../../../data/scenes/press.toml");
 
 /// Steps a bundled scene (its mesh from the crate), calling `each` after
 /// every step.

@@ -2,7 +2,7 @@
 //! and `<!-- HELP-END -->`) is generated from the binary's `--help` output.
 //! This test fails when it is stale; regenerate it with
 //!
-//!     UPDATE_README=1 cargo test --release -p mss-cli --test readme_help
+//!     UPDATE_README=1 cargo test --release -p mss-cli --test fast readme_help
 
 use std::path::Path;
 use std::process::Command;
@@ -60,6 +60,6 @@ fn readme_help_section_is_generated_from_the_binary() {
         return;
     }
     panic!(
-        "README.md's help section is stale: run `UPDATE_README=1 cargo test --release -p mss-cli --test readme_help`"
+        "README.md's help section is stale: run `UPDATE_README=1 cargo test --release -p mss-cli --test fast readme_help`"
     );
 }

@@ -6,8 +6,8 @@
 use mss_core::State;
 use mss_scene::{Job, Registry, SceneInput, no_progress};
 
-const DEFAULT_SCENE: &str = include_str!("../../data/scenes/default.toml");
-const TEMPLATE_SCENE: &str = include_str!("../../data/scenes/template.toml");
+const DEFAULT_SCENE: &str = include_str!("../../../data/scenes/default.toml");
+const TEMPLATE_SCENE: &str = include_str!("../../../data/scenes/template.toml");
 
 /// The default scene with the bundled mesh and another Young's modulus.
 fn critter(young: f64) -> String {

@@ -2,7 +2,7 @@
 //! protocol's round trips, bad messages, several pages, the drag, the
 //! poking sphere, errors of the scene and replay.
 
-mod common;
+use crate::common;
 
 use std::time::Duration;
 

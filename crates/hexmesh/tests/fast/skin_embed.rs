@@ -1,6 +1,6 @@
 //! Skins are closed outward 2-manifolds; embeddings reproduce and follow.
 
-mod common;
+use crate::common;
 
 use common::*;
 use hexmesh::{Embedding, Lattice, Resolution, VoxelizeOptions, boundary_skin, voxelize};

@@ -1,6 +1,6 @@
 //! The committed default mesh is exactly what the generator produces.
 
-mod common;
+use crate::common;
 
 use std::path::PathBuf;
 

@@ -1,7 +1,7 @@
 //! The PLY and VTK loaders against files written by other tools (plyfile,
 //! meshio; `data/meshes/formats/make_fixtures.py`), and their errors.
 
-mod common;
+use crate::common;
 
 use std::path::PathBuf;
 

@@ -1,7 +1,7 @@
 //! Voxelization: exact cells of a box, the bunny (one component, agreement
 //! with parry's flood fill), robustness to flipped, holed and STL input.
 
-mod common;
+use crate::common;
 
 use std::collections::BTreeSet;
 

@@ -1,0 +1,282 @@
+//! The stages from a mesh to a lattice, shared by every front end: the
+//! scene's [`Job`](crate::Job), `mss voxelize` and the Python package call
+//! these and nothing else, so that the guards (memory estimated before
+//! anything is allocated, the lattice's cell limit) and the messages are
+//! the same wherever a body is built.
+//!
+//! - [`load_placed`]: a mesh from a file or the bundled ones, cleaned, then
+//!   moved, scaled and turned by a [`Placement`].
+//! - [`lattice_within`]: the mesh voxelized under a memory limit: the
+//!   bounding grid is estimated before it is allocated, the lattice is
+//!   built only up to the cells the memory allows, and the run that would
+//!   follow (with or without matrices) is estimated before it is returned.
+//! - [`problem`]: a model under constraints, loads, damping and obstacles
+//!   given in the scene's syntax ([`ProblemSpecs`]).
+//!
+//! ```
+//! use mss_scene::hexmesh::{Placement, Resolution, VoxelizeOptions};
+//! use mss_scene::limits::Limits;
+//! use mss_scene::scene::MeshSource;
+//! use mss_scene::stages::{RunNeeds, lattice_within, load_placed};
+//!
+//! let source = MeshSource::Builtin("critter".into());
+//! let placed = load_placed(&source, &Placement::default(), &Default::default()).unwrap();
+//! let options = VoxelizeOptions {
+//!     resolution: Resolution::CellsAlongLongestAxis(12),
+//!     ..Default::default()
+//! };
+//! let vox = lattice_within(&placed.mesh, &placed.name, &options, &Limits::default(), RunNeeds::EXPLICIT, &|_, _| {}).unwrap();
+//! assert!(vox.lattice.num_cells() > 100);
+//!
+//! // A memory limit too small for the bounding grid is refused before
+//! // anything is allocated.
+//! let tiny = Limits { memory_bytes: 1000, ..Limits::default() };
+//! let err = lattice_within(&placed.mesh, &placed.name, &options, &tiny, RunNeeds::EXPLICIT, &|_, _| {}).unwrap_err();
+//! assert!(err.to_string().contains("bounding grid"), "{err}");
+//! ```
+
+use hexmesh::Embedding;
+use hexmesh::load::{LoadReport, Loaders};
+use hexmesh::voxelize::{GRID_BYTES_PER_CELL, LATTICE_BYTES_PER_CELL, plan_grid};
+use hexmesh::{Placement, PlacementError, TriMesh, VoxelizeError, VoxelizeOptions, Voxelized};
+use mss_core::constraints::ConstraintSpec;
+use mss_core::contact::{ContactSettings, Obstacle, ObstacleError};
+use mss_core::loads::Damping;
+use mss_core::solver::{Problem, ProblemError};
+use mss_core::{LoadSpec, Model};
+use thiserror::Error;
+
+use crate::build::{MeshSourceError, load_mesh};
+use crate::error::human;
+use crate::limits::{Limits, cell_budget, mesh_memory_estimate, run_memory_estimate};
+use crate::obstacles::{ObstacleSpec, PointsKey, build_contact_with};
+use crate::scene::MeshSource;
+
+/// A mesh loaded, cleaned and placed.
+#[derive(Debug, Clone)]
+pub struct PlacedMesh {
+    /// Its name in messages (the file, or `builtin:NAME`).
+    pub name: String,
+    /// The cleaned mesh, placed (m).
+    pub mesh: TriMesh,
+    /// What cleaning did.
+    pub report: LoadReport,
+}
+
+/// Why a stage failed. The messages name the mesh; a front end adds the
+/// scene, the command or the call.
+#[derive(Debug, Error)]
+pub enum StageError {
+    /// The mesh could not be had (unknown built-in, missing file, a loader's
+    /// error).
+    #[error(transparent)]
+    Source(#[from] MeshSourceError),
+    /// The placement does not apply to the mesh (it would overflow or
+    /// flatten it).
+    #[error("{mesh}: {source}")]
+    Placement {
+        /// The mesh.
+        mesh: String,
+        /// Why.
+        source: PlacementError,
+    },
+    /// A stage would need more memory than the limit.
+    #[error(
+        "{what} would need about {} of memory, more than the limit of {} ({limit_origin}); use a coarser resolution{hint}",
+        human(*needed), human(*limit)
+    )]
+    Memory {
+        /// What would need it.
+        what: String,
+        /// Estimated bytes.
+        needed: u64,
+        /// The limit (bytes).
+        limit: u64,
+        /// Where the limit comes from.
+        limit_origin: &'static str,
+        /// What else can be done, starting with ", " (or empty).
+        hint: &'static str,
+    },
+    /// The voxelizer refused the mesh or the options.
+    #[error("cannot voxelize {mesh}: {source}")]
+    Voxelize {
+        /// The mesh.
+        mesh: String,
+        /// Why.
+        source: VoxelizeError,
+    },
+}
+
+/// Loads the mesh `source` names with `loaders` and applies `placement`.
+pub fn load_placed(
+    source: &MeshSource,
+    placement: &Placement,
+    loaders: &Loaders,
+) -> Result<PlacedMesh, StageError> {
+    let (name, mut loaded) = load_mesh(source, loaders)?;
+    placement
+        .apply(&mut loaded.mesh)
+        .map_err(|source| StageError::Placement {
+            mesh: name.clone(),
+            source,
+        })?;
+    if !placement.is_identity() {
+        log::info!("{name}: placed with {placement}");
+    }
+    Ok(PlacedMesh {
+        name,
+        mesh: loaded.mesh,
+        report: loaded.report,
+    })
+}
+
+/// The run a lattice is built for: its memory depends on whether the
+/// solver assembles matrices.
+#[derive(Debug, Clone, Copy)]
+pub struct RunNeeds<'a> {
+    /// The solver's name, in messages (`"explicit"`, `"static"`, ...).
+    pub solver: &'a str,
+    /// Whether it assembles matrices (an implicit or static solve).
+    pub needs_matrix: bool,
+}
+
+impl RunNeeds<'_> {
+    /// An explicit run (no matrices): what `mss voxelize` and a lattice
+    /// made for inspection are measured against.
+    pub const EXPLICIT: RunNeeds<'static> = RunNeeds {
+        solver: "explicit",
+        needs_matrix: false,
+    };
+}
+
+/// Voxelizes `mesh` (named `mesh_name` in errors) with `options` within `limits.memory_bytes`: the cells
+/// are capped at what that memory can run for `run`, the bounding grid is
+/// estimated before it is allocated, and the run's estimate is checked on
+/// the lattice built. `progress(done, total)` follows the grid's rows.
+pub fn lattice_within(
+    mesh: &TriMesh,
+    mesh_name: &str,
+    options: &VoxelizeOptions,
+    limits: &Limits,
+    run: RunNeeds<'_>,
+    progress: &(dyn Fn(u64, u64) + Sync),
+) -> Result<Voxelized, StageError> {
+    let needs_matrix = run.needs_matrix;
+    let matrix_hint = if needs_matrix {
+        ", or the explicit solver (no matrices)"
+    } else {
+        ""
+    };
+    let memory = |what: String, needed: u64, hint: &'static str| StageError::Memory {
+        what,
+        needed,
+        limit: limits.memory_bytes,
+        limit_origin: limits.memory_origin(),
+        hint,
+    };
+    let mut opts = options.clone();
+    let budget = cell_budget(limits.memory_bytes, needs_matrix);
+    let memory_binds = budget < opts.max_cells;
+    opts.max_cells = opts.max_cells.min(budget);
+    // The grid is allocated whole while classifying: estimate it first.
+    if let Ok(grid) = plan_grid(mesh, &opts) {
+        let needed = grid.len() as u64 * GRID_BYTES_PER_CELL;
+        if needed > limits.memory_bytes {
+            return Err(memory(
+                format!("voxelizing (a bounding grid of {:?} cells)", grid.dims),
+                needed,
+                "",
+            ));
+        }
+    }
+    let vox =
+        hexmesh::voxelize_with_progress(mesh, &opts, progress).map_err(|source| match source {
+            VoxelizeError::TooManyCells { cells, .. } if memory_binds => memory(
+                format!("a lattice of {cells} cells"),
+                run_memory_estimate(cells as usize, cells as usize, needs_matrix)
+                    + cells * LATTICE_BYTES_PER_CELL,
+                matrix_hint,
+            ),
+            source => StageError::Voxelize {
+                mesh: mesh_name.to_owned(),
+                source,
+            },
+        })?;
+    let needed = run_memory_estimate(
+        vox.lattice.num_cells(),
+        vox.lattice.num_nodes(),
+        needs_matrix,
+    ) + mesh_memory_estimate(mesh.vertices.len());
+    if needed > limits.memory_bytes {
+        return Err(memory(
+            format!(
+                "the {} run of {} cells",
+                run.solver,
+                vox.lattice.num_cells()
+            ),
+            needed,
+            matrix_hint,
+        ));
+    }
+    Ok(vox)
+}
+
+/// What a problem is made of besides its model, as a scene's tables (or a
+/// front end's arguments in the same syntax) give it.
+#[derive(Debug, Clone, Copy)]
+pub struct ProblemSpecs<'a> {
+    /// Held nodes and prescribed motions, in order (`[[fixed]]`, then
+    /// `[[motions]]`).
+    pub constraints: &'a [ConstraintSpec],
+    /// Gravity, forces, tractions, drags.
+    pub loads: &'a [LoadSpec],
+    /// Mass and stiffness damping.
+    pub damping: Damping,
+    /// The `[[obstacles]]` tables.
+    pub obstacles: &'a [ObstacleSpec],
+    /// Which points of the body touch the obstacles.
+    pub points: PointsKey,
+}
+
+/// Why [`problem`] failed.
+#[derive(Debug, Error)]
+pub enum ProblemStageError {
+    /// An obstacle could not be built (index into [`ProblemSpecs::obstacles`]).
+    #[error("obstacle #{}: {source}", index + 1)]
+    Obstacle {
+        /// Its index.
+        index: usize,
+        /// Why.
+        source: ObstacleError,
+    },
+    /// A constraint or load does not apply to the model.
+    #[error(transparent)]
+    Problem(#[from] ProblemError),
+}
+
+/// The problem of `model` under `specs`: obstacle meshes come from
+/// `mesh_of`, the embedded `surface` touches obstacles when
+/// [`ProblemSpecs::points`] asks, and `extra` obstacles (an interactive
+/// front end's tools) come after the scene's.
+pub fn problem(
+    model: Model,
+    specs: &ProblemSpecs<'_>,
+    mesh_of: &dyn Fn(&str) -> Result<TriMesh, String>,
+    surface: Option<&Embedding>,
+    extra: Vec<(Box<dyn Obstacle>, ContactSettings)>,
+) -> Result<Problem, ProblemStageError> {
+    let contact = build_contact_with(
+        &model,
+        specs.obstacles,
+        extra,
+        mesh_of,
+        specs.points.points(),
+        surface,
+    )
+    .map_err(|(index, source)| ProblemStageError::Obstacle { index, source })?;
+    let problem = Problem::from_specs(model, specs.constraints, specs.loads, specs.damping)?;
+    Ok(match contact {
+        Some(c) => problem.with_contact(c),
+        None => problem,
+    })
+}

@@ -1,0 +1,8 @@
+//! The quick tests of this crate, in one binary (a module per file): `cargo
+//! test --release --test fast` runs them, and `cargo fast` runs every crate's
+//! (see README).
+
+#[path = "../common/mod.rs"]
+mod common;
+
+mod server;

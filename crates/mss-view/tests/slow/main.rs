@@ -1,0 +1,10 @@
+//! The slow tests of this crate (large lattices, convergence studies, process
+//! and browser runs), in one binary apart from the quick ones: `cargo test
+//! --release --workspace` runs them too; `cargo fast` leaves them out.
+
+#[path = "../common/cdp.rs"]
+mod cdp;
+#[path = "../common/mod.rs"]
+mod common;
+
+mod browser;
