@@ -343,12 +343,14 @@ impl Recipe {
                         .map(|placed| placed.mesh)
                         .map_err(|e| e.to_string())
                 };
+                let shapes = mss_scene::obstacles::Shapes::default();
                 let specs = stages::ProblemSpecs {
                     constraints,
                     loads,
                     damping: *damping,
                     obstacles,
                     points: *points,
+                    shapes: &shapes,
                 };
                 stages::problem(
                     (**model).clone(),

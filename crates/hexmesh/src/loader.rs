@@ -12,7 +12,7 @@ use thiserror::Error;
 use crate::TriMesh;
 
 /// Why a mesh could not be loaded. Every variant names the file (or the name
-/// given to [`load_mesh_bytes`]).
+/// given to [`load_mesh_bytes`](crate::load::load_mesh_bytes)).
 #[derive(Debug, Error)]
 pub enum LoadError {
     /// The file could not be read (missing, permissions, ...).
@@ -185,13 +185,13 @@ pub struct LoadedMesh {
 }
 
 /// A mesh file format, the plug point for new formats: implement it and
-/// [`Loaders::register`] it.
+/// [`Loaders::register`](crate::load::Loaders::register) it.
 ///
 /// Contract: [`load`](Self::load) parses the whole file's bytes into a raw
 /// [`TriMesh`] and never panics; malformed input is a [`LoadError`] naming
 /// `name` (and the line, where the format has lines). It does not need to
-/// weld, drop degenerate triangles or check finiteness: [`clean_mesh`] does
-/// that for every loader. See [`Loaders`] for an example.
+/// weld, drop degenerate triangles or check finiteness: [`clean_mesh`](crate::load::clean_mesh) does
+/// that for every loader. See [`Loaders`](crate::load::Loaders) for an example.
 pub trait MeshLoader: Send + Sync {
     /// File extensions served, lower case, without the dot.
     fn extensions(&self) -> &[&str];

@@ -347,13 +347,13 @@ pub type ParameterizationFactory = Arc<dyn Fn() -> Box<dyn Parameterization> + S
 /// ```
 #[derive(Clone)]
 pub struct Parameterizations {
-    entries: Vec<(String, ParameterizationFactory)>,
+    entries: mss_registry::Named<ParameterizationFactory>,
 }
 
 impl Default for Parameterizations {
     fn default() -> Self {
         let mut p = Self {
-            entries: Vec::new(),
+            entries: mss_registry::Named::new(),
         };
         p.register("paper", Arc::new(|| Box::new(PaperModel)));
         p.register("springs", Arc::new(|| Box::new(SpringsOnly)));
@@ -368,9 +368,7 @@ impl Default for Parameterizations {
 
 impl Debug for Parameterizations {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_list()
-            .entries(self.entries.iter().map(|(n, _)| n))
-            .finish()
+        self.entries.fmt(f)
     }
 }
 
@@ -392,15 +390,12 @@ pub const HOURGLASS_SUFFIX: &str = "+hg";
 impl Parameterizations {
     /// Registers (or replaces) the parameterization called `name`.
     pub fn register(&mut self, name: &str, factory: ParameterizationFactory) {
-        match self.entries.iter_mut().find(|(n, _)| n == name) {
-            Some(entry) => entry.1 = factory,
-            None => self.entries.push((name.to_owned(), factory)),
-        }
+        self.entries.register(name, factory);
     }
 
     /// The registered base names, in registration order.
     pub fn names(&self) -> Vec<String> {
-        self.entries.iter().map(|(n, _)| n.clone()).collect()
+        self.entries.names()
     }
 
     /// Builds the parameterization `name`, or `"NAME+hg"` for a registered
@@ -423,12 +418,10 @@ impl Parameterizations {
         };
         let factory = self
             .entries
-            .iter()
-            .find(|(n, _)| n == base)
-            .map(|(_, f)| f)
-            .ok_or_else(|| UnknownParameterization {
+            .lookup(base)
+            .map_err(|unknown| UnknownParameterization {
                 name: name.to_owned(),
-                known: self.names().join(", "),
+                known: unknown.known,
             })?;
         let inner = factory();
         let alpha = match (hourglass, suffixed) {

@@ -46,6 +46,7 @@ use crate::skin::{SkinExporter, SkinFormat, SkinFrames, SkinSeries};
 use crate::vtk::{FrameExporter, VtuEncoding, VtuSeries};
 #[cfg(feature = "legacy-vtk")]
 use crate::vtk::{LegacyFormat, LegacyVtkSeries};
+use mss_registry::Named;
 
 /// Creates a frame exporter writing `PREFIX_NNNN.*` files into a folder.
 pub type FrameExporterFactory =
@@ -71,8 +72,8 @@ pub type SkinExporterFactory =
 /// triangle) and `stl` (binary).
 #[derive(Clone)]
 pub struct Exporters {
-    frames: Vec<(String, FrameExporterFactory)>,
-    skins: Vec<(String, SkinExporterFactory)>,
+    frames: Named<FrameExporterFactory>,
+    skins: Named<SkinExporterFactory>,
 }
 
 fn vtu(encoding: VtuEncoding, pvd: bool) -> FrameExporterFactory {
@@ -98,8 +99,8 @@ fn skin(format: SkinFormat) -> SkinExporterFactory {
 impl Default for Exporters {
     fn default() -> Self {
         let mut e = Self {
-            frames: Vec::new(),
-            skins: Vec::new(),
+            frames: Named::new(),
+            skins: Named::new(),
         };
         e.register_frames("vtu", vtu(VtuEncoding::Base64Zlib, true));
         e.register_frames("vtu-no-pvd", vtu(VtuEncoding::Base64Zlib, false));
@@ -127,32 +128,25 @@ impl std::fmt::Debug for Exporters {
     }
 }
 
-fn upsert<F>(list: &mut Vec<(String, F)>, name: &str, factory: F) {
-    match list.iter_mut().find(|(n, _)| n == name) {
-        Some(entry) => entry.1 = factory,
-        None => list.push((name.to_owned(), factory)),
-    }
-}
-
 impl Exporters {
     /// Registers (or replaces) the frame exporter called `name`.
     pub fn register_frames(&mut self, name: &str, factory: FrameExporterFactory) {
-        upsert(&mut self.frames, name, factory);
+        self.frames.register(name, factory);
     }
 
     /// Registers (or replaces) the skin exporter called `name`.
     pub fn register_skins(&mut self, name: &str, factory: SkinExporterFactory) {
-        upsert(&mut self.skins, name, factory);
+        self.skins.register(name, factory);
     }
 
     /// Names of the frame exporters, in registration order.
     pub fn frame_names(&self) -> Vec<String> {
-        self.frames.iter().map(|(n, _)| n.clone()).collect()
+        self.frames.names()
     }
 
     /// Names of the skin exporters, in registration order.
     pub fn skin_names(&self) -> Vec<String> {
-        self.skins.iter().map(|(n, _)| n.clone()).collect()
+        self.skins.names()
     }
 
     /// Creates the frame exporter `name` writing into `dir` (created if
@@ -165,13 +159,11 @@ impl Exporters {
     ) -> Result<Box<dyn FrameExporter>, IoError> {
         let factory = self
             .frames
-            .iter()
-            .find(|(n, _)| n == name)
-            .map(|(_, f)| f)
-            .ok_or_else(|| IoError::UnknownExporter {
+            .lookup(name)
+            .map_err(|unknown| IoError::UnknownExporter {
                 kind: "frame",
-                name: name.to_owned(),
-                known: self.frame_names().join(", "),
+                name: unknown.name,
+                known: unknown.known,
             })?;
         factory(dir, prefix)
     }
@@ -186,13 +178,11 @@ impl Exporters {
     ) -> Result<Box<dyn SkinExporter>, IoError> {
         let factory = self
             .skins
-            .iter()
-            .find(|(n, _)| n == name)
-            .map(|(_, f)| f)
-            .ok_or_else(|| IoError::UnknownExporter {
+            .lookup(name)
+            .map_err(|unknown| IoError::UnknownExporter {
                 kind: "skin",
-                name: name.to_owned(),
-                known: self.skin_names().join(", "),
+                name: unknown.name,
+                known: unknown.known,
             })?;
         factory(dir, prefix, frames)
     }

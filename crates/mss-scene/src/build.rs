@@ -112,7 +112,7 @@ impl SceneInput {
 
     /// The problem of the scene for a built model: constraints, loads, damping.
     pub fn problem(&self, model: mss_core::Model) -> Result<Problem, JobError> {
-        self.problem_with(model, &Loaders::default(), None)
+        self.problem_with(model, &Registry::default(), None)
     }
 
     /// Loads a second mesh the scene names (a region's, an obstacle's),
@@ -129,16 +129,17 @@ impl SceneInput {
             .map_err(|e| e.to_string())
     }
 
-    /// [`SceneInput::problem`] with `loaders` for the meshes that
-    /// `[[obstacles]]` name (placed like `[mesh]`), and the embedded
-    /// `surface` whose vertices touch them when `[contact] points` asks.
+    /// [`SceneInput::problem`] with the loaders of `registry` for the
+    /// meshes that `[[obstacles]]` name (placed like `[mesh]`), its shapes
+    /// for their kinds, and the embedded `surface` whose vertices touch them
+    /// when `[contact] points` asks.
     pub fn problem_with(
         &self,
         model: mss_core::Model,
-        loaders: &Loaders,
+        registry: &Registry,
         surface: Option<&hexmesh::Embedding>,
     ) -> Result<Problem, JobError> {
-        self.problem_with_obstacles(model, loaders, surface, Vec::new())
+        self.problem_with_obstacles(model, registry, surface, Vec::new())
     }
 
     /// [`SceneInput::problem_with`] with `extra` obstacles after the
@@ -146,7 +147,7 @@ impl SceneInput {
     pub fn problem_with_obstacles(
         &self,
         model: mss_core::Model,
-        loaders: &Loaders,
+        registry: &Registry,
         surface: Option<&hexmesh::Embedding>,
         extra: Vec<(
             Box<dyn mss_core::contact::Obstacle>,
@@ -155,7 +156,7 @@ impl SceneInput {
     ) -> Result<Problem, JobError> {
         let scene = &self.scene;
         let n_fixed = scene.fixed.len();
-        let mesh_of = |path: &str| self.load_placed_mesh(path, loaders);
+        let mesh_of = |path: &str| self.load_placed_mesh(path, &registry.loaders);
         let constraints = scene.constraint_specs();
         let loads = scene.loads.specs();
         let specs = crate::stages::ProblemSpecs {
@@ -164,6 +165,7 @@ impl SceneInput {
             damping: scene.solver.damping(),
             obstacles: &scene.obstacles,
             points: scene.contact.points,
+            shapes: &registry.shapes,
         };
         crate::stages::problem(model, &specs, &mesh_of, surface, extra).map_err(|e| match e {
             ProblemStageError::Obstacle { index, source } => {
@@ -188,7 +190,11 @@ impl SceneInput {
     /// limit times `safety` (adjusted down so that whole steps end exactly at
     /// the duration), other integrators at `duration / IMPLICIT_AUTO_STEPS`,
     /// unless `dt` is given; a static solve is one step.
-    pub fn time_plan(&self, problem: &Problem) -> Result<TimePlan, JobError> {
+    pub fn time_plan(
+        &self,
+        problem: &Problem,
+        integrators: &mss_core::solver::Integrators,
+    ) -> Result<TimePlan, JobError> {
         let s = &self.scene.solver;
         let stable_dt = mss_core::solver::explicit_time_step_limit(problem, s.safety);
         let duration = s.duration;
@@ -199,7 +205,7 @@ impl SceneInput {
         let (dt, steps) = match s.dt {
             _ if s.is_static() => (duration, 1),
             TimeStep::Auto => {
-                let wanted = if s.is_explicit() {
+                let wanted = if s.is_explicit(integrators) {
                     stable_dt
                 } else {
                     duration / f64::from(IMPLICIT_AUTO_STEPS)

@@ -91,7 +91,11 @@ impl TimeEstimate {
                 seconds_per_step: solve,
             });
         }
-        let explicit = job.input.scene.solver.is_explicit();
+        let explicit = job
+            .input
+            .scene
+            .solver
+            .is_explicit(&job.registry.integrators);
         let model = job.problem.model();
         if !explicit && model.num_nodes() > LOAD_CHECK_MAX_NODES {
             return None;
@@ -143,7 +147,11 @@ impl CheckReport {
         let held_nodes = (0..model.num_nodes())
             .filter(|&n| job.problem.constraints().mask(n).iter().any(|&h| h))
             .count();
-        let needs_matrix = !job.input.scene.solver.is_explicit();
+        let needs_matrix = !job
+            .input
+            .scene
+            .solver
+            .is_explicit(&job.registry.integrators);
         let mechanism_warning = mechanism_warning(job);
         let started = std::time::Instant::now();
         let load_check = job.load_check(mechanism_warning.is_some(), cancel);

@@ -244,7 +244,7 @@ impl Job {
         .map_err(stage_error)?;
         let needs = RunNeeds {
             solver: &scene.solver.kind,
-            needs_matrix: !scene.solver.is_explicit(),
+            needs_matrix: !scene.solver.is_explicit(&registry.integrators),
         };
         let hook = |done: u64, total: u64| progress(Progress::Voxelizing { done, total });
         let vox = lattice_within(
@@ -301,8 +301,8 @@ impl Job {
         })?;
         let surface = (scene.contact.points != crate::obstacles::PointsKey::Nodes)
             .then(|| hexmesh::Embedding::new(&vox.lattice, &mesh));
-        let problem = input.problem_with(model, &registry.loaders, surface.as_ref())?;
-        let plan = input.time_plan(&problem)?;
+        let problem = input.problem_with(model, &registry, surface.as_ref())?;
+        let plan = input.time_plan(&problem, &registry.integrators)?;
         // Refuse a bad integrator choice (unknown name, a dt above the
         // stability limit) here, before anything is written.
         input.integrator(&registry, &problem, &plan)?;
@@ -343,7 +343,7 @@ impl Job {
         let surface = (self.input.scene.contact.points != crate::obstacles::PointsKey::Nodes)
             .then(|| hexmesh::Embedding::new(&self.lattice, &self.mesh));
         self.input
-            .problem_with_obstacles(model, &self.registry.loaders, surface.as_ref(), extra)
+            .problem_with_obstacles(model, &self.registry, surface.as_ref(), extra)
     }
 
     /// Time-steps (or statically solves) the job, writing frames into

@@ -12,7 +12,7 @@ use mss_core::solver::{
 use serde::Serialize;
 
 /// Largest model (nodes) on which a run counts zero-energy modes before
-/// starting when the count needs a factorization; [`CheckReport::new`]
+/// starting when the count needs a factorization; [`CheckReport::new`](crate::check::CheckReport::new)
 /// always counts them, and so does a run whose cells are rigid (hourglass
 /// control: the count is linear in the cells).
 pub const RUN_MODE_CHECK_MAX_NODES: usize = 20_000;
@@ -23,7 +23,7 @@ pub fn run_counts_modes(model: &mss_core::Model) -> bool {
     model.num_nodes() <= RUN_MODE_CHECK_MAX_NODES || mss_core::modes::cells_are_rigid(model)
 }
 
-/// Largest model (nodes) on which [`CheckReport::new`] solves the scene's
+/// Largest model (nodes) on which [`CheckReport::new`](crate::check::CheckReport::new) solves the scene's
 /// load statically (seconds with the multigrid solver at this size), when
 /// the model has hourglass control; without, [`RUN_MODE_CHECK_MAX_NODES`].
 pub const LOAD_CHECK_MAX_NODES: usize = 60_000;

@@ -11,7 +11,9 @@
 //! motion = [[0.0, 0.0, 0.0, 0.0], [0.5, 0.0, 0.0, -0.02], [1.0, 0.0, 0.0, 0.0]]
 //! ```
 //!
-//! Shapes: `plane` (`point`, outward `normal`), `ground` (a plane facing +z
+//! The shape's `kind` is resolved by name in [`Shapes`] (the registry's
+//! `shapes`), where a program registers its own ([`ShapeFactory`]; see
+//! `examples/custom_obstacle.rs`). Built-in shapes: `plane` (`point`, outward `normal`), `ground` (a plane facing +z
 //! at the body's lowest node less `gap`), `sphere` (`centre`, `radius`),
 //! `box` (axis-aligned, `min`, `max`), `capsule` (segment `a`, `b`,
 //! `radius`), `mesh` (a closed surface file, `path` relative to the scene,
@@ -32,10 +34,63 @@ use mss_core::contact::{
 use mss_core::{Model, Vec3};
 use serde::Deserialize;
 
-/// An obstacle's shape.
+/// An obstacle's shape as a scene gives it: `kind`, resolved by name in
+/// the [`Shapes`] registry when the problem is built, and the table's other
+/// keys, which the shape's factory reads ([`ShapeSpec::keys_as`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ShapeSpec {
+    /// The shape's name in [`Shapes`] (`"plane"`, `"sphere"`, ...).
+    pub kind: String,
+    /// The other keys of the `shape = { ... }` table.
+    pub keys: toml::Table,
+}
+
+impl<'de> Deserialize<'de> for ShapeSpec {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let mut keys = toml::Table::deserialize(d)?;
+        match keys.remove("kind") {
+            Some(toml::Value::String(kind)) => Ok(ShapeSpec { kind, keys }),
+            Some(other) => Err(serde::de::Error::custom(format!(
+                "kind = {other}: the shape's kind is a name (\"sphere\", ...)"
+            ))),
+            None => Err(serde::de::Error::missing_field("kind")),
+        }
+    }
+}
+
+impl ShapeSpec {
+    /// The keys read as `T` (a factory's own table type, usually with
+    /// `deny_unknown_fields`), with serde's message on a bad key.
+    pub fn keys_as<T: serde::de::DeserializeOwned>(&self) -> Result<T, ObstacleError> {
+        toml::Value::Table(self.keys.clone())
+            .try_into()
+            .map_err(|e: toml::de::Error| {
+                ObstacleError::Invalid(format!("shape {:?}: {}", self.kind, e.message().trim()))
+            })
+    }
+
+    /// The built-in shape this is, if its kind is one (for a front end that
+    /// draws obstacles).
+    pub fn builtin(&self) -> Option<BuiltinShape> {
+        self.read_builtin().ok()
+    }
+
+    fn read_builtin(&self) -> Result<BuiltinShape, ObstacleError> {
+        let mut table = self.keys.clone();
+        table.insert("kind".into(), toml::Value::String(self.kind.clone()));
+        toml::Value::Table(table)
+            .try_into()
+            .map_err(|e: toml::de::Error| {
+                ObstacleError::Invalid(format!("shape {:?}: {}", self.kind, e.message().trim()))
+            })
+    }
+}
+
+/// The built-in shapes, registered in [`Shapes::default`] under their
+/// snake-case names.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
-pub enum ShapeSpec {
+pub enum BuiltinShape {
     /// The half-space behind the plane through `point` with outward `normal`.
     Plane {
         /// A point of the plane (m).
@@ -153,12 +208,13 @@ impl ObstacleSpec {
         Ok(s)
     }
 
-    /// The obstacle for `model` (a `ground` sits below its lowest node);
-    /// `mesh_of` loads and places a `mesh` shape's file.
+    /// The obstacle for `model`, its shape resolved in `shapes`; `mesh_of`
+    /// loads and places a mesh file the shape names.
     pub fn obstacle(
         &self,
         model: &Model,
         mesh_of: &dyn Fn(&str) -> Result<hexmesh::TriMesh, String>,
+        shapes: &Shapes,
     ) -> Result<Box<dyn Obstacle>, ObstacleError> {
         let path = Path::new(
             self.motion
@@ -171,36 +227,117 @@ impl ObstacleSpec {
                 "motion keyframes [t, dx, dy, dz] must be finite with increasing times".into(),
             )
         })?;
-        Ok(match &self.shape {
-            ShapeSpec::Plane { point, normal } => {
-                Box::new(Plane::new(v(*point), v(*normal))?.moving(path))
-            }
-            ShapeSpec::Ground { gap } => {
-                if !gap.is_finite() {
-                    return Err(ObstacleError::Invalid(format!(
-                        "ground gap {gap} must be finite"
-                    )));
-                }
-                let lowest = model
-                    .rest_positions()
-                    .iter()
-                    .map(|p| p.z)
-                    .fold(f64::INFINITY, f64::min);
-                Box::new(Plane::new(Vec3::new(0.0, 0.0, lowest - gap), Vec3::z())?.moving(path))
-            }
-            ShapeSpec::Sphere { centre, radius } => {
-                Box::new(Sphere::new(v(*centre), *radius)?.moving(path))
-            }
-            ShapeSpec::Box { min, max } => Box::new(Cuboid::new(v(*min), v(*max))?.moving(path)),
-            ShapeSpec::Mesh { path: file } => {
-                let mesh = mesh_of(file).map_err(ObstacleError::Invalid)?;
-                Box::new(MeshObstacle::new(&mesh)?.moving(path))
-            }
-            ShapeSpec::Capsule { a, b, radius } => {
-                Box::new(Capsule::new(v(*a), v(*b), *radius)?.moving(path))
-            }
-        })
+        let context = ShapeContext {
+            model,
+            mesh_of,
+            path,
+        };
+        let factory = shapes.lookup(&self.shape.kind).map_err(|unknown| {
+            ObstacleError::Invalid(format!(
+                "unknown shape kind {:?}; known: {}",
+                unknown.name, unknown.known
+            ))
+        })?;
+        factory(&self.shape, &context)
     }
+}
+
+/// What a shape's factory may use: the model (a `ground` sits below its
+/// lowest node), the loader of the scene's meshes (placed like `[mesh]`) and
+/// the obstacle's motion, which the factory applies (built-ins through their
+/// `moving`, any obstacle through [`mss_core::contact::Moving`]).
+pub struct ShapeContext<'a> {
+    /// The body's model.
+    pub model: &'a Model,
+    /// Loads and places a mesh file the scene names.
+    pub mesh_of: &'a dyn Fn(&str) -> Result<hexmesh::TriMesh, String>,
+    /// The obstacle's `motion`.
+    pub path: Path,
+}
+
+/// Builds an obstacle from its shape table: one entry of [`Shapes`].
+pub type ShapeFactory = std::sync::Arc<
+    dyn Fn(&ShapeSpec, &ShapeContext<'_>) -> Result<Box<dyn Obstacle>, ObstacleError> + Send + Sync,
+>;
+
+/// The obstacle shapes a scene can name in `shape = { kind = ... }`: the
+/// built-ins ([`BuiltinShape`]) and any a program registers.
+#[derive(Clone, Debug)]
+pub struct Shapes {
+    entries: mss_registry::Named<ShapeFactory>,
+}
+
+impl Default for Shapes {
+    fn default() -> Self {
+        let mut shapes = Shapes {
+            entries: mss_registry::Named::new(),
+        };
+        for kind in ["plane", "ground", "sphere", "box", "mesh", "capsule"] {
+            shapes.register(kind, std::sync::Arc::new(builtin_obstacle));
+        }
+        shapes
+    }
+}
+
+impl Shapes {
+    /// Registers (or replaces) the shape called `kind`.
+    pub fn register(&mut self, kind: &str, factory: ShapeFactory) {
+        self.entries.register(kind, factory);
+    }
+
+    /// The registered kinds, in registration order.
+    pub fn names(&self) -> Vec<String> {
+        self.entries.names()
+    }
+
+    fn lookup(&self, kind: &str) -> Result<&ShapeFactory, mss_registry::UnknownName> {
+        self.entries.lookup(kind)
+    }
+}
+
+fn builtin_obstacle(
+    spec: &ShapeSpec,
+    context: &ShapeContext<'_>,
+) -> Result<Box<dyn Obstacle>, ObstacleError> {
+    let mut table = spec.keys.clone();
+    table.insert("kind".into(), toml::Value::String(spec.kind.clone()));
+    let shape: BuiltinShape =
+        toml::Value::Table(table)
+            .try_into()
+            .map_err(|e: toml::de::Error| {
+                ObstacleError::Invalid(format!("shape {:?}: {}", spec.kind, e.message().trim()))
+            })?;
+    let path = context.path.clone();
+    Ok(match shape {
+        BuiltinShape::Plane { point, normal } => {
+            Box::new(Plane::new(v(point), v(normal))?.moving(path))
+        }
+        BuiltinShape::Ground { gap } => {
+            if !gap.is_finite() {
+                return Err(ObstacleError::Invalid(format!(
+                    "ground gap {gap} must be finite"
+                )));
+            }
+            let lowest = context
+                .model
+                .rest_positions()
+                .iter()
+                .map(|p| p.z)
+                .fold(f64::INFINITY, f64::min);
+            Box::new(Plane::new(Vec3::new(0.0, 0.0, lowest - gap), Vec3::z())?.moving(path))
+        }
+        BuiltinShape::Sphere { centre, radius } => {
+            Box::new(Sphere::new(v(centre), radius)?.moving(path))
+        }
+        BuiltinShape::Box { min, max } => Box::new(Cuboid::new(v(min), v(max))?.moving(path)),
+        BuiltinShape::Mesh { path: file } => {
+            let mesh = (context.mesh_of)(&file).map_err(ObstacleError::Invalid)?;
+            Box::new(MeshObstacle::new(&mesh)?.moving(path))
+        }
+        BuiltinShape::Capsule { a, b, radius } => {
+            Box::new(Capsule::new(v(a), v(b), radius)?.moving(path))
+        }
+    })
 }
 
 /// The contact of `model` with `specs`, or the first bad obstacle (0-based)
@@ -212,7 +349,15 @@ pub fn build_contact(
     points: ContactPoints,
     surface: Option<&hexmesh::Embedding>,
 ) -> Result<Option<Contact>, (usize, ObstacleError)> {
-    build_contact_with(model, specs, Vec::new(), mesh_of, points, surface)
+    build_contact_with(
+        model,
+        specs,
+        &Shapes::default(),
+        Vec::new(),
+        mesh_of,
+        points,
+        surface,
+    )
 }
 
 /// [`build_contact`] with `extra` obstacles after the scene's (an
@@ -221,6 +366,7 @@ pub fn build_contact(
 pub fn build_contact_with(
     model: &Model,
     specs: &[ObstacleSpec],
+    shapes: &Shapes,
     extra: Vec<(Box<dyn Obstacle>, ContactSettings)>,
     mesh_of: &dyn Fn(&str) -> Result<hexmesh::TriMesh, String>,
     points: ContactPoints,
@@ -231,7 +377,7 @@ pub fn build_contact_with(
     }
     let mut obstacles = Vec::with_capacity(specs.len() + extra.len());
     for (i, spec) in specs.iter().enumerate() {
-        let o = spec.obstacle(model, mesh_of).map_err(|e| (i, e))?;
+        let o = spec.obstacle(model, mesh_of, shapes).map_err(|e| (i, e))?;
         let s = spec.settings(model).map_err(|e| (i, e))?;
         obstacles.push((o, s));
     }

@@ -5,9 +5,12 @@ use mss_core::Parameterizations;
 use mss_core::solver::Integrators;
 use mss_io::exporters::Exporters;
 
+use crate::obstacles::Shapes;
+
 /// Everything a scene can name that a program may extend: mesh loaders (by
 /// file extension), spring parameterizations (`[model] parameterization`),
-/// time integrators (`[solver] kind`) and exporters (`[output]`).
+/// time integrators (`[solver] kind`), exporters (`[output]`) and obstacle
+/// shapes (`[[obstacles]] shape`).
 ///
 /// A program starts from [`Registry::default`] (the built-ins), registers its
 /// own plugins in the public fields, and passes the value to
@@ -41,4 +44,6 @@ pub struct Registry {
     pub integrators: Integrators,
     /// Frame and skin exporters, by name.
     pub exporters: Exporters,
+    /// Obstacle shapes, by `[[obstacles]] shape = { kind = ... }`.
+    pub shapes: Shapes,
 }

@@ -52,7 +52,7 @@ use mss_core::Material;
 use mss_core::constraints::{ConstraintSpec, Dofs, Keyframe, Motion, NodeSelector};
 use mss_core::loads::{Damping, ForceDistribution, LoadSpec};
 use mss_core::solver::{
-    DEFAULT_MAX_NEWTON, DEFAULT_NEWTON_RTOL, ExplicitOptions, LinearSolverKind,
+    DEFAULT_MAX_NEWTON, DEFAULT_NEWTON_RTOL, ExplicitOptions, Integrators, LinearSolverKind,
 };
 use serde::Deserialize;
 use serde::de::{self, Deserializer, Visitor};
@@ -686,8 +686,8 @@ impl MotionSpec {
 /// kind names an integrator of the [`Registry`](crate::Registry).
 pub const STATIC_KIND: &str = "static";
 
-/// Integrator names whose `dt = "auto"` is the stable explicit step.
-pub const EXPLICIT_KINDS: &[&str] = &["explicit", "verlet", "symplectic-euler"];
+/// `[solver] kind` of a scene that names none.
+pub const DEFAULT_KIND: &str = "explicit";
 
 /// Steps of an implicit (or other non-explicit) run when `dt = "auto"`: the
 /// step is `duration / IMPLICIT_AUTO_STEPS`.
@@ -697,7 +697,8 @@ pub const IMPLICIT_AUTO_STEPS: u32 = 100;
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub enum TimeStep {
     /// The model's stable step times `safety` (explicit schemes,
-    /// [`EXPLICIT_KINDS`]), or `duration / IMPLICIT_AUTO_STEPS` (the others).
+    /// [`IntegratorEntry::explicit`](mss_core::solver::IntegratorEntry)), or
+    /// `duration / IMPLICIT_AUTO_STEPS` (the others).
     #[default]
     Auto,
     /// A fixed step (s).
@@ -825,7 +826,7 @@ fn default_load_steps() -> u32 {
 }
 
 fn default_kind() -> String {
-    EXPLICIT_KINDS[0].to_owned()
+    DEFAULT_KIND.to_owned()
 }
 fn default_safety() -> f64 {
     ExplicitOptions::default().safety
@@ -866,9 +867,11 @@ impl SolverSection {
         self.kind == STATIC_KIND
     }
 
-    /// Whether `dt = "auto"` means the stable explicit step for this kind.
-    pub fn is_explicit(&self) -> bool {
-        EXPLICIT_KINDS.contains(&self.kind.as_str())
+    /// Whether this kind is an explicit integrator of `integrators` (then
+    /// `dt = "auto"` means the stable step and the run assembles no
+    /// matrices); the registry's entries say which are.
+    pub fn is_explicit(&self, integrators: &Integrators) -> bool {
+        integrators.is_explicit(&self.kind)
     }
 
     /// The damping of the run.

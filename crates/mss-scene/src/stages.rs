@@ -49,7 +49,7 @@ use thiserror::Error;
 use crate::build::{MeshSourceError, load_mesh};
 use crate::error::human;
 use crate::limits::{Limits, cell_budget, mesh_memory_estimate, run_memory_estimate};
-use crate::obstacles::{ObstacleSpec, PointsKey, build_contact_with};
+use crate::obstacles::{ObstacleSpec, PointsKey, Shapes, build_contact_with};
 use crate::scene::MeshSource;
 
 /// A mesh loaded, cleaned and placed.
@@ -236,6 +236,8 @@ pub struct ProblemSpecs<'a> {
     pub obstacles: &'a [ObstacleSpec],
     /// Which points of the body touch the obstacles.
     pub points: PointsKey,
+    /// The shapes the obstacles may name.
+    pub shapes: &'a Shapes,
 }
 
 /// Why [`problem`] failed.
@@ -268,6 +270,7 @@ pub fn problem(
     let contact = build_contact_with(
         &model,
         specs.obstacles,
+        specs.shapes,
         extra,
         mesh_of,
         specs.points.points(),

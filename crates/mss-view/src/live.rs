@@ -20,7 +20,7 @@ use mss_scene::hexmesh::{Embedding, Skin};
 use mss_scene::mss_core::contact::{ContactSettings, Obstacle, Sphere, SteerHandle, Steered};
 use mss_scene::mss_core::simulation::Simulation;
 use mss_scene::mss_core::{Model, Vec3};
-use mss_scene::obstacles::ShapeSpec;
+use mss_scene::obstacles::BuiltinShape;
 use mss_scene::{Job, Registry, SceneInput};
 
 use crate::protocol::{
@@ -103,8 +103,11 @@ pub(crate) fn obstacle_draws(
         .scene
         .obstacles
         .iter()
-        .map(|o| match &o.shape {
-            ShapeSpec::Plane { point, normal } => {
+        .map(|o| match &o.shape.builtin() {
+            None => ObstacleDraw::Other {
+                shape: o.shape.kind.clone(),
+            },
+            Some(BuiltinShape::Plane { point, normal }) => {
                 let n = v3(*normal);
                 let n = if n.norm() > 0.0 {
                     n / n.norm()
@@ -116,24 +119,24 @@ pub(crate) fn obstacle_draws(
                     normal: arr(n),
                 }
             }
-            ShapeSpec::Ground { gap } => ObstacleDraw::Plane {
+            Some(BuiltinShape::Ground { gap }) => ObstacleDraw::Plane {
                 point: [0.0, 0.0, lowest - gap],
                 normal: [0.0, 0.0, 1.0],
             },
-            ShapeSpec::Sphere { centre, radius } => ObstacleDraw::Sphere {
+            Some(BuiltinShape::Sphere { centre, radius }) => ObstacleDraw::Sphere {
                 centre: *centre,
                 radius: *radius,
             },
-            ShapeSpec::Box { min, max } => ObstacleDraw::Box {
+            Some(BuiltinShape::Box { min, max }) => ObstacleDraw::Box {
                 min: *min,
                 max: *max,
             },
-            ShapeSpec::Capsule { a, b, radius } => ObstacleDraw::Capsule {
+            Some(BuiltinShape::Capsule { a, b, radius }) => ObstacleDraw::Capsule {
                 a: *a,
                 b: *b,
                 radius: *radius,
             },
-            ShapeSpec::Mesh { path } => {
+            Some(BuiltinShape::Mesh { path }) => {
                 let [min, max] = mesh_bounds(path).unwrap_or([[0.0; 3]; 2]);
                 ObstacleDraw::Mesh { min, max }
             }

@@ -230,6 +230,12 @@ pub enum ObstacleDraw {
         /// Maximum corner (m).
         max: [f64; 3],
     },
+    /// A shape a program registered: the page does not draw it (it keeps
+    /// its place, so that offsets stay aligned with the obstacles).
+    Other {
+        /// Its kind.
+        shape: String,
+    },
 }
 
 /// What the page is showing: sent on connect and after every rebuild.

@@ -716,7 +716,19 @@ pub type IntegratorFactory = std::sync::Arc<
 /// See [`Integrator`] for an example of a custom one.
 #[derive(Clone)]
 pub struct Integrators {
-    entries: Vec<(String, IntegratorFactory)>,
+    entries: mss_registry::Named<IntegratorEntry>,
+}
+
+/// One entry of [`Integrators`]: how to build the integrator, and what a
+/// caller needs to know before building it.
+#[derive(Clone)]
+pub struct IntegratorEntry {
+    /// Builds it for a problem.
+    pub factory: IntegratorFactory,
+    /// Whether it is explicit: its step is bounded by the stability limit
+    /// (`dt = "auto"` means that limit) and it assembles no matrices (so
+    /// the memory a run needs is smaller).
+    pub explicit: bool,
 }
 
 fn explicit_factory(scheme: ExplicitScheme) -> IntegratorFactory {
@@ -735,11 +747,11 @@ fn explicit_factory(scheme: ExplicitScheme) -> IntegratorFactory {
 impl Default for Integrators {
     fn default() -> Self {
         let mut known = Self {
-            entries: Vec::new(),
+            entries: mss_registry::Named::new(),
         };
-        known.register("explicit", explicit_factory(ExplicitScheme::VelocityVerlet));
-        known.register("verlet", explicit_factory(ExplicitScheme::VelocityVerlet));
-        known.register(
+        known.register_explicit("explicit", explicit_factory(ExplicitScheme::VelocityVerlet));
+        known.register_explicit("verlet", explicit_factory(ExplicitScheme::VelocityVerlet));
+        known.register_explicit(
             "symplectic-euler",
             explicit_factory(ExplicitScheme::SymplecticEuler),
         );
@@ -762,29 +774,47 @@ impl Default for Integrators {
 
 impl std::fmt::Debug for Integrators {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_list()
-            .entries(self.entries.iter().map(|(n, _)| n))
-            .finish()
+        self.entries.fmt(f)
     }
 }
 
 impl Integrators {
-    /// Registers (or replaces) the integrator called `name`.
+    /// Registers (or replaces) the integrator called `name`, one that is
+    /// not explicit (see [`IntegratorEntry::explicit`]).
     pub fn register(&mut self, name: &str, factory: IntegratorFactory) {
-        match self.entries.iter_mut().find(|(n, _)| n == name) {
-            Some(entry) => entry.1 = factory,
-            None => self.entries.push((name.to_owned(), factory)),
-        }
+        self.entries.register(
+            name,
+            IntegratorEntry {
+                factory,
+                explicit: false,
+            },
+        );
+    }
+
+    /// Registers (or replaces) the explicit integrator called `name`.
+    pub fn register_explicit(&mut self, name: &str, factory: IntegratorFactory) {
+        self.entries.register(
+            name,
+            IntegratorEntry {
+                factory,
+                explicit: true,
+            },
+        );
     }
 
     /// The registered names, in registration order.
     pub fn names(&self) -> Vec<String> {
-        self.entries.iter().map(|(n, _)| n.clone()).collect()
+        self.entries.names()
     }
 
     /// Whether `name` is registered.
     pub fn contains(&self, name: &str) -> bool {
-        self.entries.iter().any(|(n, _)| n == name)
+        self.entries.contains(name)
+    }
+
+    /// Whether `name` is a registered explicit integrator.
+    pub fn is_explicit(&self, name: &str) -> bool {
+        self.entries.get(name).is_some_and(|e| e.explicit)
     }
 
     /// Builds the integrator `name` for `problem`.
@@ -794,16 +824,14 @@ impl Integrators {
         problem: &Problem,
         settings: &IntegratorSettings,
     ) -> Result<Box<dyn Integrator>, SolverError> {
-        let factory = self
-            .entries
-            .iter()
-            .find(|(n, _)| n == name)
-            .map(|(_, f)| f)
-            .ok_or_else(|| SolverError::UnknownIntegrator {
-                name: name.to_owned(),
-                known: self.names().join(", "),
-            })?;
-        factory(problem, settings)
+        let entry =
+            self.entries
+                .lookup(name)
+                .map_err(|unknown| SolverError::UnknownIntegrator {
+                    name: unknown.name,
+                    known: unknown.known,
+                })?;
+        (entry.factory)(problem, settings)
     }
 }
 

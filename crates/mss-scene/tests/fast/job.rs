@@ -528,7 +528,10 @@ fn obstacles_reach_the_problem_and_bad_ones_are_refused() {
             "shape = { kind = \"ground\" }\nmotion = [[1.0, 0.0, 0.0, 0.0], [0.5, 0.0, 0.0, 0.0]]\n",
             "increasing",
         ),
-        ("shape = { kind = \"cone\" }\n", "unknown variant `cone`"),
+        (
+            "shape = { kind = \"cone\" }\n",
+            "shape kind \"cone\"; known: plane, ground",
+        ),
         (
             "shape = { kind = \"ground\" }\nbounce = 1.0\n",
             "unknown field `bounce`",

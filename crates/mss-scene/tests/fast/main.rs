@@ -6,4 +6,5 @@ mod blender;
 mod job;
 mod placement;
 mod regions;
+mod shapes;
 mod stages;
