@@ -433,7 +433,7 @@ impl From<Dofs> for String {
 }
 
 /// How held dofs move.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[derive(Debug, Clone, PartialEq, Serialize, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum Motion {
     /// Held where they are (velocity zero).
@@ -447,8 +447,7 @@ pub enum Motion {
 }
 
 /// One keyframe of a prescribed displacement.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Keyframe {
     /// Time (s).
     pub time: f64,
@@ -506,8 +505,7 @@ impl Motion {
 
 /// A user-facing boundary condition: hold the `dofs` of the selected nodes and
 /// move them by `motion`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct ConstraintSpec {
     /// Which nodes.
     pub select: NodeSelector,

@@ -92,8 +92,8 @@ pub enum ForceDistribution {
 }
 
 /// The built-in loads, as written in scene files.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case", deny_unknown_fields)]
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(rename_all = "snake_case")]
 pub enum LoadSpec {
     /// Uniform gravitational acceleration (m/s^2): force `m_i g` on every node.
     Gravity {
@@ -372,8 +372,7 @@ impl Load for Drag {
 /// keeps the implicit Jacobian simple. Being the rest stiffness, it does not
 /// rotate with the body: after a large rotation, beta damping also resists
 /// rigid rotation somewhat. Use alpha for bodies that rotate a lot.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
-#[serde(deny_unknown_fields)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Default)]
 pub struct Damping {
     /// Mass-proportional coefficient (1/s).
     #[serde(default)]

@@ -1,0 +1,97 @@
+//! `[mesh]`: the surface file and its placement (units, scale, up axis,
+//! rotation, translation).
+
+use hexmesh::placement::{Placement, Units, UpAxis};
+use serde::Deserialize;
+
+/// `[mesh]`: the input surface (OBJ, STL, PLY, VTK) and where it is placed
+/// before voxelizing: `units`, `scale`, `up`, `rotate`, `translate`, applied
+/// in that order (see [`hexmesh::placement`]).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MeshSection {
+    /// Path of the surface mesh, relative to the scene file's folder, or a
+    /// built-in mesh as `"builtin:NAME"` (`"builtin:critter"`).
+    pub path: String,
+    /// Unit of the file's coordinates: `"m"` (default), `"cm"` or `"mm"`.
+    #[serde(default)]
+    pub units: UnitsKey,
+    /// Scale factor after units: one number, or `[sx, sy, sz]` (default 1).
+    #[serde(default)]
+    pub scale: ScaleKey,
+    /// The file's up axis, turned to +z: `"x"`, `"y"` or `"z"` (default).
+    #[serde(default)]
+    pub up: UpKey,
+    /// Rotation about the fixed x, then y, then z axis (degrees, default 0).
+    #[serde(default)]
+    pub rotate: [f64; 3],
+    /// Translation applied last (m, default 0).
+    #[serde(default)]
+    pub translate: [f64; 3],
+}
+
+impl MeshSection {
+    /// The placement these keys describe.
+    pub fn placement(&self) -> Placement {
+        Placement {
+            units: match self.units {
+                UnitsKey::M => Units::Metres,
+                UnitsKey::Cm => Units::Centimetres,
+                UnitsKey::Mm => Units::Millimetres,
+            },
+            scale: match self.scale {
+                ScaleKey::Uniform(s) => [s; 3],
+                ScaleKey::PerAxis(s) => s,
+            },
+            up: match self.up {
+                UpKey::X => UpAxis::X,
+                UpKey::Y => UpAxis::Y,
+                UpKey::Z => UpAxis::Z,
+            },
+            rotate_degrees: self.rotate,
+            translate: self.translate,
+        }
+    }
+}
+
+/// `[mesh] units`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum UnitsKey {
+    /// Metres.
+    #[default]
+    M,
+    /// Centimetres.
+    Cm,
+    /// Millimetres.
+    Mm,
+}
+
+/// `[mesh] up`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum UpKey {
+    /// +x is up.
+    X,
+    /// +y is up.
+    Y,
+    /// +z is up.
+    #[default]
+    Z,
+}
+
+/// `[mesh] scale`: one factor or one per axis.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(untagged, expecting = "a number or an array of 3 numbers")]
+pub enum ScaleKey {
+    /// The same factor along every axis.
+    Uniform(f64),
+    /// Factors along x, y, z.
+    PerAxis([f64; 3]),
+}
+
+impl Default for ScaleKey {
+    fn default() -> Self {
+        ScaleKey::Uniform(1.0)
+    }
+}

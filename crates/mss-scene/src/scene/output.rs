@@ -1,0 +1,166 @@
+//! `[output]`: what is written and when.
+
+use std::path::PathBuf;
+
+use serde::Deserialize;
+
+/// `[output]`: what is written and when.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OutputSection {
+    /// Output folder, relative to the working directory (default `"out"`;
+    /// the CLI's `--out` overrides it).
+    #[serde(default = "default_folder")]
+    pub folder: PathBuf,
+    /// Lattice frames as XML `.vtu` (default true).
+    #[serde(default = "yes")]
+    pub vtu: bool,
+    /// A `.pvd` collection listing the `.vtu` frames with their times (default true).
+    #[serde(default = "yes")]
+    pub pvd: bool,
+    /// How `.vtu` arrays are stored: `"zlib"` (compressed, default: files
+    /// about 4 times smaller) or `"none"` (base64 only: no compression work,
+    /// a frame takes about a third less time where the disk keeps up).
+    #[serde(default)]
+    pub compression: CompressionKey,
+    /// Lattice frames as legacy `.vtk` (default false).
+    #[serde(default)]
+    pub vtk: bool,
+    /// Deformed lattice boundary skin as OBJ per frame (default true).
+    #[serde(default = "yes")]
+    pub skin_obj: bool,
+    /// Deformed lattice boundary skin as binary STL per frame (default false).
+    #[serde(default)]
+    pub skin_stl: bool,
+    /// The input surface carried by the lattice, as OBJ per frame (default true).
+    #[serde(default = "yes")]
+    pub embedded: bool,
+    /// Shading of the skin OBJ files: `"flat"` (one normal per triangle,
+    /// default: the skin is made of cube faces) or `"smooth"`.
+    #[serde(default = "flat")]
+    pub skin_normals: NormalsKey,
+    /// Shading of the embedded surface's OBJ files: `"smooth"` (default) or `"flat"`.
+    #[serde(default)]
+    pub surface_normals: NormalsKey,
+    /// Point caches for Blender's Mesh Cache modifier (default false):
+    /// `skin.pc2` with its rest shape `skin_rest.obj`, and, with `embedded`,
+    /// `surface.pc2` with `surface_rest.obj`; one sample per frame.
+    #[serde(default)]
+    pub pc2: bool,
+    /// The springs as lines per frame, `springs_NNNN.vtu`, with cell data
+    /// `strain` ((l - L0) / L0), `stiffness` (N/m), `rest_length` (m) and
+    /// `diagonal`, plus `springs.pvd` when frames form a series (default false).
+    #[serde(default)]
+    pub springs: bool,
+    /// Write a frame every this many steps (give this or `every_time`).
+    pub every_steps: Option<u64>,
+    /// Write a frame every this many simulated seconds (default: duration / 20).
+    pub every_time: Option<f64>,
+    /// Write only the final state (default false).
+    #[serde(default)]
+    pub last_only: bool,
+    /// Write `checkpoint.mss`, the whole state of the run, every this many
+    /// simulated seconds (default: never, but at an interruption), so that
+    /// `mss run --resume FOLDER` continues it (time-stepping solvers only).
+    pub checkpoint_every: Option<f64>,
+    /// More lattice frame exporters, by the names a program registered in its
+    /// [`Registry`](crate::Registry) (default none).
+    #[serde(default)]
+    pub exporters: Vec<String>,
+}
+
+/// `[output] compression`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum CompressionKey {
+    /// ZLib-compressed blocks (VTK's `vtkZLibDataCompressor`).
+    #[default]
+    Zlib,
+    /// Uncompressed.
+    None,
+}
+
+impl CompressionKey {
+    /// The `.vtu` encoding.
+    pub fn encoding(self) -> mss_io::vtk::VtuEncoding {
+        match self {
+            CompressionKey::Zlib => mss_io::vtk::VtuEncoding::Base64Zlib,
+            CompressionKey::None => mss_io::vtk::VtuEncoding::Base64,
+        }
+    }
+
+    /// The lattice frame exporter for this compression, with or without
+    /// the `.pvd` collection.
+    pub fn vtu_exporter(self, pvd: bool) -> &'static str {
+        match (self, pvd) {
+            (CompressionKey::Zlib, true) => "vtu",
+            (CompressionKey::Zlib, false) => "vtu-no-pvd",
+            (CompressionKey::None, true) => "vtu-base64",
+            (CompressionKey::None, false) => "vtu-base64-no-pvd",
+        }
+    }
+}
+
+/// `[output] skin_normals` / `surface_normals`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum NormalsKey {
+    /// One normal per vertex.
+    #[default]
+    Smooth,
+    /// One normal per triangle.
+    Flat,
+}
+
+impl NormalsKey {
+    /// The writer's setting.
+    pub fn normals(self) -> mss_io::skin::Normals {
+        match self {
+            NormalsKey::Smooth => mss_io::skin::Normals::Smooth,
+            NormalsKey::Flat => mss_io::skin::Normals::Flat,
+        }
+    }
+
+    /// The skin exporter writing OBJ files with these normals.
+    pub fn obj_exporter(self) -> &'static str {
+        match self {
+            NormalsKey::Smooth => "obj",
+            NormalsKey::Flat => "obj-flat",
+        }
+    }
+}
+
+fn flat() -> NormalsKey {
+    NormalsKey::Flat
+}
+
+fn default_folder() -> PathBuf {
+    PathBuf::from("out")
+}
+fn yes() -> bool {
+    true
+}
+
+impl Default for OutputSection {
+    fn default() -> Self {
+        Self {
+            folder: default_folder(),
+            vtu: true,
+            pvd: true,
+            compression: CompressionKey::Zlib,
+            vtk: false,
+            skin_obj: true,
+            skin_stl: false,
+            embedded: true,
+            skin_normals: NormalsKey::Flat,
+            surface_normals: NormalsKey::Smooth,
+            pc2: false,
+            springs: false,
+            every_steps: None,
+            every_time: None,
+            last_only: false,
+            checkpoint_every: None,
+            exporters: Vec::new(),
+        }
+    }
+}

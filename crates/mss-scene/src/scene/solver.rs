@@ -1,0 +1,211 @@
+//! `[solver]`: the solver kind, the time step, damping and the Newton settings.
+
+use std::fmt;
+
+use mss_core::loads::Damping;
+use mss_core::solver::{
+    DEFAULT_MAX_NEWTON, DEFAULT_NEWTON_RTOL, ExplicitOptions, Integrators, LinearSolverKind,
+};
+use serde::Deserialize;
+use serde::de::{self, Deserializer, Visitor};
+
+/// `[solver] kind` of a static solve (equilibrium, no inertia); every other
+/// kind names an integrator of the [`Registry`](crate::Registry).
+pub const STATIC_KIND: &str = "static";
+
+/// `[solver] kind` of a scene that names none.
+pub const DEFAULT_KIND: &str = "explicit";
+
+/// Steps of an implicit (or other non-explicit) run when `dt = "auto"`: the
+/// step is `duration / IMPLICIT_AUTO_STEPS`.
+pub const IMPLICIT_AUTO_STEPS: u32 = 100;
+
+/// A time step: `"auto"` (from the model's stability limit) or seconds.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum TimeStep {
+    /// The model's stable step times `safety` (explicit schemes,
+    /// [`IntegratorEntry::explicit`](mss_core::solver::IntegratorEntry)), or
+    /// `duration / IMPLICIT_AUTO_STEPS` (the others).
+    #[default]
+    Auto,
+    /// A fixed step (s).
+    Seconds(f64),
+}
+
+impl<'de> Deserialize<'de> for TimeStep {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct V;
+        impl Visitor<'_> for V {
+            type Value = TimeStep;
+            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                f.write_str("\"auto\" or a time step in seconds")
+            }
+            fn visit_str<E: de::Error>(self, v: &str) -> Result<TimeStep, E> {
+                if v == "auto" {
+                    Ok(TimeStep::Auto)
+                } else {
+                    Err(E::invalid_value(de::Unexpected::Str(v), &self))
+                }
+            }
+            fn visit_f64<E: de::Error>(self, v: f64) -> Result<TimeStep, E> {
+                Ok(TimeStep::Seconds(v))
+            }
+            fn visit_i64<E: de::Error>(self, v: i64) -> Result<TimeStep, E> {
+                Ok(TimeStep::Seconds(v as f64))
+            }
+            fn visit_u64<E: de::Error>(self, v: u64) -> Result<TimeStep, E> {
+                Ok(TimeStep::Seconds(v as f64))
+            }
+        }
+        d.deserialize_any(V)
+    }
+}
+
+/// `[solver]`: time integration. Defaults are the library's
+/// ([`IntegratorSettings`](mss_core::solver::IntegratorSettings) and the
+/// Newton constants of [`mss_core::solver`]).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SolverSection {
+    /// `"explicit"` (default, velocity Verlet), `"symplectic-euler"`,
+    /// `"implicit"` (backward Euler), `"static"` (equilibrium), or the name of
+    /// an integrator registered by the program.
+    #[serde(default = "default_kind")]
+    pub kind: String,
+    /// Time step: `"auto"` (default) or seconds.
+    #[serde(default)]
+    pub dt: TimeStep,
+    /// Fraction of the stable step used when `dt = "auto"` (0 < s <= 1,
+    /// default [`ExplicitOptions::default`]'s 0.9).
+    #[serde(default = "default_safety")]
+    pub safety: f64,
+    /// Explicit solver only: if `dt` is above the stability limit, take as many
+    /// sub-steps as needed instead of refusing (default false).
+    #[serde(default)]
+    pub substep: bool,
+    /// Mass-proportional damping alpha (1/s): force `-alpha m v` (default 0).
+    #[serde(default)]
+    pub damping: f64,
+    /// Stiffness-proportional damping beta (s): force `-beta K0 v`, K0 the
+    /// stiffness at rest (default 0).
+    #[serde(default)]
+    pub stiffness_damping: f64,
+    /// Simulated duration (s), > 0 (default 1.0). Static solves ignore it.
+    #[serde(default = "default_duration")]
+    pub duration: f64,
+    /// Newton tolerance on the residual force, relative to the load (implicit,
+    /// static; default [`DEFAULT_NEWTON_RTOL`]).
+    #[serde(default = "default_tolerance")]
+    pub tolerance: f64,
+    /// Newton iteration limit per step or load increment (implicit, static;
+    /// default [`DEFAULT_MAX_NEWTON`]).
+    #[serde(default = "default_max_iterations")]
+    pub max_iterations: u32,
+    /// Linear solver of the Newton steps (implicit, static): `"auto"`
+    /// (default: direct for small problems, multigrid-preconditioned Krylov
+    /// above [`mss_core::solver::DIRECT_MAX_FREE_DOFS`] free dofs),
+    /// `"direct"` or `"iterative"`.
+    #[serde(default)]
+    pub linear_solver: LinearSolverChoice,
+    /// Static solves: the load is applied in this many equal first
+    /// increments (default 1; the solver halves an increment that fails and
+    /// doubles one that succeeds).
+    #[serde(default = "default_load_steps")]
+    pub load_steps: u32,
+    /// Static solves: solve the small-strain (linearized) problem once
+    /// instead of the nonlinear one (default false).
+    #[serde(default)]
+    pub linear: bool,
+    /// Static solves: keep an equilibrium that the stability test finds
+    /// unstable instead of failing; dynamic runs: run a model (one without
+    /// hourglass control or the barrier) that the static solve of the
+    /// scene's load says would fold, instead of refusing it up front
+    /// (default false).
+    #[serde(default)]
+    pub accept_unstable: bool,
+}
+
+/// `[solver] linear_solver`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum LinearSolverChoice {
+    /// Direct for small problems, iterative for large ones.
+    #[default]
+    Auto,
+    /// Sparse LU.
+    Direct,
+    /// Multigrid-preconditioned conjugate gradients or GMRES.
+    Iterative,
+}
+
+impl From<LinearSolverChoice> for LinearSolverKind {
+    fn from(c: LinearSolverChoice) -> Self {
+        match c {
+            LinearSolverChoice::Auto => LinearSolverKind::Auto,
+            LinearSolverChoice::Direct => LinearSolverKind::Direct,
+            LinearSolverChoice::Iterative => LinearSolverKind::Iterative,
+        }
+    }
+}
+
+fn default_load_steps() -> u32 {
+    1
+}
+
+fn default_kind() -> String {
+    DEFAULT_KIND.to_owned()
+}
+fn default_safety() -> f64 {
+    ExplicitOptions::default().safety
+}
+fn default_duration() -> f64 {
+    1.0
+}
+fn default_tolerance() -> f64 {
+    DEFAULT_NEWTON_RTOL
+}
+fn default_max_iterations() -> u32 {
+    DEFAULT_MAX_NEWTON
+}
+
+impl Default for SolverSection {
+    fn default() -> Self {
+        Self {
+            kind: default_kind(),
+            dt: TimeStep::Auto,
+            substep: false,
+            safety: default_safety(),
+            damping: 0.0,
+            stiffness_damping: 0.0,
+            duration: default_duration(),
+            tolerance: default_tolerance(),
+            max_iterations: default_max_iterations(),
+            linear_solver: LinearSolverChoice::default(),
+            load_steps: default_load_steps(),
+            linear: false,
+            accept_unstable: false,
+        }
+    }
+}
+
+impl SolverSection {
+    /// Whether this is a static solve.
+    pub fn is_static(&self) -> bool {
+        self.kind == STATIC_KIND
+    }
+
+    /// Whether this kind is an explicit integrator of `integrators` (then
+    /// `dt = "auto"` means the stable step and the run assembles no
+    /// matrices); the registry's entries say which are.
+    pub fn is_explicit(&self, integrators: &Integrators) -> bool {
+        integrators.is_explicit(&self.kind)
+    }
+
+    /// The damping of the run.
+    pub fn damping(&self) -> Damping {
+        Damping {
+            alpha: self.damping,
+            beta: self.stiffness_damping,
+        }
+    }
+}
