@@ -1,8 +1,10 @@
 //! `[mesh]`: the surface file and its placement (units, scale, up axis,
 //! rotation, translation).
 
-use hexmesh::placement::{Placement, Units, UpAxis};
+use hexmesh::placement::{Placement, PlacementError, Units, UpAxis};
 use serde::Deserialize;
+
+use super::key::KeyError;
 
 /// `[mesh]`: the input surface (OBJ, STL, PLY, VTK) and where it is placed
 /// before voxelizing: `units`, `scale`, `up`, `rotate`, `translate`, applied
@@ -31,6 +33,29 @@ pub struct MeshSection {
 }
 
 impl MeshSection {
+    /// Checks the keys: a non-empty `path`, and a placement that applies
+    /// (finite, non-zero scale; finite rotation and translation).
+    pub fn check(&self) -> Result<(), KeyError> {
+        let bad = |key: &'static str, message: String| Err(KeyError { key, message });
+        if self.path.trim().is_empty() {
+            return bad(
+                "path",
+                "is empty; give the path of a surface mesh file (OBJ, STL, PLY, VTK; \
+                 relative to the scene file) or \"builtin:critter\""
+                    .into(),
+            );
+        }
+        if let Err(e) = self.placement().validate() {
+            let key = match e {
+                PlacementError::BadScale { .. } => "scale",
+                PlacementError::NonFinite { what: "rotate", .. } => "rotate",
+                _ => "translate",
+            };
+            return bad(key, e.to_string());
+        }
+        Ok(())
+    }
+
     /// The placement these keys describe.
     pub fn placement(&self) -> Placement {
         Placement {

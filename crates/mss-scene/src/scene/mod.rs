@@ -45,13 +45,13 @@
 use std::path::{Path, PathBuf};
 
 use crate::regions::{RegionSelector, RegionSpec};
-use hexmesh::placement::PlacementError;
 use mss_core::Material;
 use mss_core::constraints::{ConstraintSpec, NodeSelector};
 use serde::Deserialize;
 use thiserror::Error;
 
 mod constraints;
+mod key;
 mod loads;
 mod mesh;
 mod model;
@@ -60,6 +60,7 @@ mod solver;
 mod voxelize;
 
 pub use constraints::*;
+pub use key::KeyError;
 pub use loads::*;
 pub use mesh::*;
 pub use model::*;
@@ -355,21 +356,8 @@ impl Scene {
         };
         let finite3 = |v: &[f64; 3]| v.iter().all(|x| x.is_finite());
 
-        if self.mesh.path.trim().is_empty() {
-            return bad(
-                "[mesh] path",
-                "is empty; give the path of a surface mesh file (OBJ, STL, PLY, VTK; relative to the scene file) \
-                 or \"builtin:critter\""
-                    .into(),
-            );
-        }
-        if let Err(e) = self.mesh.placement().validate() {
-            let key = match e {
-                PlacementError::BadScale { .. } => "[mesh] scale",
-                PlacementError::NonFinite { what: "rotate", .. } => "[mesh] rotate",
-                _ => "[mesh] translate",
-            };
-            return bad(key, e.to_string());
+        if let Err(e) = self.mesh.check() {
+            return bad(&e.scene_key("[mesh]"), e.message);
         }
         if let Err(e) = self.voxelize.check() {
             return bad(&e.scene_key("[voxelize]"), e.message);
@@ -479,59 +467,8 @@ impl Scene {
                 return bad(&key, format!("ramp = {r}; must be a positive time (s)"));
             }
         }
-        let s = &self.solver;
-        if !(s.duration.is_finite() && s.duration > 0.0) {
-            return bad(
-                "[solver] duration",
-                format!(
-                    "= {}; the simulated duration must be a positive number of seconds",
-                    s.duration
-                ),
-            );
-        }
-        if let TimeStep::Seconds(dt) = s.dt
-            && !(dt.is_finite() && dt > 0.0)
-        {
-            return bad(
-                "[solver] dt",
-                format!("= {dt}; use a positive time step in seconds, or \"auto\""),
-            );
-        }
-        if !(s.safety > 0.0 && s.safety <= 1.0) {
-            return bad(
-                "[solver] safety",
-                format!(
-                    "= {}; must be in (0, 1] (fraction of the stable time step)",
-                    s.safety
-                ),
-            );
-        }
-        if !(s.damping.is_finite() && s.damping >= 0.0) {
-            return bad(
-                "[solver] damping",
-                format!("= {}; must be >= 0 (1/s)", s.damping),
-            );
-        }
-        if !(s.stiffness_damping.is_finite() && s.stiffness_damping >= 0.0) {
-            return bad(
-                "[solver] stiffness_damping",
-                format!("= {}; must be >= 0 (s)", s.stiffness_damping),
-            );
-        }
-        if !(s.tolerance.is_finite() && s.tolerance > 0.0) {
-            return bad(
-                "[solver] tolerance",
-                format!("= {}; must be positive", s.tolerance),
-            );
-        }
-        if s.max_iterations == 0 {
-            return bad("[solver] max_iterations", "= 0; must be at least 1".into());
-        }
-        if s.load_steps == 0 || s.load_steps > 1_000_000 {
-            return bad(
-                "[solver] load_steps",
-                format!("= {}; use 1 to 1000000 increments", s.load_steps),
-            );
+        if let Err(e) = self.solver.check() {
+            return bad(&e.scene_key("[solver]"), e.message);
         }
         let o = &self.output;
         if o.folder.as_os_str().is_empty() {

@@ -7,6 +7,8 @@ use mss_core::solver::{
     DEFAULT_MAX_NEWTON, DEFAULT_NEWTON_RTOL, ExplicitOptions, Integrators, LinearSolverKind,
 };
 use serde::Deserialize;
+
+use super::key::KeyError;
 use serde::de::{self, Deserializer, Visitor};
 
 /// `[solver] kind` of a static solve (equilibrium, no inertia); every other
@@ -189,6 +191,62 @@ impl Default for SolverSection {
 }
 
 impl SolverSection {
+    /// Checks the ranges of the keys (duration, dt, safety, damping,
+    /// tolerance, iterations, load steps); whether `kind` names an
+    /// integrator is known only against a registry, when the job is built.
+    pub fn check(&self) -> Result<(), KeyError> {
+        let bad = |key: &'static str, message: String| Err(KeyError { key, message });
+        let s = self;
+        if !(s.duration.is_finite() && s.duration > 0.0) {
+            return bad(
+                "duration",
+                format!(
+                    "= {}; the simulated duration must be a positive number of seconds",
+                    s.duration
+                ),
+            );
+        }
+        if let TimeStep::Seconds(dt) = s.dt
+            && !(dt.is_finite() && dt > 0.0)
+        {
+            return bad(
+                "dt",
+                format!("= {dt}; use a positive time step in seconds, or \"auto\""),
+            );
+        }
+        if !(s.safety > 0.0 && s.safety <= 1.0) {
+            return bad(
+                "safety",
+                format!(
+                    "= {}; must be in (0, 1] (fraction of the stable time step)",
+                    s.safety
+                ),
+            );
+        }
+        if !(s.damping.is_finite() && s.damping >= 0.0) {
+            return bad("damping", format!("= {}; must be >= 0 (1/s)", s.damping));
+        }
+        if !(s.stiffness_damping.is_finite() && s.stiffness_damping >= 0.0) {
+            return bad(
+                "stiffness_damping",
+                format!("= {}; must be >= 0 (s)", s.stiffness_damping),
+            );
+        }
+        if !(s.tolerance.is_finite() && s.tolerance > 0.0) {
+            return bad("tolerance", format!("= {}; must be positive", s.tolerance));
+        }
+        if s.max_iterations == 0 {
+            return bad("max_iterations", "= 0; must be at least 1".into());
+        }
+        if s.load_steps == 0 || s.load_steps > 1_000_000 {
+            return bad(
+                "load_steps",
+                format!("= {}; use 1 to 1000000 increments", s.load_steps),
+            );
+        }
+        Ok(())
+    }
+
     /// Whether this is a static solve.
     pub fn is_static(&self) -> bool {
         self.kind == STATIC_KIND
