@@ -235,6 +235,7 @@ class Problem:
         forces: Optional[Sequence[Mapping[str, Any]]] = None,
         tractions: Optional[Sequence[Mapping[str, Any]]] = None,
         drags: Optional[Sequence[Mapping[str, Any]]] = None,
+        custom_loads: Optional[Sequence[Mapping[str, Any]]] = None,
         motions: Optional[Sequence[Mapping[str, Any]]] = None,
         motion_duration: float = 1.0,
         damping: float = 0.0,
@@ -244,7 +245,8 @@ class Problem:
         surface: Optional[Embedding] = None,
     ) -> None:
         """The keys follow a scene's tables: [[fixed]], [loads] (gravity in
-        m/s^2, forces, tractions, drags), [[motions]] (default end
+        m/s^2, forces, tractions, drags, and custom_loads: [[loads.custom]]
+        tables by ``kind``), [[motions]] (default end
         ``motion_duration``, s), damping alpha (1/s) and beta (s),
         [[obstacles]] and [contact] points."""
     @property

@@ -228,11 +228,13 @@ fn voxelize(
     options: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<PyLattice> {
     let section: VoxelizeSection = from_py("voxelize", kwargs_dict(py, options).as_any())?;
-    section.check().map_err(|e| {
-        let key = if e.key.is_empty() { "voxelize" } else { e.key };
-        raise(Kind::Voxelize, format!("{key} {}", e.message))
-    })?;
-    let opts = section.options();
+    let opts = section
+        .check()
+        .and_then(|()| section.options(&mss_scene::Registry::default().occupancy))
+        .map_err(|e| {
+            let key = if e.key.is_empty() { "voxelize" } else { &e.key };
+            raise(Kind::Voxelize, format!("{key} {}", e.message))
+        })?;
     let m = Arc::clone(&mesh.mesh);
     let reporter = crate::progress::Reporter::new(progress);
     let hook = |done: u64, total: u64| reporter.report("voxelizing", done, total);

@@ -5,6 +5,7 @@ use std::sync::{Arc, Mutex};
 
 use mss_scene::hexmesh::load::Loaders;
 use mss_scene::mss_core::constraints::{ConstraintSpec, NodeSelector};
+use mss_scene::mss_core::contact::ContactPoints;
 use mss_scene::mss_core::loads::Damping;
 use mss_scene::mss_core::simulation::Simulation;
 use mss_scene::mss_core::solver::{
@@ -12,7 +13,7 @@ use mss_scene::mss_core::solver::{
     StaticOptions, solve_static,
 };
 use mss_scene::mss_core::{LoadSpec, Material, Model, Parameterizations, Vec3};
-use mss_scene::obstacles::{ObstacleSpec, PointsKey};
+use mss_scene::obstacles::ObstacleSpec;
 use mss_scene::scene::{LoadsSection, MotionSpec};
 use mss_scene::stages;
 use numpy::{PyArray2, PyArrayMethods, PyReadwriteArray2};
@@ -314,9 +315,10 @@ pub enum Recipe {
         model: Arc<Model>,
         constraints: Vec<ConstraintSpec>,
         loads: Vec<LoadSpec>,
+        custom_loads: Vec<mss_scene::kind_table::KindTable>,
         damping: Damping,
         obstacles: Vec<ObstacleSpec>,
-        points: PointsKey,
+        points: ContactPoints,
         surface: Option<Arc<mss_scene::hexmesh::Embedding>>,
     },
     /// The problem of a prepared scene.
@@ -330,6 +332,7 @@ impl Recipe {
                 model,
                 constraints,
                 loads,
+                custom_loads,
                 damping,
                 obstacles,
                 points,
@@ -343,14 +346,16 @@ impl Recipe {
                         .map(|placed| placed.mesh)
                         .map_err(|e| e.to_string())
                 };
-                let shapes = mss_scene::obstacles::Shapes::default();
+                let registry = mss_scene::Registry::default();
                 let specs = stages::ProblemSpecs {
                     constraints,
                     loads,
+                    custom_loads,
+                    load_kinds: &registry.loads,
                     damping: *damping,
                     obstacles,
                     points: *points,
-                    shapes: &shapes,
+                    shapes: &registry.shapes,
                 };
                 stages::problem(
                     (**model).clone(),
@@ -362,6 +367,9 @@ impl Recipe {
                 .map_err(|e| match e {
                     stages::ProblemStageError::Obstacle { index, source } => {
                         raise(Kind::Scene, format!("obstacles[{index}]: {source}"))
+                    }
+                    stages::ProblemStageError::CustomLoad { index, source } => {
+                        raise(Kind::Scene, format!("custom_loads[{index}]: {source}"))
                     }
                     stages::ProblemStageError::Problem(p) => from_error(Kind::Model, &p),
                 })
@@ -407,18 +415,18 @@ impl PyProblem {
 
 #[pymethods]
 impl PyProblem {
-    /// Problem(model, *, fixed=(), gravity=None, forces=(), tractions=(), drags=(), motions=(), motion_duration=1.0, damping=0.0, stiffness_damping=0.0, obstacles=(), contact_points="nodes", surface=None)
+    /// Problem(model, *, fixed=(), gravity=None, forces=(), tractions=(), drags=(), custom_loads=(), motions=(), motion_duration=1.0, damping=0.0, stiffness_damping=0.0, obstacles=(), contact_points="nodes", surface=None)
     ///
     /// The keys follow a scene's tables: `fixed` is a list of `[[fixed]]`
     /// tables (`{"kind": "lowest_layer"}`, `{"kind": "face", "face": "x-"}`,
-    /// ...), `gravity` (m/s^2), `forces`, `tractions` and `drags` are the
-    /// lists of `[loads]`, `motions` the `[[motions]]` tables (their default
+    /// ...), `gravity` (m/s^2), `forces`, `tractions`, `drags` and
+    /// `custom_loads` (loads by `kind`) are the lists of `[loads]`, `motions` the `[[motions]]` tables (their default
     /// end is `motion_duration`, s), `damping` the mass damping alpha (1/s)
     /// and `stiffness_damping` beta (s), `obstacles` the `[[obstacles]]`
     /// tables touched by `contact_points` (`"nodes"`, or `"surface"` /
     /// `"both"` with the embedded `surface`).
     #[new]
-    #[pyo3(signature = (model, *, fixed = None, gravity = None, forces = None, tractions = None, drags = None, motions = None, motion_duration = 1.0, damping = 0.0, stiffness_damping = 0.0, obstacles = None, contact_points = None, surface = None))]
+    #[pyo3(signature = (model, *, fixed = None, gravity = None, forces = None, tractions = None, drags = None, custom_loads = None, motions = None, motion_duration = 1.0, damping = 0.0, stiffness_damping = 0.0, obstacles = None, contact_points = None, surface = None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -428,6 +436,7 @@ impl PyProblem {
         forces: Option<&Bound<'_, PyAny>>,
         tractions: Option<&Bound<'_, PyAny>>,
         drags: Option<&Bound<'_, PyAny>>,
+        custom_loads: Option<&Bound<'_, PyAny>>,
         motions: Option<&Bound<'_, PyAny>>,
         motion_duration: f64,
         damping: f64,
@@ -456,6 +465,7 @@ impl PyProblem {
             ("forces", forces),
             ("tractions", tractions),
             ("drags", drags),
+            ("custom", custom_loads),
         ] {
             if let Some(v) = v {
                 loads_dict.set_item(key, v)?;
@@ -466,11 +476,11 @@ impl PyProblem {
             Some(o) => from_py("obstacles", o)?,
             None => Vec::new(),
         };
-        let points: PointsKey = match contact_points {
+        let points: ContactPoints = match contact_points {
             Some(p) => from_py("contact_points", p)?,
-            None => PointsKey::Nodes,
+            None => ContactPoints::Nodes,
         };
-        if points != PointsKey::Nodes && surface.is_none() {
+        if points != ContactPoints::Nodes && surface.is_none() {
             return Err(raise(
                 Kind::Scene,
                 "contact_points: \"surface\" and \"both\" need the embedded surface (surface=lattice.embed(mesh))",
@@ -485,6 +495,7 @@ impl PyProblem {
             model: Arc::clone(&model.model),
             constraints,
             loads: loads.specs(),
+            custom_loads: loads.custom.clone(),
             damping: Damping {
                 alpha: damping,
                 beta: stiffness_damping,
@@ -701,16 +712,17 @@ impl PyState {
     }
 }
 
+/// The linear solver called `name`, read as the scene's `[solver]
+/// linear_solver` key is (the library type names its choices).
 fn linear_kind(name: &str) -> PyResult<LinearSolverKind> {
-    match name {
-        "auto" => Ok(LinearSolverKind::Auto),
-        "direct" => Ok(LinearSolverKind::Direct),
-        "iterative" => Ok(LinearSolverKind::Iterative),
-        other => Err(raise(
+    use serde::Deserialize;
+    let value = serde::de::value::StrDeserializer::<serde::de::value::Error>::new(name);
+    LinearSolverKind::deserialize(value).map_err(|_| {
+        raise(
             Kind::Scene,
-            format!("linear_solver = {other:?}: use \"auto\", \"direct\" or \"iterative\""),
-        )),
-    }
+            format!("linear_solver = {name:?}: use \"auto\", \"direct\" or \"iterative\""),
+        )
+    })
 }
 
 /// solve_static(problem, state=None, *, rtol=1e-8, max_newton=40, linear=False, accept_unstable=False, linear_solver="auto")

@@ -151,3 +151,17 @@ def test_embedding_follows_a_translation():
     emb = lattice.embed(mesh)
     moved = emb.deform(lattice.nodes + [0.5, 0.0, -0.25])
     np.testing.assert_allclose(moved, mesh.vertices + [0.5, 0.0, -0.25], atol=1e-12)
+
+
+def test_custom_loads_by_kind_are_the_builtin_tables():
+    lattice, model = bar()
+    fixed = [{"kind": "face", "face": "x-"}]
+    by_key = hexmss.Problem(model, fixed=fixed, gravity=[0, 0, -9.81])
+    by_kind = hexmss.Problem(
+        model, fixed=fixed, custom_loads=[{"kind": "gravity", "g": [0, 0, -9.81]}]
+    )
+    x = lattice.nodes
+    assert np.array_equal(by_key.external_forces(x), by_kind.external_forces(x))
+    assert np.abs(by_kind.external_forces(x)).max() > 0
+    with pytest.raises(hexmss.SceneError, match=r"custom_loads\[0\].*known: gravity"):
+        hexmss.Problem(model, custom_loads=[{"kind": "wind"}])

@@ -52,13 +52,17 @@ use crate::load::MAX_COORDINATE;
 
 /// Length unit of a mesh file's coordinates.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "serde", derive(serde::Deserialize))]
 pub enum Units {
-    /// Metres (factor 1).
+    /// Metres (factor 1; `"m"` in a scene).
     #[default]
+    #[cfg_attr(feature = "serde", serde(rename = "m"))]
     Metres,
-    /// Centimetres (factor 0.01).
+    /// Centimetres (factor 0.01; `"cm"`).
+    #[cfg_attr(feature = "serde", serde(rename = "cm"))]
     Centimetres,
-    /// Millimetres (factor 0.001).
+    /// Millimetres (factor 0.001; `"mm"`).
+    #[cfg_attr(feature = "serde", serde(rename = "mm"))]
     Millimetres,
 }
 
@@ -94,6 +98,11 @@ impl Units {
 
 /// The mesh axis that points up (becomes +z).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Deserialize),
+    serde(rename_all = "lowercase")
+)]
 pub enum UpAxis {
     /// +x is up.
     X,

@@ -109,12 +109,15 @@ impl FromStr for OccupancyRule {
 
 /// Which face-connected components of cells are kept.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "serde", derive(serde::Deserialize))]
 pub enum ComponentPolicy {
     /// Only the component with the most cells (ties: the one whose first cell
-    /// in grid order comes first).
+    /// in grid order comes first; `"largest"` in a scene).
     #[default]
+    #[cfg_attr(feature = "serde", serde(rename = "largest"))]
     LargestOnly,
-    /// Every component.
+    /// Every component (`"all"`).
+    #[cfg_attr(feature = "serde", serde(rename = "all"))]
     All,
 }
 

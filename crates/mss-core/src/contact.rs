@@ -596,7 +596,8 @@ impl Point {
 }
 
 /// Which points touch the obstacles.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum ContactPoints {
     /// The lattice's boundary nodes.
     #[default]

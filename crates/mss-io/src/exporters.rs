@@ -56,6 +56,56 @@ pub type FrameExporterFactory =
 pub type SkinExporterFactory =
     Arc<dyn Fn(&Path, &str, SkinFrames) -> Result<Box<dyn SkinExporter>, IoError> + Send + Sync>;
 
+/// What a registered exporter writes, known without building it: the
+/// extension of its numbered files (`PREFIX_NNNN.EXT`), the index file it
+/// keeps beside them, and an estimate of one file's size. A program's
+/// output folder is recognised from these (a new run there removes the
+/// files an earlier one left), and disk space is estimated from them
+/// before a run starts.
+#[derive(Debug, Clone, Copy)]
+pub struct SeriesFacts {
+    /// Extension of the numbered files, without the dot.
+    pub extension: &'static str,
+    /// Extension of the index file `PREFIX.EXT` listing them (`"pvd"`), if any.
+    pub index_extension: Option<&'static str>,
+    /// Estimated bytes of one file: for a lattice frame from its nodes and
+    /// cells, for a skin from its vertices and triangles.
+    pub bytes: fn(usize, usize) -> u64,
+}
+
+/// Bytes of a lattice frame's arrays, uncompressed: per node the points
+/// and four more vectors, a flag and a vector of f64; per cell its 8
+/// connectivity ids, an offset, a type and three f64 fields.
+fn lattice_bytes(nodes: usize, cells: usize) -> u64 {
+    (nodes * (5 * 24 + 1 + 24) + cells * (32 + 8 + 1 + 3 * 8)) as u64
+}
+
+/// A compressed `.vtu` is usually smaller; its estimate is the base64 size
+/// of the raw arrays, an upper bound the disk check can rely on.
+fn vtu_bytes(nodes: usize, cells: usize) -> u64 {
+    lattice_bytes(nodes, cells) * 4 / 3
+}
+
+/// Text numbers take about three times their binary bytes.
+fn text_bytes(nodes: usize, cells: usize) -> u64 {
+    lattice_bytes(nodes, cells) * 3
+}
+
+/// A `v` or `vn` line is about 30 bytes, an `f` line with shared normals 24.
+fn obj_smooth_bytes(vertices: usize, triangles: usize) -> u64 {
+    (vertices * 60 + triangles * 24) as u64
+}
+
+/// One `v` line per vertex; per triangle a `vn` line and an `f` line.
+fn obj_flat_bytes(vertices: usize, triangles: usize) -> u64 {
+    (vertices * 30 + triangles * 60) as u64
+}
+
+/// Binary STL: an 84-byte header, 50 bytes per triangle.
+fn stl_bytes(_vertices: usize, triangles: usize) -> u64 {
+    (84 + triangles * 50) as u64
+}
+
 /// Frame and skin exporters by name. The built-ins:
 ///
 /// | frames | what |
@@ -72,8 +122,8 @@ pub type SkinExporterFactory =
 /// triangle) and `stl` (binary).
 #[derive(Clone)]
 pub struct Exporters {
-    frames: Named<FrameExporterFactory>,
-    skins: Named<SkinExporterFactory>,
+    frames: Named<(FrameExporterFactory, Option<SeriesFacts>)>,
+    skins: Named<(SkinExporterFactory, Option<SeriesFacts>)>,
 }
 
 fn vtu(encoding: VtuEncoding, pvd: bool) -> FrameExporterFactory {
@@ -102,19 +152,61 @@ impl Default for Exporters {
             frames: Named::new(),
             skins: Named::new(),
         };
-        e.register_frames("vtu", vtu(VtuEncoding::Base64Zlib, true));
-        e.register_frames("vtu-no-pvd", vtu(VtuEncoding::Base64Zlib, false));
-        e.register_frames("vtu-base64", vtu(VtuEncoding::Base64, true));
-        e.register_frames("vtu-base64-no-pvd", vtu(VtuEncoding::Base64, false));
-        e.register_frames("vtu-ascii", vtu(VtuEncoding::Ascii, true));
+        let facts = |extension, index_extension, bytes| SeriesFacts {
+            extension,
+            index_extension,
+            bytes,
+        };
+        let pvd = Some("pvd");
+        let vtu_facts = facts("vtu", pvd, vtu_bytes);
+        for (name, encoding, with_pvd, facts) in [
+            ("vtu", VtuEncoding::Base64Zlib, true, vtu_facts),
+            (
+                "vtu-no-pvd",
+                VtuEncoding::Base64Zlib,
+                false,
+                facts("vtu", None, vtu_bytes),
+            ),
+            ("vtu-base64", VtuEncoding::Base64, true, vtu_facts),
+            (
+                "vtu-base64-no-pvd",
+                VtuEncoding::Base64,
+                false,
+                facts("vtu", None, vtu_bytes),
+            ),
+            (
+                "vtu-ascii",
+                VtuEncoding::Ascii,
+                true,
+                facts("vtu", pvd, text_bytes),
+            ),
+        ] {
+            e.register_frames_with(name, facts, vtu(encoding, with_pvd));
+        }
         #[cfg(feature = "legacy-vtk")]
         {
-            e.register_frames("vtk", legacy(LegacyFormat::Binary));
-            e.register_frames("vtk-ascii", legacy(LegacyFormat::Ascii));
+            e.register_frames_with(
+                "vtk",
+                facts("vtk", None, lattice_bytes),
+                legacy(LegacyFormat::Binary),
+            );
+            e.register_frames_with(
+                "vtk-ascii",
+                facts("vtk", None, text_bytes),
+                legacy(LegacyFormat::Ascii),
+            );
         }
-        e.register_skins("obj", skin(SkinFormat::Obj));
-        e.register_skins("obj-flat", skin(SkinFormat::ObjFlat));
-        e.register_skins("stl", skin(SkinFormat::Stl));
+        e.register_skins_with(
+            "obj",
+            facts("obj", None, obj_smooth_bytes),
+            skin(SkinFormat::Obj),
+        );
+        e.register_skins_with(
+            "obj-flat",
+            facts("obj", None, obj_flat_bytes),
+            skin(SkinFormat::ObjFlat),
+        );
+        e.register_skins_with("stl", facts("stl", None, stl_bytes), skin(SkinFormat::Stl));
         e
     }
 }
@@ -129,14 +221,59 @@ impl std::fmt::Debug for Exporters {
 }
 
 impl Exporters {
-    /// Registers (or replaces) the frame exporter called `name`.
+    /// Registers (or replaces) the frame exporter called `name`, whose
+    /// files are not known by name (a run does not count or remove them)
+    /// and whose size is not estimated.
     pub fn register_frames(&mut self, name: &str, factory: FrameExporterFactory) {
-        self.frames.register(name, factory);
+        self.frames.register(name, (factory, None));
     }
 
-    /// Registers (or replaces) the skin exporter called `name`.
+    /// Registers (or replaces) the frame exporter called `name`, writing
+    /// the files `facts` describe.
+    pub fn register_frames_with(
+        &mut self,
+        name: &str,
+        facts: SeriesFacts,
+        factory: FrameExporterFactory,
+    ) {
+        self.frames.register(name, (factory, Some(facts)));
+    }
+
+    /// Registers (or replaces) the skin exporter called `name` (files not
+    /// known by name, size not estimated).
     pub fn register_skins(&mut self, name: &str, factory: SkinExporterFactory) {
-        self.skins.register(name, factory);
+        self.skins.register(name, (factory, None));
+    }
+
+    /// Registers (or replaces) the skin exporter called `name`, writing the
+    /// files `facts` describe.
+    pub fn register_skins_with(
+        &mut self,
+        name: &str,
+        facts: SeriesFacts,
+        factory: SkinExporterFactory,
+    ) {
+        self.skins.register(name, (factory, Some(facts)));
+    }
+
+    /// What the frame exporter `name` writes, if it is registered with facts.
+    pub fn frame_facts(&self, name: &str) -> Option<SeriesFacts> {
+        self.frames.get(name).and_then(|(_, facts)| *facts)
+    }
+
+    /// What the skin exporter `name` writes, if it is registered with facts.
+    pub fn skin_facts(&self, name: &str) -> Option<SeriesFacts> {
+        self.skins.get(name).and_then(|(_, facts)| *facts)
+    }
+
+    /// The facts of every frame exporter registered with them.
+    pub fn all_frame_facts(&self) -> Vec<SeriesFacts> {
+        self.frames.iter().filter_map(|(_, (_, f))| *f).collect()
+    }
+
+    /// The facts of every skin exporter registered with them.
+    pub fn all_skin_facts(&self) -> Vec<SeriesFacts> {
+        self.skins.iter().filter_map(|(_, (_, f))| *f).collect()
     }
 
     /// Names of the frame exporters, in registration order.
@@ -157,14 +294,14 @@ impl Exporters {
         dir: &Path,
         prefix: &str,
     ) -> Result<Box<dyn FrameExporter>, IoError> {
-        let factory = self
-            .frames
-            .lookup(name)
-            .map_err(|unknown| IoError::UnknownExporter {
-                kind: "frame",
-                name: unknown.name,
-                known: unknown.known,
-            })?;
+        let (factory, _) =
+            self.frames
+                .lookup(name)
+                .map_err(|unknown| IoError::UnknownExporter {
+                    kind: "frame",
+                    name: unknown.name,
+                    known: unknown.known,
+                })?;
         factory(dir, prefix)
     }
 
@@ -176,7 +313,7 @@ impl Exporters {
         prefix: &str,
         frames: SkinFrames,
     ) -> Result<Box<dyn SkinExporter>, IoError> {
-        let factory = self
+        let (factory, _) = self
             .skins
             .lookup(name)
             .map_err(|unknown| IoError::UnknownExporter {

@@ -83,6 +83,11 @@ fn validate(path: &Path, positions: &[[f64; 3]], triangles: &[[u32; 3]]) -> Resu
 
 /// How an OBJ skin is shaded.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Deserialize),
+    serde(rename_all = "lowercase")
+)]
 pub enum Normals {
     /// One normal per vertex, area-weighted over its triangles
     /// ([`vertex_normals`]): smooth shading, right for a smooth input surface.

@@ -70,7 +70,7 @@ impl SceneInput {
             min_load_increment: mss_core::solver::StaticOptions::default()
                 .min_load_increment
                 .min(first),
-            linear_solver: s.linear_solver.into(),
+            linear_solver: s.linear_solver,
             small_strain: s.linear,
             accept_unstable: s.accept_unstable,
         }
@@ -162,6 +162,8 @@ impl SceneInput {
         let specs = crate::stages::ProblemSpecs {
             constraints: &constraints,
             loads: &loads,
+            custom_loads: &scene.loads.custom,
+            load_kinds: &registry.loads,
             damping: scene.solver.damping(),
             obstacles: &scene.obstacles,
             points: scene.contact.points,
@@ -181,6 +183,9 @@ impl SceneInput {
             }
             ProblemStageError::Problem(ProblemError::Load { source, .. }) => {
                 self.setting("[loads]", source)
+            }
+            ProblemStageError::CustomLoad { index, source } => {
+                self.setting(&format!("[[loads.custom]] #{}", index + 1), source)
             }
             ProblemStageError::Problem(other) => self.setting("[solver]", other),
         })
@@ -303,7 +308,7 @@ impl SceneInput {
             substep: s.substep,
             rtol: s.tolerance,
             max_newton: s.max_iterations,
-            linear_solver: s.linear_solver.into(),
+            linear_solver: s.linear_solver,
         };
         if !registry.integrators.contains(&s.kind) {
             return Err(self.setting(

@@ -236,6 +236,17 @@ impl Job {
                 source,
             },
         };
+        // The rule's name is resolved before the mesh is read: a typo costs
+        // nothing.
+        let voxelize_options =
+            scene
+                .voxelize
+                .options(&registry.occupancy)
+                .map_err(|e| JobError::Setting {
+                    scene: scene_name.clone(),
+                    key: e.scene_key("[voxelize]"),
+                    message: e.message,
+                })?;
         let placed = load_placed(
             &input.mesh_source(),
             &scene.mesh.placement(),
@@ -250,7 +261,7 @@ impl Job {
         let vox = lattice_within(
             &placed.mesh,
             &placed.name,
-            &scene.voxelize.options(),
+            &voxelize_options,
             &limits,
             needs,
             &hook,
@@ -268,13 +279,18 @@ impl Job {
             None
         } else {
             let mesh_of = |path: &str| input.load_placed_mesh(path, &registry.loaders);
-            let a =
-                crate::regions::assign_regions(&vox.lattice, &material, &scene.regions, &mesh_of)
-                    .map_err(|e| JobError::Setting {
-                    scene: scene_name.clone(),
-                    key: format!("[[regions]] #{}", e.region + 1),
-                    message: e.message,
-                })?;
+            let a = crate::regions::assign_regions(
+                &vox.lattice,
+                &material,
+                &scene.regions,
+                &registry.regions,
+                &mesh_of,
+            )
+            .map_err(|e| JobError::Setting {
+                scene: scene_name.clone(),
+                key: format!("[[regions]] #{}", e.region + 1),
+                message: e.message,
+            })?;
             for (r, m) in a.materials.iter().enumerate().skip(1) {
                 param.validate(m).map_err(|e| JobError::Setting {
                     scene: scene_name.clone(),
@@ -299,7 +315,7 @@ impl Job {
             scene: scene_name.clone(),
             source,
         })?;
-        let surface = (scene.contact.points != crate::obstacles::PointsKey::Nodes)
+        let surface = (scene.contact.points != mss_core::contact::ContactPoints::Nodes)
             .then(|| hexmesh::Embedding::new(&vox.lattice, &mesh));
         let problem = input.problem_with(model, &registry, surface.as_ref())?;
         let plan = input.time_plan(&problem, &registry.integrators)?;
@@ -340,7 +356,7 @@ impl Job {
         )>,
     ) -> Result<Problem, JobError> {
         let model = self.problem.model().clone();
-        let surface = (self.input.scene.contact.points != crate::obstacles::PointsKey::Nodes)
+        let surface = (self.input.scene.contact.points != mss_core::contact::ContactPoints::Nodes)
             .then(|| hexmesh::Embedding::new(&self.lattice, &self.mesh));
         self.input
             .problem_with_obstacles(model, &self.registry, surface.as_ref(), extra)
@@ -553,7 +569,7 @@ impl Job {
                 );
                 steps_done = 1;
                 prepare_output_folder(out_dir)?;
-                remove_previous_run(out_dir)?;
+                remove_previous_run(out_dir, &self.registry.exporters)?;
                 writer = self.writer(out_dir)?;
                 if !plan.last_only {
                     writer.write(problem, &rest_state)?;
@@ -565,7 +581,7 @@ impl Job {
                 prepare_output_folder(out_dir)?;
                 let first_step = match &resume {
                     None => {
-                        remove_previous_run(out_dir)?;
+                        remove_previous_run(out_dir, &self.registry.exporters)?;
                         writer = self.writer(out_dir)?;
                         if !plan.last_only {
                             writer.write(problem, &state)?;
@@ -724,6 +740,7 @@ impl Job {
         let skin = hexmesh::boundary_skin(&self.lattice);
         let frame_bytes = crate::output::frame_size_estimate(
             &self.input.scene.output,
+            &self.registry.exporters,
             &crate::output::FrameCounts {
                 nodes: model.num_nodes(),
                 cells: model.num_cells(),
@@ -752,7 +769,7 @@ impl Job {
         let (frame_bytes, frames) = self.output_estimate();
         let needed = frame_bytes.saturating_mul(frames);
         // The files of an earlier run there are replaced: their space counts.
-        let replaced: u64 = crate::output::previous_run_files(out_dir)
+        let replaced: u64 = crate::output::previous_run_files(out_dir, &self.registry.exporters)
             .iter()
             .filter_map(|f| std::fs::metadata(f).ok())
             .map(|m| m.len())

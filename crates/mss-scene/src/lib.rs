@@ -64,6 +64,7 @@ pub mod check;
 pub mod checkpoint;
 pub mod error;
 pub mod job;
+pub mod kind_table;
 pub mod limits;
 pub mod load_check;
 pub mod obstacles;

@@ -34,55 +34,16 @@ use mss_core::contact::{
 use mss_core::{Model, Vec3};
 use serde::Deserialize;
 
+use crate::kind_table::{KindKeysError, KindTable};
+
 /// An obstacle's shape as a scene gives it: `kind`, resolved by name in
 /// the [`Shapes`] registry when the problem is built, and the table's other
-/// keys, which the shape's factory reads ([`ShapeSpec::keys_as`]).
-#[derive(Debug, Clone, PartialEq)]
-pub struct ShapeSpec {
-    /// The shape's name in [`Shapes`] (`"plane"`, `"sphere"`, ...).
-    pub kind: String,
-    /// The other keys of the `shape = { ... }` table.
-    pub keys: toml::Table,
-}
+/// keys, which the shape's factory reads ([`KindTable::keys_as`]).
+pub type ShapeSpec = KindTable;
 
-impl<'de> Deserialize<'de> for ShapeSpec {
-    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        let mut keys = toml::Table::deserialize(d)?;
-        match keys.remove("kind") {
-            Some(toml::Value::String(kind)) => Ok(ShapeSpec { kind, keys }),
-            Some(other) => Err(serde::de::Error::custom(format!(
-                "kind = {other}: the shape's kind is a name (\"sphere\", ...)"
-            ))),
-            None => Err(serde::de::Error::missing_field("kind")),
-        }
-    }
-}
-
-impl ShapeSpec {
-    /// The keys read as `T` (a factory's own table type, usually with
-    /// `deny_unknown_fields`), with serde's message on a bad key.
-    pub fn keys_as<T: serde::de::DeserializeOwned>(&self) -> Result<T, ObstacleError> {
-        toml::Value::Table(self.keys.clone())
-            .try_into()
-            .map_err(|e: toml::de::Error| {
-                ObstacleError::Invalid(format!("shape {:?}: {}", self.kind, e.message().trim()))
-            })
-    }
-
-    /// The built-in shape this is, if its kind is one (for a front end that
-    /// draws obstacles).
-    pub fn builtin(&self) -> Option<BuiltinShape> {
-        self.read_builtin().ok()
-    }
-
-    fn read_builtin(&self) -> Result<BuiltinShape, ObstacleError> {
-        let mut table = self.keys.clone();
-        table.insert("kind".into(), toml::Value::String(self.kind.clone()));
-        toml::Value::Table(table)
-            .try_into()
-            .map_err(|e: toml::de::Error| {
-                ObstacleError::Invalid(format!("shape {:?}: {}", self.kind, e.message().trim()))
-            })
+impl From<KindKeysError> for ObstacleError {
+    fn from(e: KindKeysError) -> Self {
+        ObstacleError::Invalid(format!("shape {:?}: {}", e.kind, e.message))
     }
 }
 
@@ -135,59 +96,7 @@ pub enum BuiltinShape {
     },
 }
 
-/// `[contact]`: which points touch the obstacles.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
-#[serde(deny_unknown_fields)]
-pub struct ContactSection {
-    /// `"nodes"` (the lattice's boundary nodes, default), `"surface"` (the
-    /// embedded input surface's vertices, what is rendered) or `"both"`.
-    #[serde(default)]
-    pub points: PointsKey,
-}
-
-/// `[contact] points`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
-#[serde(rename_all = "lowercase")]
-pub enum PointsKey {
-    /// The lattice's boundary nodes.
-    #[default]
-    Nodes,
-    /// The embedded surface's vertices.
-    Surface,
-    /// Both.
-    Both,
-}
-
-impl PointsKey {
-    /// The library's choice.
-    pub fn points(self) -> ContactPoints {
-        match self {
-            PointsKey::Nodes => ContactPoints::Nodes,
-            PointsKey::Surface => ContactPoints::Surface,
-            PointsKey::Both => ContactPoints::Both,
-        }
-    }
-}
-
-/// One `[[obstacles]]` table.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct ObstacleSpec {
-    /// The shape.
-    pub shape: ShapeSpec,
-    /// Coulomb friction coefficient (default 0.5).
-    pub friction: Option<f64>,
-    /// Kinetic friction coefficient (default: `friction`).
-    pub friction_kinetic: Option<f64>,
-    /// Penalty stiffness (N/m) of a node of the mean boundary-node mass
-    /// (default: see [`ContactSettings::for_model`]).
-    pub stiffness: Option<f64>,
-    /// Damping ratio of the contact spring (default 0.2).
-    pub damping_ratio: Option<f64>,
-    /// Keyframes `[t, dx, dy, dz]` of the obstacle's offset (s, m).
-    #[serde(default)]
-    pub motion: Vec<[f64; 4]>,
-}
+pub use crate::scene::{ContactSection, ObstacleSpec};
 
 fn v(a: [f64; 3]) -> Vec3 {
     Vec3::new(a[0], a[1], a[2])
@@ -216,17 +125,7 @@ impl ObstacleSpec {
         mesh_of: &dyn Fn(&str) -> Result<hexmesh::TriMesh, String>,
         shapes: &Shapes,
     ) -> Result<Box<dyn Obstacle>, ObstacleError> {
-        let path = Path::new(
-            self.motion
-                .iter()
-                .map(|k| (k[0], Vec3::new(k[1], k[2], k[3])))
-                .collect(),
-        )
-        .ok_or_else(|| {
-            ObstacleError::Invalid(
-                "motion keyframes [t, dx, dy, dz] must be finite with increasing times".into(),
-            )
-        })?;
+        let path = self.path().map_err(|e| ObstacleError::Invalid(e.message))?;
         let context = ShapeContext {
             model,
             mesh_of,
@@ -295,18 +194,19 @@ impl Shapes {
     }
 }
 
+impl BuiltinShape {
+    /// The built-in shape `spec` is, if its kind is one (for a front end
+    /// that draws obstacles).
+    pub fn of(spec: &ShapeSpec) -> Option<BuiltinShape> {
+        spec.tagged_as().ok()
+    }
+}
+
 fn builtin_obstacle(
     spec: &ShapeSpec,
     context: &ShapeContext<'_>,
 ) -> Result<Box<dyn Obstacle>, ObstacleError> {
-    let mut table = spec.keys.clone();
-    table.insert("kind".into(), toml::Value::String(spec.kind.clone()));
-    let shape: BuiltinShape =
-        toml::Value::Table(table)
-            .try_into()
-            .map_err(|e: toml::de::Error| {
-                ObstacleError::Invalid(format!("shape {:?}: {}", spec.kind, e.message().trim()))
-            })?;
+    let shape: BuiltinShape = spec.tagged_as()?;
     let path = context.path.clone();
     Ok(match shape {
         BuiltinShape::Plane { point, normal } => {

@@ -8,7 +8,7 @@ use hexmesh::{Embedding, Lattice, Skin, TriMesh};
 use mss_core::solver::{Problem, State};
 use mss_core::{SpringSet, Vec3};
 use mss_io::IoError;
-use mss_io::exporters::Exporters;
+use mss_io::exporters::{Exporters, SeriesFacts};
 use mss_io::pc2::Pc2Writer;
 use mss_io::skin::{SkinExporter, SkinFrames};
 use mss_io::vtk::{Field, FrameExporter, LatticeFrame, PvdWriter, VtuEncoding, write_lines_vtu};
@@ -25,41 +25,50 @@ pub const SURFACE_PREFIX: &str = "surface";
 /// File name stem of the springs as lines (`springs_0000.vtu`, `springs.pvd`).
 pub const SPRINGS_PREFIX: &str = "springs";
 
-/// Series a run writes: file-name stem and the extensions of its numbered
-/// frames (`STEM_NNNN.EXT`).
-const SERIES: [(&str, &[&str]); 4] = [
-    (LATTICE_PREFIX, &["vtu", "vtk"]),
-    (SKIN_PREFIX, &["obj", "stl"]),
-    (SURFACE_PREFIX, &["obj"]),
-    (SPRINGS_PREFIX, &["vtu"]),
-];
+/// Extension of the springs' frames (`springs_NNNN.vtu`): written by
+/// [`write_lines_vtu`], not by a registered exporter.
+const SPRINGS_EXTENSION: &str = "vtu";
 
-/// Single files a run writes.
-const RUN_FILES: [&str; 8] = [
-    crate::checkpoint::CHECKPOINT_FILE,
-    "lattice.pvd",
-    "springs.pvd",
-    "summary.json",
-    "skin.pc2",
-    "skin_rest.obj",
-    "surface.pc2",
-    "surface_rest.obj",
-];
-
-/// Whether `name` is a file a run writes: `STEM_NNNN.EXT` of one of the
-/// series (four or more digits), or one of the run's single files.
-fn is_run_file(name: &str) -> bool {
-    if RUN_FILES.contains(&name) {
+/// Whether `name` is a file a run writes, with the exporters of
+/// `exporters`: `STEM_NNNN.EXT` (four or more digits) of the lattice series
+/// (the frame exporters' extensions), of the skin and surface series (the
+/// skin exporters'), or of the springs; a series' index file (`STEM.pvd`);
+/// a point cache and its rest shape (`STEM.pc2`, `STEM_rest.obj`);
+/// `summary.json` or the checkpoint.
+fn is_run_file(name: &str, exporters: &Exporters) -> bool {
+    if name == crate::checkpoint::CHECKPOINT_FILE || name == "summary.json" {
         return true;
     }
-    SERIES.iter().any(|(stem, exts)| {
-        let Some(rest) = name.strip_prefix(stem).and_then(|r| r.strip_prefix('_')) else {
+    let frames = exporters.all_frame_facts();
+    let skins = exporters.all_skin_facts();
+    let springs = [SeriesFacts {
+        extension: SPRINGS_EXTENSION,
+        index_extension: Some("pvd"),
+        bytes: |_, _| 0,
+    }];
+    let series: [(&str, &[SeriesFacts]); 4] = [
+        (LATTICE_PREFIX, &frames),
+        (SKIN_PREFIX, &skins),
+        (SURFACE_PREFIX, &skins),
+        (SPRINGS_PREFIX, &springs),
+    ];
+    series.iter().any(|&(stem, facts)| {
+        let Some(rest) = name.strip_prefix(stem) else {
             return false;
         };
-        let Some((digits, ext)) = rest.split_once('.') else {
+        if let Some(ext) = rest.strip_prefix('.') {
+            return facts.iter().any(|f| f.index_extension == Some(ext))
+                || ((stem == SKIN_PREFIX || stem == SURFACE_PREFIX) && ext == "pc2");
+        }
+        if rest == "_rest.obj" {
+            return stem == SKIN_PREFIX || stem == SURFACE_PREFIX;
+        }
+        let Some((digits, ext)) = rest.strip_prefix('_').and_then(|r| r.split_once('.')) else {
             return false;
         };
-        digits.len() >= 4 && digits.bytes().all(|b| b.is_ascii_digit()) && exts.contains(&ext)
+        digits.len() >= 4
+            && digits.bytes().all(|b| b.is_ascii_digit())
+            && facts.iter().any(|f| f.extension == ext)
     })
 }
 
@@ -78,10 +87,11 @@ fn process_is_running(pid: u32) -> bool {
 }
 
 /// The files an earlier run left in `dir` that a new run there would mix
-/// with its own: the numbered frames of every series, the `.pvd` files and
-/// `summary.json`, and temporary files of runs that were interrupted (their
-/// process is gone). Nothing else is touched. Sorted by name.
-pub fn previous_run_files(dir: &Path) -> Vec<PathBuf> {
+/// with its own: the numbered frames of every series the exporters of
+/// `exporters` write, the `.pvd` files and `summary.json`, and temporary
+/// files of runs that were interrupted (their process is gone). Nothing
+/// else is touched. Sorted by name.
+pub fn previous_run_files(dir: &Path, exporters: &Exporters) -> Vec<PathBuf> {
     let Ok(entries) = std::fs::read_dir(dir) else {
         return Vec::new();
     };
@@ -90,9 +100,10 @@ pub fn previous_run_files(dir: &Path) -> Vec<PathBuf> {
         .filter(|e| e.file_type().is_ok_and(|t| t.is_file()))
         .filter_map(|e| {
             let name = e.file_name().to_str()?.to_owned();
-            let ours = is_run_file(&name)
-                || temporary_of(&name)
-                    .is_some_and(|(target, pid)| is_run_file(target) && !process_is_running(pid));
+            let ours = is_run_file(&name, exporters)
+                || temporary_of(&name).is_some_and(|(target, pid)| {
+                    is_run_file(target, exporters) && !process_is_running(pid)
+                });
             ours.then(|| e.path())
         })
         .collect();
@@ -101,8 +112,8 @@ pub fn previous_run_files(dir: &Path) -> Vec<PathBuf> {
 }
 
 /// Removes [`previous_run_files`] from `dir`; returns how many were removed.
-pub fn remove_previous_run(dir: &Path) -> Result<usize, JobError> {
-    let files = previous_run_files(dir);
+pub fn remove_previous_run(dir: &Path, exporters: &Exporters) -> Result<usize, JobError> {
+    let files = previous_run_files(dir, exporters);
     for f in &files {
         std::fs::remove_file(f).map_err(|e| IoError::io(f, e))?;
     }
@@ -214,27 +225,17 @@ impl FrameWriter {
         mesh: &TriMesh,
     ) -> Result<Self, JobError> {
         let mut lattice_exporters = Vec::new();
-        if out.vtu {
-            let name = out.compression.vtu_exporter(out.pvd);
-            lattice_exporters.push((exporters.frames(name, dir, LATTICE_PREFIX)?, Some("vtu")));
-        }
-        if out.vtk {
-            lattice_exporters.push((exporters.frames("vtk", dir, LATTICE_PREFIX)?, Some("vtk")));
-        }
-        for name in &out.exporters {
-            lattice_exporters.push((exporters.frames(name, dir, LATTICE_PREFIX)?, None));
+        for name in frame_exporter_names(out) {
+            let extension = exporters.frame_facts(name).map(|f| f.extension);
+            lattice_exporters.push((exporters.frames(name, dir, LATTICE_PREFIX)?, extension));
         }
         let skin =
             (out.skin_obj || out.skin_stl || out.pc2).then(|| hexmesh::boundary_skin(lattice));
         let mut skin_exporters = Vec::new();
-        for (on, name, ext) in [
-            (out.skin_obj, out.skin_normals.obj_exporter(), "obj"),
-            (out.skin_stl, "stl", "stl"),
-        ] {
-            if on {
-                let e = exporters.skins(name, dir, SKIN_PREFIX, SkinFrames::Every)?;
-                skin_exporters.push((e, ext));
-            }
+        for name in skin_exporter_names(out) {
+            let e = exporters.skins(name, dir, SKIN_PREFIX, SkinFrames::Every)?;
+            let extension = exporters.skin_facts(name).map_or("", |f| f.extension);
+            skin_exporters.push((e, extension));
         }
         let skin_cache = match (&skin, out.pc2) {
             (Some(skin), true) => Some(start_cache(
@@ -242,7 +243,7 @@ impl FrameWriter {
                 SKIN_PREFIX,
                 &skin.positions(lattice.nodes()),
                 &skin.triangles,
-                out.skin_normals.normals(),
+                out.skin_normals,
             )?),
             _ => None,
         };
@@ -251,7 +252,7 @@ impl FrameWriter {
                 embedding: Embedding::new(lattice, mesh),
                 triangles: mesh.triangles.clone(),
                 exporter: exporters.skins(
-                    out.surface_normals.obj_exporter(),
+                    crate::scene::obj_exporter(out.surface_normals),
                     dir,
                     SURFACE_PREFIX,
                     SkinFrames::Every,
@@ -262,7 +263,7 @@ impl FrameWriter {
                         SURFACE_PREFIX,
                         &mesh.vertices,
                         &mesh.triangles,
-                        out.surface_normals.normals(),
+                        out.surface_normals,
                     )?)
                 } else {
                     None
@@ -608,35 +609,51 @@ pub struct FrameCounts {
     pub surface_triangles: usize,
 }
 
-/// Estimated bytes of one frame, for `mss check` (uncompressed binary sizes
-/// of the fields, base64 included for `.vtu`; compressed `.vtu` files are
-/// usually smaller).
-pub fn frame_size_estimate(out: &OutputSection, n: &FrameCounts) -> u64 {
-    let lattice = (n.nodes * (5 * 24 + 1 + 24) + n.cells * (32 + 8 + 1 + 3 * 8)) as u64;
-    // Points, then per spring: 2 Int64 node ids, an offset, a type, three
-    // Float64 fields and a flag.
-    let springs = (n.nodes * 24 + n.springs * (16 + 8 + 1 + 3 * 8 + 1)) as u64;
-    // A `v` or `vn` line is about 30 bytes, an `f` line 24 (smooth) or 30 (flat).
-    let obj = |v: usize, t: usize, normals: crate::scene::NormalsKey| match normals {
-        crate::scene::NormalsKey::Smooth => (v * 60 + t * 24) as u64,
-        crate::scene::NormalsKey::Flat => (v * 30 + t * 60) as u64,
-    };
-    let stl = |t: usize| (84 + t * 50) as u64;
-    let mut total = 0;
+/// The lattice frame exporters `[output]` asks for, by name.
+fn frame_exporter_names(out: &OutputSection) -> Vec<&str> {
+    let mut names = Vec::new();
     if out.vtu {
-        total += lattice * 4 / 3;
+        names.push(out.compression.vtu_exporter(out.pvd));
     }
     if out.vtk {
-        total += lattice;
+        names.push("vtk");
     }
+    names.extend(out.exporters.iter().map(String::as_str));
+    names
+}
+
+/// The boundary skin exporters `[output]` asks for, by name.
+fn skin_exporter_names(out: &OutputSection) -> Vec<&'static str> {
+    let mut names = Vec::new();
     if out.skin_obj {
-        total += obj(n.skin_vertices, n.skin_triangles, out.skin_normals);
+        names.push(crate::scene::obj_exporter(out.skin_normals));
     }
     if out.skin_stl {
-        total += stl(n.skin_triangles);
+        names.push("stl");
     }
-    if out.embedded {
-        total += obj(n.surface_vertices, n.surface_triangles, out.surface_normals);
+    names
+}
+
+/// Estimated bytes of one frame, for `mss check` and the disk check: the
+/// size estimate of every exporter `out` asks for (see
+/// [`SeriesFacts::bytes`]; a registered exporter without facts counts
+/// nothing), the point caches and the springs.
+pub fn frame_size_estimate(out: &OutputSection, exporters: &Exporters, n: &FrameCounts) -> u64 {
+    let mut total = 0;
+    for name in frame_exporter_names(out) {
+        if let Some(facts) = exporters.frame_facts(name) {
+            total += (facts.bytes)(n.nodes, n.cells);
+        }
+    }
+    for name in skin_exporter_names(out) {
+        if let Some(facts) = exporters.skin_facts(name) {
+            total += (facts.bytes)(n.skin_vertices, n.skin_triangles);
+        }
+    }
+    if out.embedded
+        && let Some(facts) = exporters.skin_facts(crate::scene::obj_exporter(out.surface_normals))
+    {
+        total += (facts.bytes)(n.surface_vertices, n.surface_triangles);
     }
     if out.pc2 {
         // One f32 triple per vertex per frame.
@@ -646,6 +663,9 @@ pub fn frame_size_estimate(out: &OutputSection, n: &FrameCounts) -> u64 {
         }
     }
     if out.springs {
+        // Points, then per spring: 2 Int64 node ids, an offset, a type,
+        // three Float64 fields and a flag; base64 adds a third.
+        let springs = (n.nodes * 24 + n.springs * (16 + 8 + 1 + 3 * 8 + 1)) as u64;
         total += springs * 4 / 3;
     }
     total
@@ -664,9 +684,13 @@ mod tests {
             "surface_0040.obj",
             "springs_0001.vtu",
             "lattice.pvd",
+            "springs.pvd",
+            "skin.pc2",
+            "surface_rest.obj",
             "summary.json",
+            crate::checkpoint::CHECKPOINT_FILE,
         ] {
-            assert!(is_run_file(yes), "{yes}");
+            assert!(is_run_file(yes, &Exporters::default()), "{yes}");
         }
         for no in [
             "lattice_01.vtu",
@@ -676,9 +700,26 @@ mod tests {
             "mesh.obj",
             "skin.obj",
             "lattice.vtu",
+            "skin.pvd",
+            "lattice_rest.obj",
+            "lattice_0001.vtp",
         ] {
-            assert!(!is_run_file(no), "{no}");
+            assert!(!is_run_file(no, &Exporters::default()), "{no}");
         }
+        // A program's exporter registered with its facts: its files are the
+        // run's too.
+        let mut exporters = Exporters::default();
+        exporters.register_frames_with(
+            "vtp",
+            SeriesFacts {
+                extension: "vtp",
+                index_extension: None,
+                bytes: |nodes, _| 24 * nodes as u64,
+            },
+            std::sync::Arc::new(|_, _| unreachable!()),
+        );
+        assert!(is_run_file("lattice_0001.vtp", &exporters));
+        assert!(!is_run_file("skin_0001.vtp", &exporters));
         assert_eq!(
             temporary_of(".lattice_0003.vtu.tmp-123-7"),
             Some(("lattice_0003.vtu", 123))
@@ -704,7 +745,7 @@ mod tests {
         ] {
             std::fs::write(d.join(name), b"x").unwrap();
         }
-        assert_eq!(remove_previous_run(d).unwrap(), 5);
+        assert_eq!(remove_previous_run(d, &Exporters::default()).unwrap(), 5);
         let mut left: Vec<String> = std::fs::read_dir(d)
             .unwrap()
             .map(|e| e.unwrap().file_name().into_string().unwrap())

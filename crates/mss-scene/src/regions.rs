@@ -1,6 +1,8 @@
 //! Materials per region: `[[regions]]` tables that give the cells inside a
 //! box, a sphere or a second closed mesh their own Young's modulus, Poisson's
-//! ratio and density.
+//! ratio and density. The region's `select = { kind = ... }` is resolved by
+//! name in [`RegionSelectors`] (the registry's `regions`), where a program
+//! registers selectors of its own.
 //!
 //! A cell belongs to a region when its centre lies inside the region's
 //! shape (for a mesh: inside by the voxelizer's own test, a generalized
@@ -12,82 +14,30 @@
 //!
 //! ```
 //! use mss_core::Material;
-//! use mss_scene::regions::{RegionSelector, RegionSpec, assign_regions};
+//! use mss_scene::regions::{RegionSelectors, RegionSpec, assign_regions};
 //!
 //! let lattice = hexmesh::Lattice::block([4, 1, 1], 0.1, [0.0; 3]).unwrap();
 //! let base = Material::new(1.0e4, 0.3, 1000.0).unwrap();
-//! let stiff_end = RegionSpec {
-//!     select: RegionSelector::Box { min: [0.2, -1.0, -1.0], max: [1.0, 1.0, 1.0], relative: false },
-//!     young: Some(1.0e5),
-//!     poisson: None,
-//!     density: None,
-//! };
-//! let a = assign_regions(&lattice, &base, &[stiff_end], &|_| unreachable!()).unwrap();
+//! let stiff_end: RegionSpec = toml::from_str(
+//!     "select = { kind = \"box\", min = [0.2, -1, -1], max = [1, 1, 1] }\nyoung = 1e5",
+//! )
+//! .unwrap();
+//! let selectors = RegionSelectors::default();
+//! let a = assign_regions(&lattice, &base, &[stiff_end], &selectors, &|_| unreachable!()).unwrap();
 //! assert_eq!(a.cell_material, vec![0, 0, 1, 1]);
 //! assert_eq!(a.materials[1].young, 1.0e5);
 //! assert_eq!(a.materials[1].poisson, 0.3);
 //! ```
 
+use std::sync::Arc;
+
 use hexmesh::winding::WindingInside;
-use hexmesh::{Lattice, TriMesh};
+use hexmesh::{Aabb, Lattice, TriMesh};
 use mss_core::Material;
-use serde::Deserialize;
+use mss_registry::Named;
 
-/// Which cells a region takes (by their centres).
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
-pub enum RegionSelector {
-    /// Centres in the box `min ..= max` (m, or fractions of the lattice's
-    /// bounding box if `relative`).
-    Box {
-        /// Minimum corner.
-        min: [f64; 3],
-        /// Maximum corner.
-        max: [f64; 3],
-        /// Whether `min` and `max` are fractions of the bounding box.
-        #[serde(default)]
-        relative: bool,
-    },
-    /// Centres within `radius` (m) of `centre` (m).
-    Sphere {
-        /// Centre (m).
-        centre: [f64; 3],
-        /// Radius (m), > 0.
-        radius: f64,
-    },
-    /// Centres inside a closed surface mesh (any format `[mesh]` takes),
-    /// relative to the scene file's folder, placed like `[mesh]`.
-    Mesh {
-        /// The mesh file.
-        path: String,
-    },
-}
-
-/// One `[[regions]]` table.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct RegionSpec {
-    /// The cells it takes.
-    pub select: RegionSelector,
-    /// Young's modulus (Pa); `[material]`'s if absent.
-    pub young: Option<f64>,
-    /// Poisson's ratio; `[material]`'s if absent.
-    pub poisson: Option<f64>,
-    /// Density (kg/m^3); `[material]`'s if absent.
-    pub density: Option<f64>,
-}
-
-impl RegionSpec {
-    /// The region's material: its own values over `base`'s. The values are
-    /// only combined here; the parameterization checks them.
-    pub fn material(&self, base: &Material) -> Material {
-        Material {
-            young: self.young.unwrap_or(base.young),
-            poisson: self.poisson.unwrap_or(base.poisson),
-            density: self.density.unwrap_or(base.density),
-        }
-    }
-}
+use crate::kind_table::KindTable;
+pub use crate::scene::{RegionSelector, RegionSpec};
 
 /// The materials of a lattice with regions.
 #[derive(Debug, Clone, PartialEq)]
@@ -122,14 +72,122 @@ pub struct RegionError {
     pub message: String,
 }
 
+/// Whether a point (a cell centre, m) lies in a region.
+pub type CellTest = Box<dyn Fn([f64; 3]) -> bool + Send + Sync>;
+
+/// What a region selector's factory may use: the lattice's bounding box
+/// and cell edge, and the loader of the scene's meshes (placed like
+/// `[mesh]`).
+pub struct RegionContext<'a> {
+    /// The lattice's bounding box (m).
+    pub bounds: Aabb,
+    /// The cell edge (m).
+    pub h: f64,
+    /// Loads and places a mesh file the scene names.
+    pub mesh_of: &'a dyn Fn(&str) -> Result<TriMesh, String>,
+}
+
+/// Builds a region's test from its `select` table: one entry of
+/// [`RegionSelectors`]. The error says what is wrong with the table.
+pub type RegionFactory =
+    Arc<dyn Fn(&KindTable, &RegionContext<'_>) -> Result<CellTest, String> + Send + Sync>;
+
+/// The region selectors a scene can name in `select = { kind = ... }`:
+/// the built-ins ([`RegionSelector`]) and any a program registers.
+///
+/// ```
+/// use std::sync::Arc;
+/// use mss_scene::regions::{RegionSelectors, RegionSpec, assign_regions};
+///
+/// let mut selectors = RegionSelectors::default();
+/// // Cells above a height, with the height as the table's one key.
+/// selectors.register("above", Arc::new(|table, _| {
+///     #[derive(serde::Deserialize)]
+///     struct Keys { z: f64 }
+///     let z = table.keys_as::<Keys>().map_err(|e| e.to_string())?.z;
+///     Ok(Box::new(move |p: [f64; 3]| p[2] > z))
+/// }));
+/// let lattice = hexmesh::Lattice::block([1, 1, 4], 0.1, [0.0; 3]).unwrap();
+/// let base = mss_core::Material::new(1.0e4, 0.3, 1000.0).unwrap();
+/// let top: RegionSpec = toml::from_str("select = { kind = \"above\", z = 0.2 }\ndensity = 10.0").unwrap();
+/// let a = assign_regions(&lattice, &base, &[top], &selectors, &|_| unreachable!()).unwrap();
+/// assert_eq!(a.cell_material, [0, 0, 1, 1]);
+/// ```
+#[derive(Clone, Debug)]
+pub struct RegionSelectors {
+    entries: Named<RegionFactory>,
+}
+
+impl Default for RegionSelectors {
+    fn default() -> Self {
+        let mut selectors = RegionSelectors {
+            entries: Named::new(),
+        };
+        for kind in RegionSelector::KINDS {
+            selectors.register(kind, Arc::new(builtin_test));
+        }
+        selectors
+    }
+}
+
+impl RegionSelectors {
+    /// Registers (or replaces) the selector called `kind`.
+    pub fn register(&mut self, kind: &str, factory: RegionFactory) {
+        self.entries.register(kind, factory);
+    }
+
+    /// The registered kinds, in registration order.
+    pub fn names(&self) -> Vec<String> {
+        self.entries.names()
+    }
+
+    fn test(&self, table: &KindTable, context: &RegionContext<'_>) -> Result<CellTest, String> {
+        let factory = self.entries.lookup(&table.kind).map_err(|u| {
+            format!(
+                "unknown region selector kind {:?}; known: {}",
+                u.name, u.known
+            )
+        })?;
+        factory(table, context)
+    }
+}
+
+fn builtin_test(table: &KindTable, context: &RegionContext<'_>) -> Result<CellTest, String> {
+    let select: RegionSelector = table.tagged_as().map_err(|e| e.to_string())?;
+    Ok(match select {
+        RegionSelector::Box { min, max, relative } => {
+            let (lo, hi) = if relative {
+                (
+                    context.bounds.at_fraction(min),
+                    context.bounds.at_fraction(max),
+                )
+            } else {
+                (min, max)
+            };
+            Box::new(move |p| (0..3).all(|k| p[k] >= lo[k] && p[k] <= hi[k]))
+        }
+        RegionSelector::Sphere { centre, radius } => {
+            let r2 = radius * radius;
+            Box::new(move |p| (0..3).map(|k| (p[k] - centre[k]).powi(2)).sum::<f64>() <= r2)
+        }
+        RegionSelector::Mesh { path } => {
+            let mesh = (context.mesh_of)(&path)?;
+            let test = WindingInside::new(&mesh, context.h);
+            Box::new(move |p| test.contains(p))
+        }
+    })
+}
+
 /// Assigns every cell of `lattice` its material: `base`, overridden by each
-/// region in turn. `mesh_of` loads (and places) a region's mesh by its path.
-/// A region whose shape contains no cell centre is an error: it most likely
-/// lies elsewhere than intended (a unit or placement mistake).
+/// region in turn, its selector resolved in `selectors`. `mesh_of` loads
+/// (and places) a region's mesh by its path. A region whose shape contains
+/// no cell centre is an error: it most likely lies elsewhere than intended
+/// (a unit or placement mistake).
 pub fn assign_regions(
     lattice: &Lattice,
     base: &Material,
     regions: &[RegionSpec],
+    selectors: &RegionSelectors,
     mesh_of: &dyn Fn(&str) -> Result<TriMesh, String>,
 ) -> Result<RegionAssignment, RegionError> {
     let (o, h) = (lattice.origin(), lattice.h());
@@ -139,30 +197,13 @@ pub fn assign_regions(
         .map(|c| std::array::from_fn(|k| o[k] + (c[k] as f64 + 0.5) * h))
         .collect();
     let bounds = lattice.bounding_box();
+    let context = RegionContext { bounds, h, mesh_of };
     let mut materials = vec![*base];
     let mut cell_material = vec![0u32; centres.len()];
     let mut selected = Vec::with_capacity(regions.len());
     for (r, region) in regions.iter().enumerate() {
         let error = |message: String| RegionError { region: r, message };
-        let inside: Box<dyn Fn([f64; 3]) -> bool> = match &region.select {
-            RegionSelector::Box { min, max, relative } => {
-                let (lo, hi) = if *relative {
-                    (bounds.at_fraction(*min), bounds.at_fraction(*max))
-                } else {
-                    (*min, *max)
-                };
-                Box::new(move |p| (0..3).all(|k| p[k] >= lo[k] && p[k] <= hi[k]))
-            }
-            RegionSelector::Sphere { centre, radius } => {
-                let (c, r2) = (*centre, radius * radius);
-                Box::new(move |p| (0..3).map(|k| (p[k] - c[k]).powi(2)).sum::<f64>() <= r2)
-            }
-            RegionSelector::Mesh { path } => {
-                let mesh = mesh_of(path).map_err(error)?;
-                let test = WindingInside::new(&mesh, h);
-                Box::new(move |p| test.contains(p))
-            }
-        };
+        let inside = selectors.test(&region.select, &context).map_err(error)?;
         let index = materials.len() as u32;
         let mut count = 0;
         for (c, &p) in centres.iter().enumerate() {
@@ -175,8 +216,8 @@ pub fn assign_regions(
             return Err(error(format!(
                 "selects no cell: no cell centre lies in {} (the lattice spans {:?} .. {:?} m)",
                 describe(&region.select),
-                bounds.min,
-                bounds.max
+                context.bounds.min,
+                context.bounds.max
             )));
         }
         selected.push(count);
@@ -195,11 +236,14 @@ pub fn assign_regions(
     Ok(assignment)
 }
 
-fn describe(s: &RegionSelector) -> String {
-    match s {
+fn describe(table: &KindTable) -> String {
+    let Ok(select) = table.tagged_as::<RegionSelector>() else {
+        return format!("the region of kind {:?}", table.kind);
+    };
+    match select {
         RegionSelector::Box { min, max, relative } => format!(
             "the box {min:?} .. {max:?}{}",
-            if *relative {
+            if relative {
                 " (fractions of the bounding box)"
             } else {
                 " m"
@@ -216,33 +260,54 @@ fn describe(s: &RegionSelector) -> String {
 mod tests {
     use super::*;
 
+    fn table(s: RegionSelector) -> KindTable {
+        // `{:?}` of an array of floats is a TOML array.
+        let text = match s {
+            RegionSelector::Box { min, max, relative } => {
+                format!("kind = \"box\"\nmin = {min:?}\nmax = {max:?}\nrelative = {relative}")
+            }
+            RegionSelector::Sphere { centre, radius } => {
+                format!("kind = \"sphere\"\ncentre = {centre:?}\nradius = {radius:?}")
+            }
+            RegionSelector::Mesh { path } => format!("kind = \"mesh\"\npath = {path:?}"),
+        };
+        toml::from_str(&text).unwrap()
+    }
+
+    fn assign(
+        regions: &[RegionSpec],
+        mesh_of: &dyn Fn(&str) -> Result<TriMesh, String>,
+    ) -> Result<RegionAssignment, RegionError> {
+        let base = Material::new(1.0e4, 0.3, 1000.0).unwrap();
+        assign_regions(&bar(), &base, regions, &RegionSelectors::default(), mesh_of)
+    }
+
     fn bar() -> Lattice {
         Lattice::block([4, 2, 2], 0.05, [0.0; 3]).unwrap()
     }
 
     #[test]
     fn later_regions_override_earlier_ones() {
-        let base = Material::new(1.0e4, 0.3, 1000.0).unwrap();
         let all = RegionSpec {
-            select: RegionSelector::Box {
+            select: table(RegionSelector::Box {
                 min: [0.0; 3],
                 max: [1.0; 3],
                 relative: true,
-            },
+            }),
             young: Some(2.0e4),
             poisson: None,
             density: Some(500.0),
         };
         let ball = RegionSpec {
-            select: RegionSelector::Sphere {
+            select: table(RegionSelector::Sphere {
                 centre: [0.0, 0.0, 0.0],
                 radius: 0.05,
-            },
+            }),
             young: None,
             poisson: Some(0.45),
             density: None,
         };
-        let a = assign_regions(&bar(), &base, &[all, ball], &|_| unreachable!()).unwrap();
+        let a = assign(&[all, ball], &|_| unreachable!()).unwrap();
         // The sphere holds the one cell centre at (0.025, 0.025, 0.025).
         assert_eq!(a.selected, vec![16, 1]);
         assert_eq!(a.cells_per_material(), vec![0, 15, 1]);
@@ -259,17 +324,16 @@ mod tests {
 
     #[test]
     fn a_region_that_selects_nothing_is_an_error_naming_it() {
-        let base = Material::new(1.0e4, 0.3, 1000.0).unwrap();
         let far = RegionSpec {
-            select: RegionSelector::Sphere {
+            select: table(RegionSelector::Sphere {
                 centre: [5.0, 5.0, 5.0],
                 radius: 0.1,
-            },
+            }),
             young: Some(1.0),
             poisson: None,
             density: None,
         };
-        let err = assign_regions(&bar(), &base, &[far], &|_| unreachable!()).unwrap_err();
+        let err = assign(&[far], &|_| unreachable!()).unwrap_err();
         assert_eq!(err.region, 0);
         assert!(
             err.to_string()
@@ -280,23 +344,22 @@ mod tests {
 
     #[test]
     fn a_mesh_region_takes_the_cells_inside_it() {
-        let base = Material::new(1.0e4, 0.3, 1000.0).unwrap();
         let inner = RegionSpec {
-            select: RegionSelector::Mesh {
+            select: table(RegionSelector::Mesh {
                 path: "half.obj".into(),
-            },
+            }),
             young: Some(3.0e4),
             poisson: None,
             density: None,
         };
         let half = hexmesh::generate::box_mesh([0.1, -1.0, -1.0], [1.0, 1.0, 1.0]);
-        let a = assign_regions(&bar(), &base, &[inner], &|p| {
+        let a = assign(&[inner], &|p| {
             assert_eq!(p, "half.obj");
             Ok(half.clone())
         })
         .unwrap();
         assert_eq!(a.cells_per_material(), vec![8, 8]);
-        let missing = assign_regions(&bar(), &base, &[a_mesh("gone.obj")], &|p| {
+        let missing = assign(&[a_mesh("gone.obj")], &|p| {
             Err(format!("mesh file {p} does not exist"))
         })
         .unwrap_err();
@@ -305,7 +368,7 @@ mod tests {
 
     fn a_mesh(path: &str) -> RegionSpec {
         RegionSpec {
-            select: RegionSelector::Mesh { path: path.into() },
+            select: table(RegionSelector::Mesh { path: path.into() }),
             young: None,
             poisson: None,
             density: None,

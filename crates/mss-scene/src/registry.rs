@@ -6,11 +6,14 @@ use mss_core::solver::Integrators;
 use mss_io::exporters::Exporters;
 
 use crate::obstacles::Shapes;
+use crate::regions::RegionSelectors;
+use crate::scene::{LoadKinds, OccupancyRules};
 
 /// Everything a scene can name that a program may extend: mesh loaders (by
 /// file extension), spring parameterizations (`[model] parameterization`),
-/// time integrators (`[solver] kind`), exporters (`[output]`) and obstacle
-/// shapes (`[[obstacles]] shape`).
+/// time integrators (`[solver] kind`), exporters (`[output]`), obstacle
+/// shapes (`[[obstacles]] shape`), occupancy rules (`[voxelize] rule`),
+/// loads (`[[loads.custom]]`) and region selectors (`[[regions]] select`).
 ///
 /// A program starts from [`Registry::default`] (the built-ins), registers its
 /// own plugins in the public fields, and passes the value to
@@ -46,4 +49,10 @@ pub struct Registry {
     pub exporters: Exporters,
     /// Obstacle shapes, by `[[obstacles]] shape = { kind = ... }`.
     pub shapes: Shapes,
+    /// Occupancy rules of the voxelizer, by `[voxelize] rule`.
+    pub occupancy: OccupancyRules,
+    /// Loads, by `[[loads.custom]] kind`.
+    pub loads: LoadKinds,
+    /// Region selectors, by `[[regions]] select = { kind = ... }`.
+    pub regions: RegionSelectors,
 }

@@ -48,8 +48,10 @@ use thiserror::Error;
 
 use crate::build::{MeshSourceError, load_mesh};
 use crate::error::human;
+use crate::kind_table::KindTable;
 use crate::limits::{Limits, cell_budget, mesh_memory_estimate, run_memory_estimate};
-use crate::obstacles::{ObstacleSpec, PointsKey, Shapes, build_contact_with};
+use crate::obstacles::{ObstacleSpec, Shapes, build_contact_with};
+use crate::scene::LoadKinds;
 use crate::scene::MeshSource;
 
 /// A mesh loaded, cleaned and placed.
@@ -230,12 +232,16 @@ pub struct ProblemSpecs<'a> {
     pub constraints: &'a [ConstraintSpec],
     /// Gravity, forces, tractions, drags.
     pub loads: &'a [LoadSpec],
+    /// Loads by kind (`[[loads.custom]]`), after `loads`.
+    pub custom_loads: &'a [KindTable],
+    /// The load kinds `custom_loads` may name.
+    pub load_kinds: &'a LoadKinds,
     /// Mass and stiffness damping.
     pub damping: Damping,
     /// The `[[obstacles]]` tables.
     pub obstacles: &'a [ObstacleSpec],
     /// Which points of the body touch the obstacles.
-    pub points: PointsKey,
+    pub points: mss_core::contact::ContactPoints,
     /// The shapes the obstacles may name.
     pub shapes: &'a Shapes,
 }
@@ -254,6 +260,15 @@ pub enum ProblemStageError {
     /// A constraint or load does not apply to the model.
     #[error(transparent)]
     Problem(#[from] ProblemError),
+    /// A load by kind could not be built (index into
+    /// [`ProblemSpecs::custom_loads`]).
+    #[error("custom load #{}: {source}", index + 1)]
+    CustomLoad {
+        /// Its index.
+        index: usize,
+        /// Why.
+        source: mss_core::loads::LoadError,
+    },
 }
 
 /// The problem of `model` under `specs`: obstacle meshes come from
@@ -273,11 +288,25 @@ pub fn problem(
         specs.shapes,
         extra,
         mesh_of,
-        specs.points.points(),
+        specs.points,
         surface,
     )
     .map_err(|(index, source)| ProblemStageError::Obstacle { index, source })?;
-    let problem = Problem::from_specs(model, specs.constraints, specs.loads, specs.damping)?;
+    let custom: Vec<_> = specs
+        .custom_loads
+        .iter()
+        .enumerate()
+        .map(|(index, table)| {
+            specs
+                .load_kinds
+                .build(table, &model)
+                .map_err(|source| ProblemStageError::CustomLoad { index, source })
+        })
+        .collect::<Result<_, _>>()?;
+    let problem = custom.into_iter().fold(
+        Problem::from_specs(model, specs.constraints, specs.loads, specs.damping)?,
+        Problem::with_load,
+    );
     Ok(match contact {
         Some(c) => problem.with_contact(c),
         None => problem,

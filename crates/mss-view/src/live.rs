@@ -103,7 +103,7 @@ pub(crate) fn obstacle_draws(
         .scene
         .obstacles
         .iter()
-        .map(|o| match &o.shape.builtin() {
+        .map(|o| match &BuiltinShape::of(&o.shape) {
             None => ObstacleDraw::Other {
                 shape: o.shape.kind.clone(),
             },

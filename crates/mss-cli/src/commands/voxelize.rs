@@ -7,8 +7,9 @@ use std::time::Instant;
 
 use anyhow::Context;
 use clap::Args;
+use mss_scene::hexmesh::{Units, UpAxis};
 use mss_scene::mss_io::vtk::{Field, LatticeFrame, VtuEncoding, write_lines_vtu, write_vtu};
-use mss_scene::scene::{KeepComponents, MeshSource, OccupancyKind, VoxelizeSection};
+use mss_scene::scene::{ComponentPolicy, MeshSource, VoxelizeSection, value_from_str};
 use mss_scene::{Progress, Registry, stages};
 use serde::Serialize;
 
@@ -29,8 +30,8 @@ pub struct VoxelizeArgs {
     pub size: Option<f64>,
     /// Occupancy rule: centre (cell centre inside), any (cell overlaps the
     /// solid), fraction (at least --fraction of the cell inside).
-    #[arg(long, value_name = "RULE", default_value = "centre", value_parser = parse_rule)]
-    pub rule: OccupancyKind,
+    #[arg(long, value_name = "RULE", default_value = "centre")]
+    pub rule: String,
     /// Minimum inside fraction for --rule fraction.
     #[arg(long, value_name = "F", default_value_t = 0.5)]
     pub fraction: f64,
@@ -41,14 +42,14 @@ pub struct VoxelizeArgs {
     #[arg(long, value_name = "N", default_value_t = VoxelizeSection::default().max_cells)]
     pub max_cells: u64,
     /// Unit of the mesh's coordinates: m, cm or mm (as `[mesh] units`).
-    #[arg(long, value_name = "UNIT", default_value = "m", value_parser = ["m", "cm", "mm"])]
-    pub units: String,
+    #[arg(long, value_name = "UNIT", default_value = "m", value_parser = value_from_str::<Units>)]
+    pub units: Units,
     /// Scale factor after units (as `[mesh] scale`).
     #[arg(long, value_name = "S", default_value_t = 1.0)]
     pub scale: f64,
     /// The mesh's up axis, turned to +z: x, y or z (as `[mesh] up`).
-    #[arg(long, value_name = "AXIS", default_value = "z", value_parser = ["x", "y", "z"])]
-    pub up: String,
+    #[arg(long, value_name = "AXIS", default_value = "z", value_parser = value_from_str::<UpAxis>)]
+    pub up: UpAxis,
     /// How the .vtu files store their arrays: zlib (compressed, about 4 times
     /// smaller) or none (uncompressed: no compression work, larger files).
     #[arg(long, value_name = "KIND", default_value = "zlib", value_parser = ["zlib", "none"])]
@@ -58,10 +59,6 @@ pub struct VoxelizeArgs {
     // state; a scene's `[output] springs` writes them per frame.
     #[arg(long)]
     pub springs: bool,
-}
-
-fn parse_rule(s: &str) -> Result<OccupancyKind, String> {
-    s.parse()
 }
 
 /// What `mss voxelize` measured (printed, and written as `stats.json`).
@@ -110,52 +107,52 @@ pub fn run(args: &VoxelizeArgs, global: &GlobalArgs) -> anyhow::Result<()> {
     let section = VoxelizeSection {
         cells: args.cells,
         cell_size: args.size,
-        rule: args.rule,
+        rule: args.rule.clone(),
         fraction: args.fraction,
         components: if args.all_components {
-            KeepComponents::All
+            ComponentPolicy::All
         } else {
-            KeepComponents::Largest
+            ComponentPolicy::LargestOnly
         },
         max_cells: args.max_cells,
     };
-    section.check().map_err(|e| {
-        let flag = match e.key {
-            "cell_size" => "size",
-            "max_cells" => "max-cells",
-            other => other,
-        };
-        let value = match flag {
-            "cells" => format!("{}", args.cells.unwrap_or_default()),
-            "size" => format!("{}", args.size.unwrap_or_default()),
-            "fraction" => format!("{}", args.fraction),
-            _ => format!("{}", args.max_cells),
-        };
-        // The table's message starts with "= VALUE; ": the flag prints it.
-        let reason = e
-            .message
-            .split_once("; ")
-            .map_or(e.message.as_str(), |(_, r)| r);
-        anyhow::anyhow!("--{flag} {value}: {reason}")
-    })?;
+    let registry = Registry::default();
+    let options = section
+        .check()
+        .and_then(|()| section.options(&registry.occupancy))
+        .map_err(|e| {
+            let flag = match e.key.as_str() {
+                "cell_size" => "size",
+                "max_cells" => "max-cells",
+                other => other,
+            };
+            let value = match flag {
+                "rule" => args.rule.clone(),
+                "cells" => format!("{}", args.cells.unwrap_or_default()),
+                "size" => format!("{}", args.size.unwrap_or_default()),
+                "fraction" => format!("{}", args.fraction),
+                _ => format!("{}", args.max_cells),
+            };
+            // The table's message starts with "= VALUE; ": the flag prints it.
+            let reason = e
+                .message
+                .split_once("; ")
+                .map_or(e.message.as_str(), |(_, r)| r);
+            anyhow::anyhow!("--{flag} {value}: {reason}")
+        })?;
     let source = match args.mesh.strip_prefix(mss_scene::scene::BUILTIN_PREFIX) {
         Some(name) => MeshSource::Builtin(name.to_owned()),
         None => MeshSource::File(PathBuf::from(&args.mesh)),
     };
-    // clap admits only the values these know.
     let placement = mss_scene::hexmesh::Placement {
-        units: mss_scene::hexmesh::Units::from_symbol(&args.units).unwrap_or_default(),
+        units: args.units,
         scale: [args.scale; 3],
-        up: match args.up.as_str() {
-            "x" => mss_scene::hexmesh::UpAxis::X,
-            "y" => mss_scene::hexmesh::UpAxis::Y,
-            _ => mss_scene::hexmesh::UpAxis::Z,
-        },
+        up: args.up,
         ..mss_scene::hexmesh::Placement::default()
     };
     mss_scene::build::prepare_output_folder(&out_dir)?;
     let t0 = Instant::now();
-    let placed = stages::load_placed(&source, &placement, &Registry::default().loaders)
+    let placed = stages::load_placed(&source, &placement, &registry.loaders)
         .context("cannot load the mesh (--units, --scale, --up)")?;
     let load_seconds = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
@@ -165,7 +162,7 @@ pub fn run(args: &VoxelizeArgs, global: &GlobalArgs) -> anyhow::Result<()> {
     let vox = stages::lattice_within(
         &placed.mesh,
         &placed.name,
-        &section.options(),
+        &options,
         &global.limits(),
         stages::RunNeeds::EXPLICIT,
         &hook,

@@ -245,7 +245,8 @@ pub(crate) fn solve_free(
 }
 
 /// Which linear solver the Newton steps use.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum LinearSolverKind {
     /// Direct up to [`DIRECT_MAX_FREE_DOFS`] free dofs, multigrid-preconditioned
     /// Krylov above (default).

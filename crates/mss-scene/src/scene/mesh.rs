@@ -1,7 +1,8 @@
 //! `[mesh]`: the surface file and its placement (units, scale, up axis,
 //! rotation, translation).
 
-use hexmesh::placement::{Placement, PlacementError, Units, UpAxis};
+use hexmesh::placement::{Placement, PlacementError};
+pub use hexmesh::placement::{Units, UpAxis};
 use serde::Deserialize;
 
 use super::key::KeyError;
@@ -17,13 +18,13 @@ pub struct MeshSection {
     pub path: String,
     /// Unit of the file's coordinates: `"m"` (default), `"cm"` or `"mm"`.
     #[serde(default)]
-    pub units: UnitsKey,
+    pub units: Units,
     /// Scale factor after units: one number, or `[sx, sy, sz]` (default 1).
     #[serde(default)]
     pub scale: ScaleKey,
     /// The file's up axis, turned to +z: `"x"`, `"y"` or `"z"` (default).
     #[serde(default)]
-    pub up: UpKey,
+    pub up: UpAxis,
     /// Rotation about the fixed x, then y, then z axis (degrees, default 0).
     #[serde(default)]
     pub rotate: [f64; 3],
@@ -36,7 +37,7 @@ impl MeshSection {
     /// Checks the keys: a non-empty `path`, and a placement that applies
     /// (finite, non-zero scale; finite rotation and translation).
     pub fn check(&self) -> Result<(), KeyError> {
-        let bad = |key: &'static str, message: String| Err(KeyError { key, message });
+        let bad = |key: &str, message: String| Err(KeyError::new(key, message));
         if self.path.trim().is_empty() {
             return bad(
                 "path",
@@ -59,50 +60,16 @@ impl MeshSection {
     /// The placement these keys describe.
     pub fn placement(&self) -> Placement {
         Placement {
-            units: match self.units {
-                UnitsKey::M => Units::Metres,
-                UnitsKey::Cm => Units::Centimetres,
-                UnitsKey::Mm => Units::Millimetres,
-            },
+            units: self.units,
             scale: match self.scale {
                 ScaleKey::Uniform(s) => [s; 3],
                 ScaleKey::PerAxis(s) => s,
             },
-            up: match self.up {
-                UpKey::X => UpAxis::X,
-                UpKey::Y => UpAxis::Y,
-                UpKey::Z => UpAxis::Z,
-            },
+            up: self.up,
             rotate_degrees: self.rotate,
             translate: self.translate,
         }
     }
-}
-
-/// `[mesh] units`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
-#[serde(rename_all = "lowercase")]
-pub enum UnitsKey {
-    /// Metres.
-    #[default]
-    M,
-    /// Centimetres.
-    Cm,
-    /// Millimetres.
-    Mm,
-}
-
-/// `[mesh] up`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
-#[serde(rename_all = "lowercase")]
-pub enum UpKey {
-    /// +x is up.
-    X,
-    /// +y is up.
-    Y,
-    /// +z is up.
-    #[default]
-    Z,
 }
 
 /// `[mesh] scale`: one factor or one per axis.

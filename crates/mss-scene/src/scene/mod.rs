@@ -17,7 +17,7 @@
 //! against a [`Registry`](crate::Registry) when the job is built.
 //!
 //! ```
-//! use mss_scene::scene::{Scene, VoxelResolution};
+//! use mss_scene::scene::{Resolution, Scene};
 //! let scene = Scene::from_toml_str(
 //!     r#"
 //!     [mesh]
@@ -33,7 +33,7 @@
 //! )
 //! .unwrap();
 //! assert_eq!(scene.solver.kind, "explicit");
-//! assert_eq!(scene.voxelize.resolution(), VoxelResolution::Cells(24));
+//! assert_eq!(scene.voxelize.resolution(), Resolution::CellsAlongLongestAxis(24));
 //!
 //! let err = Scene::from_toml_str("[mesh]\npath = \"a.obj\"\ncolour = 1\n", "bad.toml")
 //!     .unwrap_err()
@@ -44,15 +44,16 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::regions::{RegionSelector, RegionSpec};
 use mss_core::Material;
 use mss_core::constraints::{ConstraintSpec, NodeSelector};
 use serde::Deserialize;
 use thiserror::Error;
 
 mod constraints;
+mod contact;
 mod key;
 mod loads;
+mod material;
 mod mesh;
 mod model;
 mod output;
@@ -60,8 +61,10 @@ mod solver;
 mod voxelize;
 
 pub use constraints::*;
-pub use key::KeyError;
+pub use contact::*;
+pub use key::{KeyError, value_from_str};
 pub use loads::*;
+pub use material::*;
 pub use mesh::*;
 pub use model::*;
 pub use output::*;
@@ -176,10 +179,10 @@ pub struct Scene {
     pub regions: Vec<RegionSpec>,
     /// `[[obstacles]]`: rigid obstacles the body touches (see [`crate::obstacles`]).
     #[serde(default)]
-    pub obstacles: Vec<crate::obstacles::ObstacleSpec>,
+    pub obstacles: Vec<ObstacleSpec>,
     /// `[contact]`: which points touch them.
     #[serde(default)]
-    pub contact: crate::obstacles::ContactSection,
+    pub contact: ContactSection,
 }
 
 /// Where a scene's mesh comes from.
@@ -344,237 +347,57 @@ impl Scene {
             .collect()
     }
 
-    /// Checks ranges and consistency that need no physics. Material and
-    /// parameterization are checked by the library when the model is built.
+    /// Checks ranges and consistency that need no physics: each table by
+    /// its own `check`, then what involves two tables. Material and
+    /// parameterization are checked by the library when the model is built,
+    /// names (parameterization, integrator, rule, kinds) against the
+    /// registry when the job is built.
     pub fn validate(&self, name: &str) -> Result<(), SceneError> {
-        let bad = |key: &str, message: String| {
-            Err(SceneError::Invalid {
-                path: name.to_owned(),
-                key: key.to_owned(),
-                message,
-            })
+        let invalid = |key: String, message: String| SceneError::Invalid {
+            path: name.to_owned(),
+            key,
+            message,
         };
-        let finite3 = |v: &[f64; 3]| v.iter().all(|x| x.is_finite());
-
-        if let Err(e) = self.mesh.check() {
-            return bad(&e.scene_key("[mesh]"), e.message);
-        }
-        if let Err(e) = self.voxelize.check() {
-            return bad(&e.scene_key("[voxelize]"), e.message);
-        }
-        let m = &self.material;
-        for (key, value) in [
-            ("[material] young", m.young),
-            ("[material] poisson", m.poisson),
-            ("[material] density", m.density),
-        ] {
-            if !value.is_finite() {
-                return bad(key, format!("= {value}; must be a finite number"));
-            }
-        }
+        let in_table = |table: &str, e: KeyError| invalid(e.scene_key(table), e.message);
+        // An entry of a list of tables: `[[fixed]] #2`, and its key if any.
+        let in_list = |list: &str, i: usize, e: KeyError| {
+            let entry = format!("{list} #{}", i + 1);
+            let e = e.within(&entry);
+            invalid(e.key, e.message)
+        };
+        self.mesh.check().map_err(|e| in_table("[mesh]", e))?;
+        self.voxelize
+            .check()
+            .map_err(|e| in_table("[voxelize]", e))?;
+        check_material(&self.material).map_err(|e| in_table("[material]", e))?;
         for (i, s) in self.fixed.iter().enumerate() {
-            check_selector(s, &format!("[[fixed]] #{}", i + 1), name)?;
+            check_selector(s).map_err(|e| in_list("[[fixed]]", i, e))?;
         }
         for (i, r) in self.regions.iter().enumerate() {
-            let key = format!("[[regions]] #{}", i + 1);
-            match &r.select {
-                RegionSelector::Box { min, max, .. } => check_box(min, max, &key, name)?,
-                RegionSelector::Sphere { centre, radius } => {
-                    if !(finite3(centre) && radius.is_finite() && *radius > 0.0) {
-                        return bad(
-                            &key,
-                            format!(
-                                "sphere centre = {centre:?}, radius = {radius}: the centre must \
-                                 be finite and the radius a positive length (m)"
-                            ),
-                        );
-                    }
-                }
-                RegionSelector::Mesh { path } if path.trim().is_empty() => {
-                    return bad(
-                        &key,
-                        "mesh path is empty; give a closed surface file".into(),
-                    );
-                }
-                RegionSelector::Mesh { .. } => {}
-            }
-            for (what, value) in [
-                ("young", r.young),
-                ("poisson", r.poisson),
-                ("density", r.density),
-            ] {
-                if let Some(v) = value
-                    && !v.is_finite()
-                {
-                    return bad(&key, format!("{what} = {v}; must be a finite number"));
-                }
-            }
-            if r.young.is_none() && r.poisson.is_none() && r.density.is_none() {
-                return bad(
-                    &key,
-                    "gives none of young, poisson, density: it would change nothing".into(),
-                );
-            }
+            r.check().map_err(|e| in_list("[[regions]]", i, e))?;
         }
-        let l = &self.loads;
-        if let Some(g) = &l.gravity
-            && !finite3(g)
-        {
-            return bad("[loads] gravity", format!("= {g:?}; must be finite"));
+        self.loads
+            .check()
+            .map_err(|e| match e.key.split_once(" #") {
+                // `forces #1` is the list `[[loads.forces]]`.
+                Some((list, n)) => invalid(format!("[[loads.{list}]] #{n}"), e.message),
+                None => in_table("[loads]", e),
+            })?;
+        for (i, m) in self.motions.iter().enumerate() {
+            m.check().map_err(|e| in_list("[[motions]]", i, e))?;
         }
-        for (i, f) in l.forces.iter().enumerate() {
-            let key = format!("[[loads.forces]] #{}", i + 1);
-            check_selector(&f.select, &key, name)?;
-            if !finite3(&f.force) {
-                return bad(&key, format!("force = {:?}; must be finite", f.force));
-            }
+        self.solver.check().map_err(|e| in_table("[solver]", e))?;
+        self.output.check().map_err(|e| in_table("[output]", e))?;
+        for (i, o) in self.obstacles.iter().enumerate() {
+            o.check().map_err(|e| in_list("[[obstacles]]", i, e))?;
         }
-        for (i, t) in l.tractions.iter().enumerate() {
-            let key = format!("[[loads.tractions]] #{}", i + 1);
-            check_box(&t.min, &t.max, &key, name)?;
-            if !finite3(&t.traction) {
-                return bad(&key, format!("traction = {:?}; must be finite", t.traction));
-            }
-        }
-        for (i, d) in l.drags.iter().enumerate() {
-            let key = format!("[[loads.drags]] #{}", i + 1);
-            check_selector(&d.select, &key, name)?;
-            if !finite3(&d.target) {
-                return bad(
-                    &key,
-                    format!("target = {:?}; must be a finite point", d.target),
-                );
-            }
-            if !(d.stiffness.is_finite() && d.stiffness > 0.0) {
-                return bad(
-                    &key,
-                    format!("stiffness = {}; must be positive (N/m)", d.stiffness),
-                );
-            }
-        }
-        for (i, mo) in self.motions.iter().enumerate() {
-            let key = format!("[[motions]] #{}", i + 1);
-            check_selector(&mo.select, &key, name)?;
-            if !finite3(&mo.displacement) {
-                return bad(
-                    &key,
-                    format!("displacement = {:?}; must be finite", mo.displacement),
-                );
-            }
-            if let Some(r) = mo.ramp
-                && !(r.is_finite() && r > 0.0)
-            {
-                return bad(&key, format!("ramp = {r}; must be a positive time (s)"));
-            }
-        }
-        if let Err(e) = self.solver.check() {
-            return bad(&e.scene_key("[solver]"), e.message);
-        }
-        let o = &self.output;
-        if o.folder.as_os_str().is_empty() {
-            return bad("[output] folder", "is empty; give a folder name".into());
-        }
-        if o.pvd && !o.vtu {
-            return bad(
-                "[output] pvd",
-                "a .pvd collection lists .vtu frames: set vtu = true too, or pvd = false".into(),
-            );
-        }
-        if let Some(i) = o.exporters.iter().position(|n| n.trim().is_empty()) {
-            return bad(
-                "[output] exporters",
-                format!("entry #{} is empty; give an exporter name", i + 1),
-            );
-        }
-        if !(o.vtu
-            || o.vtk
-            || o.skin_obj
-            || o.skin_stl
-            || o.embedded
-            || o.springs
-            || !o.exporters.is_empty())
-        {
-            return bad(
-                "[output]",
-                "every output kind is off; enable at least one of vtu, vtk, skin_obj, \
-                 skin_stl, embedded, springs"
-                    .into(),
-            );
-        }
-        match (o.every_steps, o.every_time) {
-            (Some(_), Some(_)) => {
-                return bad(
-                    "[output]",
-                    "give either every_steps or every_time, not both".into(),
-                );
-            }
-            (Some(0), _) => {
-                return bad("[output] every_steps", "= 0; must be at least 1".into());
-            }
-            (_, Some(t)) if !(t.is_finite() && t > 0.0) => {
-                return bad(
-                    "[output] every_time",
-                    format!("= {t}; must be a positive time (s)"),
-                );
-            }
-            _ => {}
-        }
-        if let Some(t) = o.checkpoint_every {
-            if !(t.is_finite() && t > 0.0) {
-                return bad(
-                    "[output] checkpoint_every",
-                    format!("= {t}; must be a positive time (s)"),
-                );
-            }
-            if self.solver.is_static() {
-                return bad(
-                    "[output] checkpoint_every",
-                    "a static solve is one step and has nothing to resume; remove the key or use a time-stepping solver".into(),
-                );
-            }
+        if self.output.checkpoint_every.is_some() && self.solver.is_static() {
+            return Err(invalid(
+                "[output] checkpoint_every".into(),
+                "a static solve is one step and has nothing to resume; remove the key or use a time-stepping solver".into(),
+            ));
         }
         Ok(())
-    }
-}
-
-fn check_box(min: &[f64; 3], max: &[f64; 3], key: &str, name: &str) -> Result<(), SceneError> {
-    if !(min.iter().chain(max).all(|v| v.is_finite())) || (0..3).any(|k| min[k] > max[k]) {
-        return Err(SceneError::Invalid {
-            path: name.to_owned(),
-            key: key.to_owned(),
-            message: format!(
-                "box min = {min:?}, max = {max:?}: coordinates must be finite with min <= max"
-            ),
-        });
-    }
-    Ok(())
-}
-
-fn check_selector(s: &NodeSelector, key: &str, name: &str) -> Result<(), SceneError> {
-    let bad = |message: String| {
-        Err(SceneError::Invalid {
-            path: name.to_owned(),
-            key: key.to_owned(),
-            message,
-        })
-    };
-    match s {
-        NodeSelector::LowestLayer | NodeSelector::Face { .. } => Ok(()),
-        NodeSelector::Box { min, max, .. } => check_box(min, max, key, name),
-        NodeSelector::Plane { value, .. } => {
-            if !value.is_finite() {
-                return bad(format!(
-                    "plane value = {value}; must be a finite position (m)"
-                ));
-            }
-            Ok(())
-        }
-        NodeSelector::Indices { nodes } => {
-            if nodes.is_empty() {
-                return bad("`nodes` is empty; list at least one node index".into());
-            }
-            Ok(())
-        }
     }
 }
 
@@ -687,10 +510,6 @@ mod tests {
             ("[solver]\nsafety = 1.5\n", "[solver] safety"),
             ("[voxelize]\ncells = 0\n", "[voxelize] cells"),
             ("[voxelize]\ncells = 4\ncell_size = 0.1\n", "not both"),
-            (
-                "[voxelize]\nrule = \"most\"\n",
-                "`centre`, `any`, `fraction`",
-            ),
             ("[output]\nevery_steps = 0\n", "[output] every_steps"),
             (
                 "[[fixed]]\nkind = \"box\"\nmin = [1,0,0]\nmax = [0,1,1]\n",

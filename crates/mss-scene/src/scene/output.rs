@@ -2,7 +2,10 @@
 
 use std::path::PathBuf;
 
+pub use mss_io::skin::Normals;
 use serde::Deserialize;
+
+use super::key::KeyError;
 
 /// `[output]`: what is written and when.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -38,10 +41,10 @@ pub struct OutputSection {
     /// Shading of the skin OBJ files: `"flat"` (one normal per triangle,
     /// default: the skin is made of cube faces) or `"smooth"`.
     #[serde(default = "flat")]
-    pub skin_normals: NormalsKey,
+    pub skin_normals: Normals,
     /// Shading of the embedded surface's OBJ files: `"smooth"` (default) or `"flat"`.
     #[serde(default)]
-    pub surface_normals: NormalsKey,
+    pub surface_normals: Normals,
     /// Point caches for Blender's Mesh Cache modifier (default false):
     /// `skin.pc2` with its rest shape `skin_rest.obj`, and, with `embedded`,
     /// `surface.pc2` with `surface_rest.obj`; one sample per frame.
@@ -101,37 +104,16 @@ impl CompressionKey {
     }
 }
 
-/// `[output] skin_normals` / `surface_normals`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
-#[serde(rename_all = "lowercase")]
-pub enum NormalsKey {
-    /// One normal per vertex.
-    #[default]
-    Smooth,
-    /// One normal per triangle.
-    Flat,
-}
-
-impl NormalsKey {
-    /// The writer's setting.
-    pub fn normals(self) -> mss_io::skin::Normals {
-        match self {
-            NormalsKey::Smooth => mss_io::skin::Normals::Smooth,
-            NormalsKey::Flat => mss_io::skin::Normals::Flat,
-        }
-    }
-
-    /// The skin exporter writing OBJ files with these normals.
-    pub fn obj_exporter(self) -> &'static str {
-        match self {
-            NormalsKey::Smooth => "obj",
-            NormalsKey::Flat => "obj-flat",
-        }
+/// The skin exporter that writes OBJ files shaded with `normals`.
+pub fn obj_exporter(normals: Normals) -> &'static str {
+    match normals {
+        Normals::Smooth => "obj",
+        Normals::Flat => "obj-flat",
     }
 }
 
-fn flat() -> NormalsKey {
-    NormalsKey::Flat
+fn flat() -> Normals {
+    Normals::Flat
 }
 
 fn default_folder() -> PathBuf {
@@ -152,8 +134,8 @@ impl Default for OutputSection {
             skin_obj: true,
             skin_stl: false,
             embedded: true,
-            skin_normals: NormalsKey::Flat,
-            surface_normals: NormalsKey::Smooth,
+            skin_normals: Normals::Flat,
+            surface_normals: Normals::Smooth,
             pc2: false,
             springs: false,
             every_steps: None,
@@ -162,5 +144,64 @@ impl Default for OutputSection {
             checkpoint_every: None,
             exporters: Vec::new(),
         }
+    }
+}
+
+impl OutputSection {
+    /// Checks the keys: a folder name, `.pvd` only with `.vtu`, named
+    /// exporters non-empty, at least one kind of output, one frame
+    /// schedule with positive values, a positive checkpoint interval.
+    /// Whether `checkpoint_every` suits the solver is the scene's
+    /// cross-table check.
+    pub fn check(&self) -> Result<(), KeyError> {
+        let bad = |key: &str, message: &str| Err(KeyError::new(key, message));
+        if self.folder.as_os_str().is_empty() {
+            return bad("folder", "is empty; give a folder name");
+        }
+        if self.pvd && !self.vtu {
+            return bad(
+                "pvd",
+                "a .pvd collection lists .vtu frames: set vtu = true too, or pvd = false",
+            );
+        }
+        if let Some(i) = self.exporters.iter().position(|n| n.trim().is_empty()) {
+            return bad(
+                "exporters",
+                &format!("entry #{} is empty; give an exporter name", i + 1),
+            );
+        }
+        if !(self.vtu
+            || self.vtk
+            || self.skin_obj
+            || self.skin_stl
+            || self.embedded
+            || self.springs
+            || !self.exporters.is_empty())
+        {
+            return bad(
+                "",
+                "every output kind is off; enable at least one of vtu, vtk, skin_obj, \
+                 skin_stl, embedded, springs",
+            );
+        }
+        match (self.every_steps, self.every_time) {
+            (Some(_), Some(_)) => {
+                return bad("", "give either every_steps or every_time, not both");
+            }
+            (Some(0), _) => return bad("every_steps", "= 0; must be at least 1"),
+            (_, Some(t)) if !(t.is_finite() && t > 0.0) => {
+                return bad("every_time", &format!("= {t}; must be a positive time (s)"));
+            }
+            _ => {}
+        }
+        if let Some(t) = self.checkpoint_every
+            && !(t.is_finite() && t > 0.0)
+        {
+            return bad(
+                "checkpoint_every",
+                &format!("= {t}; must be a positive time (s)"),
+            );
+        }
+        Ok(())
     }
 }

@@ -108,7 +108,7 @@ pub struct SolverSection {
     /// above [`mss_core::solver::DIRECT_MAX_FREE_DOFS`] free dofs),
     /// `"direct"` or `"iterative"`.
     #[serde(default)]
-    pub linear_solver: LinearSolverChoice,
+    pub linear_solver: LinearSolverKind,
     /// Static solves: the load is applied in this many equal first
     /// increments (default 1; the solver halves an increment that fails and
     /// doubles one that succeeds).
@@ -125,29 +125,6 @@ pub struct SolverSection {
     /// (default false).
     #[serde(default)]
     pub accept_unstable: bool,
-}
-
-/// `[solver] linear_solver`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
-#[serde(rename_all = "snake_case")]
-pub enum LinearSolverChoice {
-    /// Direct for small problems, iterative for large ones.
-    #[default]
-    Auto,
-    /// Sparse LU.
-    Direct,
-    /// Multigrid-preconditioned conjugate gradients or GMRES.
-    Iterative,
-}
-
-impl From<LinearSolverChoice> for LinearSolverKind {
-    fn from(c: LinearSolverChoice) -> Self {
-        match c {
-            LinearSolverChoice::Auto => LinearSolverKind::Auto,
-            LinearSolverChoice::Direct => LinearSolverKind::Direct,
-            LinearSolverChoice::Iterative => LinearSolverKind::Iterative,
-        }
-    }
 }
 
 fn default_load_steps() -> u32 {
@@ -182,7 +159,7 @@ impl Default for SolverSection {
             duration: default_duration(),
             tolerance: default_tolerance(),
             max_iterations: default_max_iterations(),
-            linear_solver: LinearSolverChoice::default(),
+            linear_solver: LinearSolverKind::default(),
             load_steps: default_load_steps(),
             linear: false,
             accept_unstable: false,
@@ -195,7 +172,7 @@ impl SolverSection {
     /// tolerance, iterations, load steps); whether `kind` names an
     /// integrator is known only against a registry, when the job is built.
     pub fn check(&self) -> Result<(), KeyError> {
-        let bad = |key: &'static str, message: String| Err(KeyError { key, message });
+        let bad = |key: &str, message: String| Err(KeyError::new(key, message));
         let s = self;
         if !(s.duration.is_finite() && s.duration > 0.0) {
             return bad(

@@ -1,71 +1,90 @@
 //! `[voxelize]`: how the surface becomes a lattice (resolution, occupancy rule,
 //! components, size limit), with the table's own range check.
 
-use hexmesh::voxelize::{ComponentPolicy, OccupancyRule, Resolution, VoxelizeOptions};
+use std::sync::Arc;
+
+use hexmesh::voxelize::VoxelizeOptions;
+pub use hexmesh::voxelize::{ComponentPolicy, OccupancyRule, Resolution};
+use mss_registry::Named;
 use serde::Deserialize;
 
 use super::key::KeyError;
 
-/// Which connected components of the voxelized lattice are kept.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
-#[serde(rename_all = "snake_case")]
-pub enum KeepComponents {
-    /// Only the largest face-connected component (default: a body in one piece).
-    #[default]
-    Largest,
-    /// Every component.
-    All,
+/// Builds the voxelizer's rule from `[voxelize] fraction` (the threshold a
+/// rule may use): one entry of [`OccupancyRules`].
+pub type OccupancyFactory = Arc<dyn Fn(f64) -> OccupancyRule + Send + Sync>;
+
+/// The occupancy rules a scene can name in `[voxelize] rule` (and `mss
+/// voxelize --rule`, Python's `voxelize(rule=...)`): the built-ins `centre`
+/// (the cell's centre inside, default), `any` (the cell overlaps the solid)
+/// and `fraction` (at least `fraction` of the cell inside, sampled 4 x 4 x
+/// 4), and any a program registers, usually an
+/// [`OccupancyRule::Custom`] around its own [`hexmesh::voxelize::Occupancy`].
+///
+/// ```
+/// use std::sync::Arc;
+/// use hexmesh::voxelize::OccupancyRule;
+/// use mss_scene::scene::{OccupancyRules, VoxelizeSection};
+///
+/// let mut rules = OccupancyRules::default();
+/// // A finer-sampled fraction rule, under its own name.
+/// rules.register("fraction-fine", Arc::new(|f| OccupancyRule::Fraction {
+///     threshold: f,
+///     samples_per_axis: 8,
+/// }));
+/// let section = VoxelizeSection { rule: "fraction-fine".into(), ..Default::default() };
+/// let options = section.options(&rules).unwrap();
+/// assert!(matches!(options.rule, OccupancyRule::Fraction { samples_per_axis: 8, .. }));
+/// let unknown = VoxelizeSection { rule: "most".into(), ..Default::default() };
+/// let err = unknown.options(&rules).unwrap_err();
+/// assert_eq!(err.key, "rule");
+/// assert!(err.message.contains("known: centre, any, fraction, fraction-fine"), "{}", err.message);
+/// ```
+#[derive(Clone, Debug)]
+pub struct OccupancyRules {
+    entries: Named<OccupancyFactory>,
 }
 
-/// The occupancy rule of `[voxelize] rule`: which grid cells become lattice
-/// cells.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
-#[serde(rename_all = "snake_case")]
-pub enum OccupancyKind {
-    /// The cell's centre is inside the surface (default).
-    #[default]
-    Centre,
-    /// The cell overlaps the solid.
-    Any,
-    /// At least `fraction` of the cell is inside.
-    Fraction,
-}
-
-impl OccupancyKind {
-    /// Every rule, by its scene name.
-    pub const ALL: [(&'static str, OccupancyKind); 3] = [
-        ("centre", OccupancyKind::Centre),
-        ("any", OccupancyKind::Any),
-        ("fraction", OccupancyKind::Fraction),
-    ];
-
-    /// The voxelizer's rule; `fraction` is the threshold of [`OccupancyKind::Fraction`].
-    pub fn rule(self, fraction: f64) -> OccupancyRule {
-        match self {
-            OccupancyKind::Centre => OccupancyRule::Centre,
-            OccupancyKind::Any => OccupancyRule::AnyOverlap,
-            OccupancyKind::Fraction => OccupancyRule::Fraction {
-                threshold: fraction,
+impl Default for OccupancyRules {
+    fn default() -> Self {
+        let mut rules = OccupancyRules {
+            entries: Named::new(),
+        };
+        rules.register("centre", Arc::new(|_| OccupancyRule::Centre));
+        rules.register("any", Arc::new(|_| OccupancyRule::AnyOverlap));
+        rules.register(
+            "fraction",
+            Arc::new(|threshold| OccupancyRule::Fraction {
+                threshold,
                 samples_per_axis: 4,
-            },
-        }
+            }),
+        );
+        rules
     }
 }
 
-impl std::str::FromStr for OccupancyKind {
-    type Err = String;
+impl OccupancyRules {
+    /// Registers (or replaces) the rule called `name`.
+    pub fn register(&mut self, name: &str, factory: OccupancyFactory) {
+        self.entries.register(name, factory);
+    }
 
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        Self::ALL
-            .iter()
-            .find(|(name, _)| *name == s)
-            .map(|(_, k)| *k)
-            .ok_or_else(|| {
-                format!(
-                    "unknown occupancy rule \"{s}\"; use one of {}",
-                    Self::ALL.map(|(n, _)| n).join(", ")
-                )
-            })
+    /// The registered names, in registration order.
+    pub fn names(&self) -> Vec<String> {
+        self.entries.names()
+    }
+
+    /// The rule called `name` with the threshold `fraction`, or the key
+    /// error naming the known rules.
+    pub fn rule(&self, name: &str, fraction: f64) -> Result<OccupancyRule, KeyError> {
+        let factory = self.entries.lookup(name).map_err(|u| KeyError {
+            key: "rule".into(),
+            message: format!(
+                "= {:?}; unknown occupancy rule (known: {})",
+                u.name, u.known
+            ),
+        })?;
+        Ok(factory(fraction))
     }
 }
 
@@ -78,23 +97,27 @@ pub struct VoxelizeSection {
     pub cells: Option<u32>,
     /// Cell edge h (m), instead of `cells`.
     pub cell_size: Option<f64>,
-    /// Occupancy rule: `"centre"` (cell centre inside the surface, default),
-    /// `"any"` (cell overlaps the solid), `"fraction"` (at least `fraction` of
-    /// the cell inside).
-    #[serde(default)]
-    pub rule: OccupancyKind,
+    /// Occupancy rule, by its name in [`OccupancyRules`]: `"centre"` (cell
+    /// centre inside the surface, default), `"any"` (cell overlaps the
+    /// solid), `"fraction"` (at least `fraction` of the cell inside), or one a
+    /// program registered.
+    #[serde(default = "default_rule")]
+    pub rule: String,
     /// Minimum inside fraction for `rule = "fraction"` (0 < f <= 1, default 0.5).
     #[serde(default = "default_fraction")]
     pub fraction: f64,
     /// Connected components kept: `"largest"` (default) or `"all"`.
     #[serde(default)]
-    pub components: KeepComponents,
+    pub components: ComponentPolicy,
     /// Refuse lattices with more cells than this (default:
     /// [`VoxelizeOptions::default`]'s).
     #[serde(default = "default_max_cells")]
     pub max_cells: u64,
 }
 
+fn default_rule() -> String {
+    "centre".to_owned()
+}
 fn default_fraction() -> f64 {
     0.5
 }
@@ -107,21 +130,12 @@ impl Default for VoxelizeSection {
         Self {
             cells: None,
             cell_size: None,
-            rule: OccupancyKind::default(),
+            rule: default_rule(),
             fraction: default_fraction(),
-            components: KeepComponents::default(),
+            components: ComponentPolicy::default(),
             max_cells: default_max_cells(),
         }
     }
-}
-
-/// The lattice resolution a `[voxelize]` table asks for.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum VoxelResolution {
-    /// Cells along the longest axis of the mesh's bounding box.
-    Cells(u32),
-    /// Cell edge (m).
-    CellSize(f64),
 }
 
 /// Cells along the longest axis when `[voxelize]` gives neither `cells` nor `cell_size`.
@@ -130,11 +144,11 @@ pub const DEFAULT_CELLS: u32 = 24;
 impl VoxelizeSection {
     /// The requested resolution (`cell_size` if given, else `cells`, else
     /// [`DEFAULT_CELLS`]).
-    pub fn resolution(&self) -> VoxelResolution {
+    pub fn resolution(&self) -> Resolution {
         match (self.cell_size, self.cells) {
-            (Some(h), _) => VoxelResolution::CellSize(h),
-            (None, Some(n)) => VoxelResolution::Cells(n),
-            (None, None) => VoxelResolution::Cells(DEFAULT_CELLS),
+            (Some(h), _) => Resolution::CellSize(h),
+            (None, Some(n)) => Resolution::CellsAlongLongestAxis(n),
+            (None, None) => Resolution::CellsAlongLongestAxis(DEFAULT_CELLS),
         }
     }
 
@@ -144,7 +158,7 @@ impl VoxelizeSection {
     /// `mss voxelize`, Python's `voxelize`) checks it here and names the
     /// key its own way ([`KeyError::key`]).
     pub fn check(&self) -> Result<(), KeyError> {
-        let bad = |key: &'static str, message: String| Err(KeyError { key, message });
+        let bad = |key: &str, message: String| Err(KeyError::new(key, message));
         match (self.cells, self.cell_size) {
             (Some(_), Some(_)) => {
                 return bad("", "give either `cells` or `cell_size`, not both".into());
@@ -175,21 +189,15 @@ impl VoxelizeSection {
         Ok(())
     }
 
-    /// The voxelizer's options for this table (ranges are checked by
-    /// [`VoxelizeSection::check`]).
-    pub fn options(&self) -> VoxelizeOptions {
-        VoxelizeOptions {
-            resolution: match self.resolution() {
-                VoxelResolution::Cells(n) => Resolution::CellsAlongLongestAxis(n),
-                VoxelResolution::CellSize(h) => Resolution::CellSize(h),
-            },
-            rule: self.rule.rule(self.fraction),
+    /// The voxelizer's options for this table, its rule resolved in
+    /// `rules` (ranges are checked by [`VoxelizeSection::check`]).
+    pub fn options(&self, rules: &OccupancyRules) -> Result<VoxelizeOptions, KeyError> {
+        Ok(VoxelizeOptions {
+            resolution: self.resolution(),
+            rule: rules.rule(&self.rule, self.fraction)?,
             max_cells: self.max_cells,
-            components: match self.components {
-                KeepComponents::Largest => ComponentPolicy::LargestOnly,
-                KeepComponents::All => ComponentPolicy::All,
-            },
+            components: self.components,
             ..VoxelizeOptions::default()
-        }
+        })
     }
 }

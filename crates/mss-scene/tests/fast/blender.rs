@@ -62,7 +62,8 @@ fn point_caches_hold_every_frame_of_their_rest_shapes() {
         assert_eq!(last_vn, vn, "{stem}");
     }
     // Counted, and removed as files of an earlier run.
-    let listed = mss_scene::output::previous_run_files(d);
+    let listed =
+        mss_scene::output::previous_run_files(d, &mss_scene::Registry::default().exporters);
     for name in [
         "skin.pc2",
         "skin_rest.obj",

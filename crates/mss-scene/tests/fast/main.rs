@@ -5,6 +5,7 @@
 mod blender;
 mod job;
 mod placement;
+mod plug_points;
 mod regions;
 mod shapes;
 mod stages;

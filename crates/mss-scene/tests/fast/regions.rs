@@ -175,7 +175,7 @@ fn bad_regions_are_refused_with_their_key() {
         ),
         (
             "[[regions]]\nselect = { kind = \"cube\" }\nyoung = 1.0\n",
-            "unknown variant `cube`",
+            "unknown region selector kind \"cube\"; known: box, sphere, mesh",
         ),
         (
             "[[regions]]\nselect = { kind = \"box\", min = [0.0, 0.0, 0.0], max = [1.0, 1.0, 1.0] }\nyoung = 1.0\nstiffness = 2.0\n",

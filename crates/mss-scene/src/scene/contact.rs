@@ -1,0 +1,68 @@
+//! `[[obstacles]]` and `[contact]`: the rigid obstacles a body touches and
+//! which of its points touch them, as tables; building them into the
+//! library's contact is [`crate::obstacles`]'s.
+
+use mss_core::Vec3;
+use mss_core::contact::{ContactPoints, Path};
+use serde::Deserialize;
+
+use super::key::KeyError;
+use crate::kind_table::KindTable;
+
+/// `[contact]`: which points touch the obstacles.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct ContactSection {
+    /// `"nodes"` (the lattice's boundary nodes, default), `"surface"` (the
+    /// embedded input surface's vertices, what is rendered) or `"both"`.
+    #[serde(default)]
+    pub points: ContactPoints,
+}
+
+/// One `[[obstacles]]` table.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ObstacleSpec {
+    /// The shape.
+    pub shape: KindTable,
+    /// Coulomb friction coefficient (default 0.5).
+    pub friction: Option<f64>,
+    /// Kinetic friction coefficient (default: `friction`).
+    pub friction_kinetic: Option<f64>,
+    /// Penalty stiffness (N/m) of a node of the mean boundary-node mass
+    /// (default: see `mss_core::contact::ContactSettings::for_model`).
+    pub stiffness: Option<f64>,
+    /// Damping ratio of the contact spring (default 0.2).
+    pub damping_ratio: Option<f64>,
+    /// Keyframes `[t, dx, dy, dz]` of the obstacle's offset (s, m).
+    #[serde(default)]
+    pub motion: Vec<[f64; 4]>,
+}
+
+impl ObstacleSpec {
+    /// Checks what needs no model: the keyframes `[t, dx, dy, dz]` are
+    /// finite with increasing times. Friction, stiffness and damping are
+    /// checked by the library's `ContactSettings::validate` once the
+    /// model's defaults fill what the table leaves out, and the shape's
+    /// keys by its factory, both when the problem is built.
+    pub fn check(&self) -> Result<(), KeyError> {
+        self.path().map(|_| ())
+    }
+
+    /// The obstacle's motion: its keyframes as a path, or the key error
+    /// saying why they are not one.
+    pub fn path(&self) -> Result<Path, KeyError> {
+        Path::new(
+            self.motion
+                .iter()
+                .map(|k| (k[0], Vec3::new(k[1], k[2], k[3])))
+                .collect(),
+        )
+        .ok_or_else(|| {
+            KeyError::new(
+                "motion",
+                "keyframes [t, dx, dy, dz] must be finite with increasing times",
+            )
+        })
+    }
+}
