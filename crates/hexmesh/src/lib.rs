@@ -74,6 +74,8 @@ pub mod springs;
 pub mod voxelize;
 #[cfg(feature = "vtk")]
 pub mod vtk;
+#[cfg(feature = "vtk")]
+mod vtk_bounds;
 pub mod winding;
 
 pub use embed::Embedding;

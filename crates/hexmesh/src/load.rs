@@ -355,7 +355,15 @@ pub struct Loaders {
     loaders: Vec<Arc<dyn MeshLoader>>,
     /// Largest mesh file read (bytes; default [`MAX_MESH_BYTES`]).
     pub max_bytes: u64,
+    /// Most bytes a file's compressed content may unpack to, checked from
+    /// what it declares before anything is unpacked (default
+    /// [`MAX_UNPACKED_BYTES`]; a job lowers it to its memory limit).
+    pub max_unpacked_bytes: u64,
 }
+
+/// Default most bytes a compressed mesh file may unpack to: twice the
+/// largest file read.
+pub const MAX_UNPACKED_BYTES: u64 = 2 * MAX_MESH_BYTES;
 
 /// Largest coordinate magnitude accepted (m).
 pub const MAX_COORDINATE: f64 = 1e9;
@@ -376,6 +384,7 @@ impl Default for Loaders {
                 Arc::new(crate::vtk::VtkLoader),
             ],
             max_bytes: MAX_MESH_BYTES,
+            max_unpacked_bytes: MAX_UNPACKED_BYTES,
         }
     }
 }
@@ -471,7 +480,7 @@ impl Loaders {
                 limit: self.max_bytes,
             });
         }
-        load_with(loader, &bytes, &name)
+        load_with(loader, &bytes, &name, self.max_unpacked_bytes)
     }
 }
 
@@ -490,12 +499,12 @@ pub fn load_mesh_bytes(
     name: &str,
 ) -> Result<LoadedMesh, LoadError> {
     match format {
-        MeshFormat::Obj => load_with(&ObjLoader, bytes, name),
-        MeshFormat::Stl => load_with(&StlLoader, bytes, name),
+        MeshFormat::Obj => load_with(&ObjLoader, bytes, name, MAX_UNPACKED_BYTES),
+        MeshFormat::Stl => load_with(&StlLoader, bytes, name, MAX_UNPACKED_BYTES),
         #[cfg(feature = "ply")]
-        MeshFormat::Ply => load_with(&crate::ply::PlyLoader, bytes, name),
+        MeshFormat::Ply => load_with(&crate::ply::PlyLoader, bytes, name, MAX_UNPACKED_BYTES),
         #[cfg(feature = "vtk")]
-        MeshFormat::Vtk => load_with(&crate::vtk::VtkLoader, bytes, name),
+        MeshFormat::Vtk => load_with(&crate::vtk::VtkLoader, bytes, name, MAX_UNPACKED_BYTES),
         #[cfg(not(all(feature = "ply", feature = "vtk")))]
         other => Err(LoadError::FormatNotBuilt {
             file: file(name),
@@ -505,11 +514,16 @@ pub fn load_mesh_bytes(
     }
 }
 
-fn load_with(loader: &dyn MeshLoader, bytes: &[u8], name: &str) -> Result<LoadedMesh, LoadError> {
+fn load_with(
+    loader: &dyn MeshLoader,
+    bytes: &[u8],
+    name: &str,
+    budget: u64,
+) -> Result<LoadedMesh, LoadError> {
     if bytes.is_empty() {
         return Err(LoadError::Empty { file: file(name) });
     }
-    let raw = loader.load(bytes, name)?;
+    let raw = loader.load_within(bytes, name, budget)?;
     clean_mesh(raw, 0.0, name)
 }
 

@@ -198,6 +198,14 @@ pub trait MeshLoader: Send + Sync {
     /// Parses `bytes` (the whole file) into a raw mesh; `name` is used in
     /// errors. Cleaning and checks are done by the caller.
     fn load(&self, bytes: &[u8], name: &str) -> Result<TriMesh, LoadError>;
+    /// [`MeshLoader::load`] where what the file unpacks to may take at most
+    /// `budget` bytes: a compressed format checks what its content declares
+    /// before unpacking it, and refuses more. The default ignores the
+    /// budget, right for a format that takes about its file's size.
+    fn load_within(&self, bytes: &[u8], name: &str, budget: u64) -> Result<TriMesh, LoadError> {
+        let _ = budget;
+        self.load(bytes, name)
+    }
 }
 
 /// A message on one line (a parser's text may span several).

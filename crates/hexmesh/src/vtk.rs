@@ -44,6 +44,31 @@ use crate::loader::{LoadError, MeshLoader, one_line};
 #[derive(Debug, Clone, Copy, Default)]
 pub struct VtkLoader;
 
+thread_local! {
+    /// Whether a panic on this thread is being caught by [`catch_quietly`].
+    static QUIET: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Runs `f`, a call into a reader that may panic on malformed input,
+/// catching its panic without the panic hook printing it: the caller turns
+/// it into one error line. Other threads' panics print as before (the
+/// previous hook runs for them).
+fn catch_quietly<R>(f: impl FnOnce() -> R + std::panic::UnwindSafe) -> std::thread::Result<R> {
+    static HOOK: std::sync::Once = std::sync::Once::new();
+    HOOK.call_once(|| {
+        let previous = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            if !QUIET.with(std::cell::Cell::get) {
+                previous(info);
+            }
+        }));
+    });
+    let was = QUIET.with(|q| q.replace(true));
+    let result = std::panic::catch_unwind(f);
+    QUIET.with(|q| q.set(was));
+    result
+}
+
 /// Cell lists as (vertex list) per cell, from either vtkio layout. `None`
 /// when the offsets are inconsistent with the connectivity.
 fn cell_lists(numbers: &VertexNumbers) -> Option<Vec<Vec<u64>>> {
@@ -302,6 +327,13 @@ impl MeshLoader for VtkLoader {
     }
 
     fn load(&self, bytes: &[u8], name: &str) -> Result<TriMesh, LoadError> {
+        self.load_within(bytes, name, crate::load::MAX_UNPACKED_BYTES)
+    }
+
+    /// Reads the file, refusing compressed XML arrays whose headers declare
+    /// more than their pieces can need or more than `budget` bytes in all,
+    /// before any is decompressed.
+    fn load_within(&self, bytes: &[u8], name: &str, budget: u64) -> Result<TriMesh, LoadError> {
         let parse_error = |message: String| LoadError::Parse {
             file: PathBuf::from(name),
             line: None,
@@ -340,9 +372,21 @@ impl MeshLoader for VtkLoader {
                 message,
             });
         }
+        // vtkio allocates what a compressed array's header declares and
+        // slices its blocks by the header's sizes: check the headers first.
+        if is_xml
+            && let Err((line, message)) = crate::vtk_bounds::check_compressed_arrays(bytes, budget)
+        {
+            return Err(LoadError::Parse {
+                file: PathBuf::from(name),
+                line: Some(line),
+                message,
+            });
+        }
         // vtkio is a pre-release: a panic inside it on a malformed file must
-        // still be an error about that file, not an abort of the program.
-        let parsed = std::panic::catch_unwind(|| {
+        // still be an error about that file, not an abort of the program,
+        // and its message must not reach the user's terminal.
+        let parsed = catch_quietly(|| {
             if is_xml {
                 Vtk::parse_xml(Cursor::new(bytes))
             } else {

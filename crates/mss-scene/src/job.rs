@@ -201,6 +201,8 @@ impl Job {
         let scene_name = input.name();
         let scene = &input.scene;
         let t0 = Instant::now();
+        let mut registry = registry;
+        limits.bound_loaders(&mut registry.loaders);
         let stage_error = |e: StageError| match e {
             StageError::Source(crate::build::MeshSourceError::Load(source)) => JobError::Mesh {
                 scene: scene_name.clone(),

@@ -41,6 +41,15 @@ pub struct Limits {
     pub output_bytes: Option<u64>,
 }
 
+impl Limits {
+    /// `loaders` whose compressed files may unpack to at most the memory
+    /// limit (or their own bound, if lower): a hostile file is refused
+    /// from what it declares before it is unpacked.
+    pub fn bound_loaders(&self, loaders: &mut hexmesh::load::Loaders) {
+        loaders.max_unpacked_bytes = loaders.max_unpacked_bytes.min(self.memory_bytes);
+    }
+}
+
 impl Default for Limits {
     fn default() -> Self {
         let physical = physical_memory_bytes().unwrap_or(FALLBACK_MEMORY_BYTES);

@@ -116,7 +116,8 @@ pub fn run(args: &VoxelizeArgs, global: &GlobalArgs) -> anyhow::Result<()> {
         },
         max_cells: args.max_cells,
     };
-    let registry = Registry::default();
+    let mut registry = Registry::default();
+    global.limits().bound_loaders(&mut registry.loaders);
     let options = section
         .check()
         .and_then(|()| section.options(&registry.occupancy))

@@ -3,4 +3,5 @@
 //! --release --workspace` runs them too; `cargo fast` leaves them out.
 
 mod cli;
+mod hostile;
 mod streams;
