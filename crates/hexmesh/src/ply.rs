@@ -129,6 +129,34 @@ impl PropertyAccess for Ignored {
     }
 }
 
+/// The PLY parser's message as a sentence for the user: its nested
+/// "String: '...' Error: ..." chains and grammar dumps (`expected one of
+/// "\r\n", EOF, ...`) become what is wrong with which line.
+fn plain_message(text: &str) -> String {
+    let quoted = text
+        .split_once("String: '")
+        .and_then(|(_, rest)| rest.split_once('\''))
+        .map(|(line, _)| line.trim().to_owned());
+    match quoted {
+        Some(line) if text.starts_with("Couldn't read element line") => format!(
+            "the data line `{line}` does not hold the values the header declares \
+             (as many numbers as the element's properties, each of its declared type)"
+        ),
+        Some(line) if text.starts_with("Invalid element") => format!(
+            "the header line `{line}` is not `element NAME COUNT` with a whole count below 2^64"
+        ),
+        Some(line) if text.starts_with("Invalid property") => format!(
+            "the header line `{line}` is not `property TYPE NAME` or \
+             `property list COUNT_TYPE TYPE NAME` with PLY types"
+        ),
+        Some(line) => format!("the line `{line}` is not valid PLY here"),
+        None => text
+            .split_once(" Error: ")
+            .map_or(text, |(first, _)| first)
+            .to_owned(),
+    }
+}
+
 fn is_index_list(name: &str) -> bool {
     name == "vertex_indices" || name == "vertex_index"
 }
@@ -153,7 +181,7 @@ impl MeshLoader for PlyLoader {
                     .map_or(text.clone(), |(_, m)| m.to_owned()),
                 None => text,
             };
-            parse(e.line(), one_line(&message))
+            parse(e.line(), plain_message(&one_line(&message)))
         };
         if !bytes.starts_with(b"ply") {
             return Err(parse(

@@ -44,6 +44,23 @@ use crate::loader::{LoadError, MeshLoader, one_line};
 #[derive(Debug, Clone, Copy, Default)]
 pub struct VtkLoader;
 
+/// vtkio's message as a sentence for the user: its parser states
+/// ("Parse error: Complete", nom's error kinds) say the data does not
+/// follow the header.
+fn plain_vtk_message(text: &str) -> String {
+    if text.contains("Deserialization error") {
+        "an attribute or value does not have the type VTK's XML format defines for it \
+         (a count that is not a whole number, a name VTK does not know)"
+            .to_owned()
+    } else if text.contains("Parse error") {
+        "the data does not follow the header: a count, a type or a keyword is wrong, \
+         or the file ends early (truncated?)"
+            .to_owned()
+    } else {
+        format!("the VTK reader refused it: {text}")
+    }
+}
+
 thread_local! {
     /// Whether a panic on this thread is being caught by [`catch_quietly`].
     static QUIET: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
@@ -394,7 +411,7 @@ impl MeshLoader for VtkLoader {
             }
         })
         .map_err(|_| parse_error("the VTK reader failed on this file (malformed data)".into()))?
-        .map_err(|e| parse_error(format!("VTK: {}", one_line(&e.to_string()))))?;
+        .map_err(|e| parse_error(plain_vtk_message(&one_line(&e.to_string()))))?;
 
         let mut surface = Surface {
             name,

@@ -51,6 +51,9 @@ fn norm(a: V3) -> f64 {
     dot(a, a).sqrt()
 }
 
+/// Vertices of a patch whose nesting in the other patches is tested.
+const NESTING_SAMPLES: usize = 16;
+
 /// What [`orient`] did.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct OrientReport {
@@ -62,6 +65,10 @@ pub struct OrientReport {
     pub closed: bool,
     /// Edges used by 3 or more triangles.
     pub nonmanifold_edges: usize,
+    /// Closed patches that cross another closed patch (part of them inside
+    /// it, part outside): overlapping shells, kept facing outwards so that
+    /// the solid is their union.
+    pub overlapping: usize,
 }
 
 /// Repairs orientation (see the module docs) and returns the repaired mesh.
@@ -159,6 +166,7 @@ pub fn orient(mesh: &TriMesh) -> (TriMesh, OrientReport) {
         }
     }
     // Cavities: a closed patch inside an odd number of other patches faces inwards.
+    let mut overlapping = 0;
     if patches.len() > 1 && patches.len() <= 64 {
         let closed_patch: Vec<bool> = patches
             .iter()
@@ -176,21 +184,45 @@ pub fn orient(mesh: &TriMesh) -> (TriMesh, OrientReport) {
                 d == r
             })
             .collect();
+        // A patch is nested as deep as its vertices lie in the other closed
+        // patches. Its vertices are sampled: if they disagree, the patch
+        // crosses another (overlapping shells, or a self-intersecting
+        // surface) rather than lying inside it, and it stays outward so that
+        // the solid is the union. One vertex alone would make a shell that
+        // merely overlaps another a cavity: the voxelized body would be the
+        // one minus the other.
+        let depth_at = |p: usize, q: V3| {
+            let w: f64 = patches
+                .iter()
+                .enumerate()
+                .filter(|&(o, _)| o != p && closed_patch[o])
+                .flat_map(|(_, other)| other.iter())
+                .map(|&t| solid_angle(tris[t as usize].map(|i| mesh.vertices[i as usize]), q))
+                .sum();
+            (w / (4.0 * PI)).round() as i64
+        };
         let mut depth = vec![0i64; patches.len()];
         for (p, members) in patches.iter().enumerate() {
-            let q = mesh.vertices[tris[members[0] as usize][0] as usize];
-            let mut w = 0.0;
-            for (o, other) in patches.iter().enumerate() {
-                if o != p && closed_patch[o] {
-                    w += other
-                        .iter()
-                        .map(|&t| {
-                            solid_angle(tris[t as usize].map(|i| mesh.vertices[i as usize]), q)
-                        })
-                        .sum::<f64>();
-                }
+            let mut vertices: Vec<u32> = members.iter().flat_map(|&t| tris[t as usize]).collect();
+            vertices.sort_unstable();
+            vertices.dedup();
+            let step = vertices.len().div_ceil(NESTING_SAMPLES).max(1);
+            let depths: Vec<i64> = vertices
+                .iter()
+                .step_by(step)
+                .map(|&v| depth_at(p, mesh.vertices[v as usize]))
+                .collect();
+            if depths.iter().all(|&d| d == depths[0]) {
+                depth[p] = depths[0];
+            } else {
+                overlapping += 1;
             }
-            depth[p] = (w / (4.0 * PI)).round() as i64;
+        }
+        if overlapping > 0 {
+            log::warn!(
+                "{overlapping} closed surface(s) cross another: the shells overlap, \
+                 voxelized as their union"
+            );
         }
         for (p, members) in patches.iter().enumerate() {
             if depth[p] % 2 != 0 {
@@ -212,6 +244,7 @@ pub fn orient(mesh: &TriMesh) -> (TriMesh, OrientReport) {
         flipped: flipped.iter().filter(|f| **f).count(),
         closed: d == r,
         nonmanifold_edges: nonmanifold,
+        overlapping,
     };
     (
         TriMesh {
@@ -656,6 +689,38 @@ mod tests {
         let (o, r) = orient(&m);
         assert_eq!(r.patches, 2);
         assert!((o.signed_volume() - (64.0 - 8.0)).abs() < 1e-9);
+    }
+
+    #[test]
+    fn overlapping_shells_are_a_union() {
+        // Two cubes of edge 2 sharing a unit cube: one vertex of each lies
+        // inside the other, the other seven outside.
+        let mut m = box_mesh([0.0; 3], [2.0; 3]);
+        let other = box_mesh([1.0; 3], [3.0; 3]);
+        let base = m.vertices.len() as u32;
+        m.vertices.extend(other.vertices);
+        m.triangles
+            .extend(other.triangles.iter().map(|t| t.map(|i| i + base)));
+        let (o, r) = orient(&m);
+        assert_eq!((r.patches, r.overlapping), (2, 2));
+        // Both outward: the signed volumes add (the overlap counted twice).
+        assert!((o.signed_volume() - 16.0).abs() < 1e-9);
+        let w = WindingInside::new(&m, 0.5);
+        for (p, inside) in [
+            ([1.5; 3], true),
+            ([0.5; 3], true),
+            ([2.5; 3], true),
+            ([0.5, 2.5, 0.5], false),
+        ] {
+            assert_eq!(w.contains(p), inside, "{p:?}");
+        }
+        // Voxelized: the union's 15 unit cubes, in cells of a quarter.
+        let opts = crate::voxelize::VoxelizeOptions {
+            resolution: crate::voxelize::Resolution::CellsAlongLongestAxis(12),
+            ..Default::default()
+        };
+        let vox = crate::voxelize(&m, &opts).unwrap();
+        assert_eq!(vox.lattice.num_cells(), 15 * 64);
     }
 
     #[test]

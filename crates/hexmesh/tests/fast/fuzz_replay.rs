@@ -2,7 +2,8 @@
 //! the fuzz targets' assertions: the seeds (`fuzz/seeds/FORMAT`), the
 //! minimized corpora of earlier fuzzing runs (`fuzz/corpus-min/FORMAT`) and
 //! every input that once crashed a target (`fuzz/regressions/FORMAT`). Each
-//! must load or give a typed error naming the file, never panic.
+//! must load or give a typed error naming the file, one sentence without
+//! the parsers' debug text, never panic.
 
 use std::path::PathBuf;
 
@@ -22,6 +23,7 @@ fn inputs(format: &str) -> Vec<PathBuf> {
 
 #[test]
 fn every_kept_fuzz_input_loads_or_fails_cleanly() {
+    let mut raw_messages = std::collections::BTreeSet::new();
     for (name, format) in [
         ("obj", MeshFormat::Obj),
         ("stl", MeshFormat::Stl),
@@ -49,8 +51,27 @@ fn every_kept_fuzz_input_loads_or_fails_cleanly() {
                         "{}: {msg}",
                         path.display()
                     );
+                    // A sentence, not a parser's state or a Debug dump.
+                    for raw in &[
+                        "ParseError {",
+                        "LineCol",
+                        "ParseIntError",
+                        "kind: ",
+                        "Parse error",
+                        "expected one of \"",
+                        "Error: error at",
+                    ] {
+                        if msg.contains(raw) {
+                            raw_messages.insert(msg.replace("replay", "FILE"));
+                        }
+                    }
                 }
             }
         }
     }
+    assert!(
+        raw_messages.is_empty(),
+        "messages with a parser's own text:\n{}",
+        raw_messages.into_iter().collect::<Vec<_>>().join("\n")
+    );
 }
