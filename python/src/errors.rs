@@ -75,7 +75,7 @@ pub fn from_error(kind: Kind, e: &(dyn std::error::Error + 'static)) -> PyErr {
 pub fn solver_kind(e: &SolverError) -> Kind {
     match e {
         SolverError::Diverged { .. } | SolverError::LoadLimit { .. } => Kind::Diverged,
-        SolverError::Mechanism { .. } | SolverError::UnstableEquilibrium => Kind::Mechanism,
+        SolverError::Mechanism { .. } | SolverError::UnstableEquilibrium { .. } => Kind::Mechanism,
         SolverError::BadOption(_)
         | SolverError::BadTimeStep(_)
         | SolverError::UnknownIntegrator { .. }
@@ -86,7 +86,16 @@ pub fn solver_kind(e: &SolverError) -> Kind {
 
 /// A solver error as its exception.
 pub fn solver(e: SolverError) -> PyErr {
-    from_error(solver_kind(&e), &e)
+    match e {
+        SolverError::UnstableEquilibrium { .. } => raise(
+            Kind::Mechanism,
+            format!(
+                "{}; pass accept_unstable=True to keep it",
+                mss_scene::error::one_line(&e)
+            ),
+        ),
+        e => from_error(solver_kind(&e), &e),
+    }
 }
 
 /// A job error as its exception.

@@ -205,7 +205,20 @@ fn load_mesh(
     let placed = detached(py, || {
         stages::load_placed(&source, &placement, &Loaders::default())
     });
-    let placed = placed.map_err(|e| stage_error(&e))?;
+    let placed = placed.map_err(|e| match &e {
+        // Not a scene's path: relative to the working directory.
+        StageError::Source(mss_scene::build::MeshSourceError::Missing { path }) => raise(
+            Kind::Mesh,
+            format!(
+                "mesh file {} does not exist (a relative path is relative to the working \
+                 directory, {})",
+                path.display(),
+                std::env::current_dir()
+                    .map_or_else(|_| "unknown".into(), |d| d.display().to_string())
+            ),
+        ),
+        _ => stage_error(&e),
+    })?;
     Ok(PyMesh::wrap(placed.mesh, placed.name))
 }
 

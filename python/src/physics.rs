@@ -282,9 +282,15 @@ impl PyModel {
 /// An output argument as a float64 2-d array.
 fn out_array(out: Bound<'_, PyAny>) -> PyResult<Bound<'_, PyArray2<f64>>> {
     out.cast_into::<PyArray2<f64>>().map_err(|e| {
+        let given = e.into_inner();
+        // A numpy array of another dtype or dimension is named by those,
+        // anything else by its type.
+        let what = match (given.getattr("dtype"), given.getattr("shape")) {
+            (Ok(dtype), Ok(shape)) => format!("an array of dtype {dtype} and shape {shape}"),
+            _ => format!("a {}", given.get_type()),
+        };
         pyo3::exceptions::PyTypeError::new_err(format!(
-            "out: give a float64 numpy array of shape (n, 3), not {}",
-            e.into_inner().get_type()
+            "out: give a float64 numpy array of shape (n, 3), not {what}"
         ))
     })
 }
@@ -919,6 +925,21 @@ impl PySimulation {
     fn new(py: Python<'_>, problem: &PyProblem, surface: Option<&PyEmbedding>) -> PyResult<Self> {
         let p = detached(py, || problem.recipe.build())?;
         Self::build(p, surface.map(|s| Arc::clone(&s.embedding)))
+    }
+
+    fn __repr__(&self) -> String {
+        let sim = self.lock();
+        format!(
+            "Simulation({} nodes, t = {} s, {} picked nodes{})",
+            sim.positions().len(),
+            sim.state().time,
+            sim.grabbed_nodes().len(),
+            if self.surface.is_some() {
+                ", with a surface"
+            } else {
+                ""
+            }
+        )
     }
 
     /// step(dt)

@@ -3,6 +3,7 @@
 import os
 import pathlib
 import shutil
+import sys
 import subprocess
 
 import pytest
@@ -28,11 +29,19 @@ def mss_binary():
     given = os.environ.get("MSS_BIN")
     if given:
         return pathlib.Path(given)
-    path = REPO / "target" / "release" / "mss"
+    target = pathlib.Path(os.environ.get("CARGO_TARGET_DIR", REPO / "target"))
+    if not target.is_absolute():
+        target = REPO / target
+    path = target / "release" / "mss"
     if not path.exists():
         cargo = shutil.which("cargo")
         if cargo is None:
             pytest.skip("no mss binary and no cargo to build it")
+        # Said on the terminal, not captured: a first build takes minutes.
+        sys.__stderr__.write(
+            f"\nbuilding the mss CLI into {target} (cargo build --release -p mss-cli; "
+            "minutes on a first build; set MSS_BIN to use a built one)\n"
+        )
         subprocess.run(
             [cargo, "build", "--release", "-p", "mss-cli"], cwd=REPO, check=True
         )

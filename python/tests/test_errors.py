@@ -112,3 +112,30 @@ def test_unwritable_output_is_an_output_error(tmp_path):
     blocker.write_text("not a folder")
     with pytest.raises(hexmss.OutputError):
         hexmss.run(small_scene(), out=blocker / "out")
+
+
+def test_messages_speak_python():
+    # An unstable equilibrium: springs alone, a cantilever under its weight
+    # and a tip load (mss-core's equilibrium test).
+    lattice = hexmss.Lattice.block((20, 4, 4), 0.01)
+    model = hexmss.Model(lattice, hexmss.Material(1e5, 0.3, 1000.0), "springs")
+    problem = hexmss.Problem(
+        model,
+        fixed=[{"kind": "face", "face": "x-"}],
+        gravity=[0, 0, -9.81],
+        forces=[{"select": {"kind": "face", "face": "x+"}, "force": [0, 0, -0.05]}],
+    )
+    with pytest.raises(hexmss.MechanismError) as e:
+        hexmss.solve_static(problem)
+    text = str(e.value)
+    assert "accept_unstable=True" in text and "[solver]" not in text and "::" not in text
+    state, _ = hexmss.solve_static(problem, accept_unstable=True)
+    # A missing mesh is relative to the working directory, not to a scene.
+    with pytest.raises(hexmss.MeshError, match="working directory"):
+        hexmss.load_mesh("surely-missing-mesh.obj")
+    # A float32 output array is named by its dtype and shape.
+    out = np.zeros((model.num_nodes, 3), dtype=np.float32)
+    with pytest.raises(TypeError, match="dtype float32 and shape"):
+        model.internal_forces(lattice.nodes, out=out)
+    sim = hexmss.Simulation(problem)
+    assert repr(sim).startswith(f"Simulation({model.num_nodes} nodes, t = 0")

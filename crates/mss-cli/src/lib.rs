@@ -68,7 +68,8 @@ pub struct GlobalArgs {
     pub threads: Option<usize>,
     /// Output folder: `run` writes there instead of the scene's `[output]
     /// folder` (and `check` estimates its free space); `voxelize` writes
-    /// there (default ./out); `experiment` (default out/experiments).
+    /// there (default ./MESH_lattice, named after the mesh); `experiment`
+    /// (default out/experiments).
     /// `init` and `view` write nothing and ignore it.
     #[arg(long, value_name = "DIR", global = true)]
     pub out: Option<PathBuf>,

@@ -154,7 +154,17 @@ impl CheckReport {
             .is_explicit(&job.registry.integrators);
         let mechanism_warning = mechanism_warning(job);
         let started = std::time::Instant::now();
-        let load_check = job.load_check(mechanism_warning.is_some(), cancel);
+        // A free body in a dynamic run (held by obstacles, or by nothing)
+        // has no static equilibrium to compare the run with.
+        let free_dynamic = !job.plan.is_static && crate::job::problem_is_free(&job.problem);
+        let load_check = if free_dynamic {
+            LoadCheck::Skipped {
+                reason: "no node is held: the body moves freely, or as its obstacles let it"
+                    .to_owned(),
+            }
+        } else {
+            job.load_check(mechanism_warning.is_some(), cancel)
+        };
         let static_seconds = matches!(load_check, LoadCheck::Equilibrium { .. })
             .then(|| started.elapsed().as_secs_f64());
         CheckReport {
@@ -205,6 +215,16 @@ pub fn mechanism_warning(job: &Job) -> Option<String> {
     let c = job.problem.constraints();
     let model = job.problem.model();
     let restrained = !job.input.scene.loads.drags.is_empty();
+    // With rigid cells (hourglass control) the only zero-energy modes are
+    // rigid motions of the body's free parts. Obstacles hold those (a body
+    // resting on the ground), and in a dynamic run a body that nothing holds
+    // moving as a whole is physics, not a defect. A body held by too few
+    // nodes is still warned about: it swings about them.
+    let rigid_motions_only = mss_core::modes::cells_are_rigid(model);
+    let free_dynamic = !job.plan.is_static && crate::job::problem_is_free(&job.problem);
+    if rigid_motions_only && (job.problem.contact().is_some() || free_dynamic) {
+        return None;
+    }
     let mask: Vec<[bool; 3]> = (0..model.num_nodes()).map(|n| c.mask(n)).collect();
     match mss_core::modes::zero_energy_modes(model, &mask) {
         Ok(z) if z.count == 0 => None,

@@ -30,7 +30,9 @@ use crate::scene::Scene;
 pub const CHECKPOINT_FILE: &str = "checkpoint.mss";
 
 const MAGIC: &[u8; 8] = b"MSSCKPT\0";
-const VERSION: u32 = 1;
+/// Version 2 added the peak displacement; version 1 files are read with
+/// none recorded.
+const VERSION: u32 = 2;
 
 /// Everything a resumed run needs.
 #[derive(Debug, Clone, PartialEq)]
@@ -49,6 +51,10 @@ pub struct Checkpoint {
     pub files: usize,
     /// Bytes written so far.
     pub bytes: u64,
+    /// Largest node displacement so far (m).
+    pub peak_displacement: f64,
+    /// Its simulated time (s).
+    pub peak_time: f64,
 }
 
 /// Why a checkpoint cannot be used.
@@ -233,6 +239,8 @@ impl Checkpoint {
         self.frame_times.iter().for_each(|&t| o.f64(t));
         o.u64(self.files as u64);
         o.u64(self.bytes);
+        o.f64(self.peak_displacement);
+        o.f64(self.peak_time);
         let sum = fnv1a(&o.0);
         o.u64(sum);
         o.0
@@ -283,7 +291,7 @@ impl Checkpoint {
             return Err(corrupt("it does not start with the checkpoint signature"));
         }
         let version = u32::from_le_bytes(bytes[8..12].try_into().unwrap_or([0; 4]));
-        if version != VERSION {
+        if version != VERSION && version != 1 {
             return Err(corrupt(&format!(
                 "format version {version}, this program reads {VERSION}"
             )));
@@ -312,6 +320,14 @@ impl Checkpoint {
         let frame_times: Vec<f64> = (0..n).map(|_| r.f64()).collect::<Result<_, _>>()?;
         let files = r.u64()? as usize;
         let bytes_written = r.u64()?;
+        let (peak_displacement, peak_time) = if version >= 2 {
+            (r.f64()?, r.f64()?)
+        } else {
+            (0.0, 0.0)
+        };
+        if !(peak_displacement.is_finite() && peak_displacement >= 0.0 && peak_time.is_finite()) {
+            return Err(r.corrupt("its peak displacement is not a finite length"));
+        }
         if r.at != body.len() {
             return Err(r.corrupt(format!("{} bytes left over", body.len() - r.at)));
         }
@@ -332,6 +348,8 @@ impl Checkpoint {
             frame_times,
             files,
             bytes: bytes_written,
+            peak_displacement,
+            peak_time,
         })
     }
 }
@@ -363,6 +381,8 @@ mod tests {
             frame_times: vec![0.0, 0.05, 0.1],
             files: 9,
             bytes: 123_456,
+            peak_displacement: 0.25,
+            peak_time: 0.5,
         }
     }
 

@@ -162,6 +162,11 @@ pub struct RunSummary {
     pub bytes_written: u64,
     /// Largest node displacement at the end (m).
     pub max_displacement: f64,
+    /// Largest node displacement over every step of the run (m): a body
+    /// that swings or is pressed and released moves most before the end.
+    pub peak_displacement: f64,
+    /// Simulated time of [`RunSummary::peak_displacement`] (s).
+    pub peak_displacement_time: f64,
     /// Wall time of voxelization (s).
     pub voxelize_seconds: f64,
     /// Wall time of time stepping, including output (s).
@@ -271,6 +276,12 @@ impl Job {
         progress(Progress::StageDone);
         let vox = vox.map_err(stage_error)?;
         let voxelize_seconds = t0.elapsed().as_secs_f64();
+        if let Some(extent) = placed.mesh.bounding_box().map(|b| b.extent())
+            && let Some(odd) =
+                crate::stages::implausible_size(extent.into_iter().fold(0.0, f64::max))
+        {
+            log::warn!("{scene_name}: {odd} ([mesh] units = \"mm\" or \"cm\", or scale)");
+        }
         let PlacedMesh {
             name: mesh_name,
             mesh,
@@ -490,14 +501,34 @@ impl Job {
             let co = model.cell_coefficients(c);
             co.volumetric_barrier && co.volumetric_lambda > 0.0
         });
-        if self.input.scene.solver.accept_unstable
-            || (barrier && mss_core::modes::cells_are_rigid(model))
-        {
+        if self.input.scene.solver.accept_unstable {
+            return Ok(());
+        }
+        let default_kind = barrier && mss_core::modes::cells_are_rigid(model);
+        // A free body (held by obstacles or by nothing) has no static
+        // equilibrium to check: its rigid motions are no defect.
+        let held_by_contact = problem_is_free(&self.problem);
+        if default_kind && held_by_contact {
             return Ok(());
         }
         progress(Progress::Solving);
-        let check = self.load_check(false, &cancel.0);
+        let check = self.load_check(held_by_contact, &cancel.0);
         progress(Progress::StageDone);
+        if default_kind {
+            // The default model runs whatever the check says (it resists
+            // folding and collapse), but the user learns before the run what
+            // `mss check` would have said.
+            if let LoadCheck::Equilibrium {
+                stable: Some(false),
+                ..
+            }
+            | LoadCheck::LoadLimit { .. } = check
+                && let Some(warning) = check.warning()
+            {
+                log::warn!("{}: {warning}", self.input.name());
+            }
+            return Ok(());
+        }
         let name = model.parameterization_name();
         let reason = match check {
             LoadCheck::Equilibrium {
@@ -546,6 +577,8 @@ impl Job {
         let mut state = State::at_rest(problem.model());
         problem.apply_constraints(&mut state);
         let mut steps_done = 0;
+        // Largest displacement so far and its time.
+        let mut peak = (0.0, 0.0);
         let mut interrupted = false;
         let mut writer;
         match integrator {
@@ -560,7 +593,13 @@ impl Job {
                 progress(Progress::StageDone);
                 let info = r.map_err(|source| JobError::Solver {
                     scene: name.clone(),
-                    stage: "static solve failed",
+                    stage: match source {
+                        mss_core::solver::SolverError::UnstableEquilibrium { .. } => {
+                            "static solve failed ([solver] accept_unstable = true keeps an \
+                             unstable equilibrium)"
+                        }
+                        _ => "static solve failed",
+                    },
                     source: Box::new(source),
                 })?;
                 log::info!(
@@ -570,6 +609,7 @@ impl Job {
                     info.relative_residual
                 );
                 steps_done = 1;
+                peak = (largest_displacement(problem.model(), &state.x), state.time);
                 prepare_output_folder(out_dir)?;
                 remove_previous_run(out_dir, &self.registry.exporters)?;
                 writer = self.writer(out_dir)?;
@@ -601,6 +641,7 @@ impl Job {
                                 message: source.to_string(),
                             })?;
                         state = c.state.clone();
+                        peak = (c.peak_displacement, c.peak_time);
                         steps_done = c.step;
                         log::info!(
                             "{name}: resumed at step {} (t = {:.3e} s) from {}",
@@ -618,10 +659,13 @@ impl Job {
                 let fingerprint = crate::checkpoint::fingerprint(scene);
                 let checkpoint = |step: u64,
                                   state: &State,
+                                  peak: (f64, f64),
                                   integrator: &dyn Integrator,
                                   writer: &FrameWriter| {
                     let (files, bytes) = writer.files_and_bytes();
                     Checkpoint {
+                        peak_displacement: peak.0,
+                        peak_time: peak.1,
                         fingerprint,
                         step,
                         state: state.clone(),
@@ -638,7 +682,7 @@ impl Job {
                         // frame (written after the checkpoint, which does not
                         // count it: the resumed run writes that frame's index
                         // again when its time comes).
-                        checkpoint(steps_done, &state, integrator.as_ref(), &writer)?;
+                        checkpoint(steps_done, &state, peak, integrator.as_ref(), &writer)?;
                         if steps_done > 0 && !plan.frame_after(steps_done) {
                             writer.write(problem, &state)?;
                         }
@@ -670,11 +714,15 @@ impl Job {
                         });
                     }
                     steps_done = k;
+                    let moved = largest_displacement(problem.model(), &state.x);
+                    if moved > peak.0 {
+                        peak = (moved, state.time);
+                    }
                     if plan.frame_after(k) {
                         writer.write(problem, &state)?;
                     }
                     if checkpoint_steps.is_some_and(|n| k % n == 0) && k < plan.steps {
-                        checkpoint(k, &state, integrator.as_ref(), &writer)?;
+                        checkpoint(k, &state, peak, integrator.as_ref(), &writer)?;
                     }
                     progress(Progress::Stepping {
                         done: k,
@@ -693,12 +741,7 @@ impl Job {
         }
         writer.finish()?;
         let model = problem.model();
-        let max_displacement = state
-            .x
-            .iter()
-            .zip(model.rest_positions())
-            .map(|(x, r)| (x - r).norm())
-            .fold(0.0, f64::max);
+        let max_displacement = largest_displacement(model, &state.x);
         let (files, bytes) = writer.files_and_bytes();
         let held_nodes = (0..model.num_nodes())
             .filter(|&n| problem.constraints().mask(n).iter().any(|&h| h))
@@ -727,6 +770,8 @@ impl Job {
             files,
             bytes_written: bytes,
             max_displacement,
+            peak_displacement: peak.0,
+            peak_displacement_time: peak.1,
             voxelize_seconds: self.voxelize_seconds,
             simulate_seconds: start.elapsed().as_secs_f64(),
             wall_seconds: self.voxelize_seconds + start.elapsed().as_secs_f64(),
@@ -818,6 +863,22 @@ pub fn write_summary(dir: &Path, summary: &RunSummary) -> Result<(), JobError> {
         w.write_all(b"\n")
     })?;
     Ok(())
+}
+
+/// The largest distance of a node from its rest position (m).
+fn largest_displacement(model: &mss_core::Model, x: &[mss_core::Vec3]) -> f64 {
+    x.iter()
+        .zip(model.rest_positions())
+        .map(|(x, r)| (x - r).norm_squared())
+        .fold(0.0, f64::max)
+        .sqrt()
+}
+
+/// Whether `problem` holds no node: its body is free, held (if at all) by
+/// obstacles, and has rigid motions that no static solve can fix.
+pub(crate) fn problem_is_free(problem: &Problem) -> bool {
+    let model = problem.model();
+    !(0..model.num_nodes()).any(|n| problem.constraints().mask(n).iter().any(|&h| h))
 }
 
 /// Peak resident memory of this process (bytes), from `VmHWM` in

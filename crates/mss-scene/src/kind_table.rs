@@ -8,7 +8,7 @@
 //! ```
 //! use mss_scene::kind_table::KindTable;
 //!
-//! #[derive(serde::Deserialize)]
+//! #[derive(Debug, serde::Deserialize)]
 //! #[serde(deny_unknown_fields)]
 //! struct Wind {
 //!     speed: f64,

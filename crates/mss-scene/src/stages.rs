@@ -132,6 +132,39 @@ pub fn load_placed(
     })
 }
 
+/// Largest extent (m) of a soft body this tool is made for: an organ, a
+/// tool, a toy or a piece of furniture; larger meshes are most likely in
+/// millimetres or centimetres, read as metres.
+pub const PLAUSIBLE_EXTENT_MAX: f64 = 5.0;
+/// Smallest plausible extent (m): smaller meshes are most likely in metres
+/// scaled down twice, or in another unit.
+pub const PLAUSIBLE_EXTENT_MIN: f64 = 0.005;
+
+/// What is odd about a placed mesh whose largest extent is `extent` metres
+/// for a soft body, if anything: the front end adds how to change its
+/// units or scale in its own terms.
+///
+/// ```
+/// use mss_scene::stages::implausible_size;
+/// assert!(implausible_size(9.7).unwrap().contains("9.700 m across"));
+/// assert!(implausible_size(0.2).is_none());
+/// assert!(implausible_size(0.0002).is_some());
+/// ```
+pub fn implausible_size(extent: f64) -> Option<String> {
+    if extent > PLAUSIBLE_EXTENT_MAX {
+        Some(format!(
+            "the mesh is {extent:.3} m across, large for a soft body: if its coordinates are \
+             millimetres or centimetres, say so"
+        ))
+    } else if extent < PLAUSIBLE_EXTENT_MIN {
+        Some(format!(
+            "the mesh is {extent:.3e} m across, small for a soft body: check its unit and scale"
+        ))
+    } else {
+        None
+    }
+}
+
 /// The run a lattice is built for: its memory depends on whether the
 /// solver assembles matrices.
 #[derive(Debug, Clone, Copy)]

@@ -171,7 +171,12 @@ fn print_summary(s: &RunSummary) -> Result<(), crate::StdoutError> {
             .map(progress::human_bytes)
             .unwrap_or_else(|| "unknown".into())
     );
-    crate::outln!("max displacement {:.4e} m", s.max_displacement);
+    crate::outln!(
+        "max displacement {:.4e} m at the end, {:.4e} m at its peak (t = {:.4} s)",
+        s.max_displacement,
+        s.peak_displacement,
+        s.peak_displacement_time
+    );
     crate::outln!(
         "output           {}: {} frames, {} files, {} (open lattice.pvd in ParaView)",
         s.output_folder,

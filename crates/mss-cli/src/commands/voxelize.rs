@@ -61,6 +61,21 @@ pub struct VoxelizeArgs {
     pub springs: bool,
 }
 
+/// The folder `mss voxelize MESH` writes into without `--out`: the mesh's
+/// file stem and `_lattice`, in the working folder (`bunny.obj` ->
+/// `bunny_lattice`, `builtin:critter` -> `critter_lattice`).
+pub fn default_folder(mesh: &str) -> String {
+    let name = mesh
+        .strip_prefix(mss_scene::scene::BUILTIN_PREFIX)
+        .unwrap_or(mesh);
+    let stem = Path::new(name)
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .filter(|s| !s.is_empty())
+        .unwrap_or("mesh");
+    format!("{stem}_lattice")
+}
+
 /// What `mss voxelize` measured (printed, and written as `stats.json`).
 #[derive(Debug, Clone, Serialize)]
 pub struct VoxelizeSummary {
@@ -102,7 +117,12 @@ pub struct VoxelizeSummary {
 
 /// Runs `mss voxelize`.
 pub fn run(args: &VoxelizeArgs, global: &GlobalArgs) -> anyhow::Result<()> {
-    let out_dir = global.out.clone().unwrap_or_else(|| PathBuf::from("out"));
+    // Its own folder, named after the mesh, rather than ./out among a run's
+    // frames.
+    let out_dir = global
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from(default_folder(&args.mesh)));
     // The same table a scene's [voxelize] is, so both mean the same.
     let section = VoxelizeSection {
         cells: args.cells,
@@ -156,6 +176,11 @@ pub fn run(args: &VoxelizeArgs, global: &GlobalArgs) -> anyhow::Result<()> {
     let placed = stages::load_placed(&source, &placement, &registry.loaders)
         .context("cannot load the mesh (--units, --scale, --up)")?;
     let load_seconds = t0.elapsed().as_secs_f64();
+    if let Some(extent) = placed.mesh.bounding_box().map(|b| b.extent())
+        && let Some(odd) = stages::implausible_size(extent.into_iter().fold(0.0, f64::max))
+    {
+        log::warn!("{}: {odd} (--units mm or cm, or --scale)", placed.name);
+    }
     let t1 = Instant::now();
     let bars = JobBars::new(&placed.name, global.chatty());
     let hook = |done: u64, total: u64| bars.report(Progress::Voxelizing { done, total });
@@ -289,4 +314,17 @@ fn print_summary(s: &VoxelizeSummary) -> Result<(), crate::StdoutError> {
         s.files.join(", ")
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::default_folder;
+
+    #[test]
+    fn the_default_folder_is_named_after_the_mesh() {
+        assert_eq!(default_folder("data/meshes/bunny.obj"), "bunny_lattice");
+        assert_eq!(default_folder("builtin:critter"), "critter_lattice");
+        assert_eq!(default_folder("scan.vtu"), "scan_lattice");
+        assert_eq!(default_folder("/"), "mesh_lattice");
+    }
 }

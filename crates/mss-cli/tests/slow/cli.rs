@@ -844,3 +844,36 @@ fn a_run_stopped_by_sigint_resumes_to_the_uninterrupted_files() {
         "{err}"
     );
 }
+
+/// `mss voxelize MESH` writes into a folder of its own named after the mesh,
+/// and says when the mesh is implausibly large for a soft body (a mesh in
+/// millimetres read as metres), naming the flags that fix it.
+#[test]
+fn voxelize_writes_its_own_folder_and_hints_at_units() {
+    let dir = tempfile::tempdir().unwrap();
+    let bunny = concat!(env!("CARGO_MANIFEST_DIR"), "/../../data/meshes/bunny.obj");
+    let out = Command::new(MSS)
+        .args(["voxelize", bunny, "--cells", "8"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(dir.path().join("bunny_lattice/stats.json").exists());
+    assert!(!dir.path().join("out").exists());
+    assert!(
+        stderr.contains("large for a soft body") && stderr.contains("--units"),
+        "{stderr}"
+    );
+    // In centimetres it is 9.7 cm: no hint.
+    let out = Command::new(MSS)
+        .args([
+            "voxelize", bunny, "--cells", "8", "--units", "cm", "--up", "y",
+        ])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(!stderr.contains("large for a soft body"), "{stderr}");
+}

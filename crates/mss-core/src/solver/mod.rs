@@ -486,10 +486,22 @@ pub enum SolverError {
     /// definite: a small disturbance leads away from it (the body buckles,
     /// or the lattice folds), so a dynamic run ends elsewhere. The state is
     /// left at that equilibrium, for inspection.
+    /// Front ends add how to keep it anyway in their own terms (a scene's
+    /// `[solver] accept_unstable`, Python's `accept_unstable=True`,
+    /// [`StaticOptions::accept_unstable`]).
     #[error(
-        "the static equilibrium found is unstable: its stiffness (symmetric part, on the free dofs) is not positive definite; a dynamic run would leave it. The lattice may fold (try hourglass control, e.g. [model] parameterization = \"volumetric-barrier+hg\"), or the body buckles under these loads; set [solver] accept_unstable = true (StaticOptions::accept_unstable) to keep it anyway"
+        "the static equilibrium found is unstable: its stiffness (symmetric part, on the free dofs) is not positive definite, so a dynamic run would leave it: {}",
+        if *hourglass_control {
+            "the body buckles under these loads (its model has hourglass control, so the lattice does not fold); lower the loads, stiffen the material or hold a larger region"
+        } else {
+            "the lattice folds (a mechanism appears under load: use hourglass control, the \"volumetric-barrier+hg\" model with hourglass 1.0), or the body buckles under these loads"
+        }
     )]
-    UnstableEquilibrium,
+    UnstableEquilibrium {
+        /// Whether every cell of the model has hourglass control (then the
+        /// lattice cannot fold: the body itself buckles).
+        hourglass_control: bool,
+    },
     /// The static solve carried part of the loads and no more: the
     /// equilibrium path has a limit point (the body buckles or folds under
     /// more load), so there is no static answer near it for the full load.

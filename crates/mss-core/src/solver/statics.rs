@@ -186,7 +186,12 @@ fn solve_static_here(
     }
     let held = problem.constraints().num_held_dofs();
     if held < 6 && !problem.has_restraining_load() {
-        let message = if held == 0 {
+        let message = if held == 0 && problem.contact().is_some() {
+            // Penalty contact holds a body only once it touches, and a
+            // static solve starts from rest, where it may not: there is no
+            // unique equilibrium to start from.
+            "no node is fixed and only obstacles hold the body: a static solve cannot settle a free body onto them (at rest it touches them nowhere, or not firmly enough to stop its rigid motions); run it in time (kind = \"explicit\" or \"implicit\") with damping until it rests, or fix a region".to_string()
+        } else if held == 0 {
             "no node is fixed: the static problem has no unique solution (the body can translate and rotate freely under its loads); fix a region, e.g. a face or the lowest layer of nodes".to_string()
         } else {
             format!(
@@ -383,7 +388,9 @@ fn solve_static_here(
         } else {
             state.x = x;
             state.v.iter_mut().for_each(|v| *v = Vec3::zeros());
-            return Err(SolverError::UnstableEquilibrium);
+            return Err(SolverError::UnstableEquilibrium {
+                hourglass_control: crate::modes::cells_are_rigid(problem.model()),
+            });
         }
     }
     let scale = sys.residual(&x, &mut r);
