@@ -205,7 +205,7 @@ impl SceneInput {
         let duration = s.duration;
         let every_time = match (self.scene.output.every_steps, self.scene.output.every_time) {
             (Some(_), _) => None,
-            (None, t) => Some(t.unwrap_or(duration / 20.0)),
+            (None, t) => Some(t.unwrap_or(duration / DEFAULT_FRAMES as f64)),
         };
         let (dt, steps) = match s.dt {
             _ if s.is_static() => (duration, 1),
@@ -399,6 +399,10 @@ fn is_multiple(a: f64, b: f64) -> bool {
 /// Largest number of time steps a run may take: beyond it, something is
 /// wrong with the time step or the duration.
 pub const MAX_STEPS: u64 = 100_000_000;
+
+/// Frames of a run whose `[output]` gives neither `every_steps` nor
+/// `every_time` (besides the initial state).
+pub const DEFAULT_FRAMES: u32 = 20;
 
 /// When frames are written.
 #[derive(Debug, Clone, Copy, PartialEq)]

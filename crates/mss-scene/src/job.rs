@@ -843,13 +843,31 @@ impl Job {
     }
 
     fn writer(&self, out_dir: &Path) -> Result<FrameWriter, JobError> {
-        FrameWriter::new(
+        Ok(FrameWriter::new(
             out_dir,
             &self.input.scene.output,
             &self.registry.exporters,
             &self.lattice,
             &self.mesh,
-        )
+        )?
+        .with_time_decimals(
+            self.frame_interval().and_then(|every| {
+                mss_io::vtk::time_decimals(every, self.input.scene.solver.duration)
+            }),
+        ))
+    }
+
+    /// The frame interval the scene gives in seconds (`[output] every_time`,
+    /// or its default), when frames are scheduled by time: the round
+    /// number their times are multiples of.
+    fn frame_interval(&self) -> Option<f64> {
+        let out = &self.input.scene.output;
+        if out.every_steps.is_some() || self.plan.is_static {
+            return None;
+        }
+        out.every_time.or(Some(
+            self.input.scene.solver.duration / crate::build::DEFAULT_FRAMES as f64,
+        ))
     }
 }
 

@@ -295,6 +295,22 @@ impl FrameWriter {
         })
     }
 
+    /// Frame times are round numbers to `decimals` decimals: the `.pvd`
+    /// collections print them so (`0.02`, not `0.019999999999999987`, the
+    /// sum of the steps); see [`mss_io::vtk::time_decimals`].
+    pub fn with_time_decimals(mut self, decimals: Option<usize>) -> Self {
+        let Some(decimals) = decimals else {
+            return self;
+        };
+        for (exporter, _) in &mut self.lattice {
+            exporter.set_time_decimals(decimals);
+        }
+        if let Some(pvd) = self.springs.as_mut().and_then(|s| s.pvd.as_mut()) {
+            pvd.set_time_decimals(Some(decimals));
+        }
+        self
+    }
+
     /// Frames written so far.
     pub fn frames(&self) -> usize {
         self.times.len()

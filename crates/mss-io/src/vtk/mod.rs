@@ -18,7 +18,7 @@ mod vtu;
 
 #[cfg(feature = "legacy-vtk")]
 pub use legacy::{LegacyFormat, write_legacy_vtk};
-pub use pvd::{PvdEntry, PvdWriter};
+pub use pvd::{PvdEntry, PvdWriter, time_decimals};
 #[cfg(feature = "legacy-vtk")]
 pub use series::LegacyVtkSeries;
 pub use series::{FrameExporter, VtuSeries};

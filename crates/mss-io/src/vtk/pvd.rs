@@ -34,6 +34,42 @@ pub struct PvdEntry {
 pub struct PvdWriter {
     path: PathBuf,
     entries: Vec<PvdEntry>,
+    /// Decimals of the times written (`None`: the shortest text that parses
+    /// back exactly).
+    time_decimals: Option<usize>,
+}
+
+/// Decimals that show frame times scheduled at multiples of `every` until
+/// `end` without the rounding of the steps' sums (`0.019999999999999987`
+/// is `0.02`): the decimals of `every` and of `end` as written, and two
+/// more, so that a frame off the schedule (an interrupted run's last)
+/// keeps its own time. `None` (times written exactly) when either has more
+/// than 9 decimals: then they are not round numbers.
+///
+/// ```
+/// use mss_io::vtk::time_decimals;
+/// assert_eq!(time_decimals(0.025, 1.0), Some(5));
+/// assert_eq!(time_decimals(0.01, 1.5), Some(4));
+/// assert_eq!(time_decimals(1.0 / 3.0, 1.0), None);
+/// ```
+pub fn time_decimals(every: f64, end: f64) -> Option<usize> {
+    let decimals = |x: f64| {
+        let text = x.to_string();
+        (x.is_finite() && !text.contains('e'))
+            .then(|| text.split_once('.').map_or(0, |(_, d)| d.len()))
+            .filter(|&d| d <= 9)
+    };
+    Some(decimals(every)?.max(decimals(end)?) + 2)
+}
+
+/// `t` with `decimals` decimals, trailing zeros dropped (`0.0200` -> `0.02`).
+fn time_text(t: f64, decimals: usize) -> String {
+    let text = format!("{t:.decimals$}");
+    if text.contains('.') {
+        text.trim_end_matches('0').trim_end_matches('.').to_owned()
+    } else {
+        text
+    }
 }
 
 impl PvdWriter {
@@ -43,7 +79,15 @@ impl PvdWriter {
         PvdWriter {
             path: path.into(),
             entries: Vec::new(),
+            time_decimals: None,
         }
+    }
+
+    /// Writes times with `decimals` decimals ([`time_decimals`] of the
+    /// frame schedule gives frames at its multiples as ParaView users expect
+    /// them), or, with `None`, exactly (the default).
+    pub fn set_time_decimals(&mut self, decimals: Option<usize>) {
+        self.time_decimals = decimals;
     }
 
     /// Path of the `.pvd` file.
@@ -103,10 +147,13 @@ impl PvdWriter {
             )?;
             for e in &self.entries {
                 // Display of f64 is the shortest text that parses back exactly.
+                let time = match self.time_decimals {
+                    Some(d) => time_text(e.time, d),
+                    None => e.time.to_string(),
+                };
                 writeln!(
                     w,
-                    "    <DataSet timestep=\"{}\" group=\"\" part=\"0\" file=\"{}\"/>",
-                    e.time,
+                    "    <DataSet timestep=\"{time}\" group=\"\" part=\"0\" file=\"{}\"/>",
                     xml_escape(&e.file)
                 )?;
             }

@@ -35,6 +35,12 @@ pub trait FrameExporter: Send {
         let _ = frame_times;
         Ok(())
     }
+    /// Frame times are round numbers to `decimals` decimals
+    /// ([`super::time_decimals`]): an index file may print them so. The
+    /// default ignores it.
+    fn set_time_decimals(&mut self, decimals: usize) {
+        let _ = decimals;
+    }
 }
 
 /// Refuses frame indices that do not increase, which would list a frame twice
@@ -97,6 +103,10 @@ impl VtuSeries {
 }
 
 impl FrameExporter for VtuSeries {
+    fn set_time_decimals(&mut self, decimals: usize) {
+        self.pvd.set_time_decimals(Some(decimals));
+    }
+
     fn name(&self) -> &'static str {
         match self.encoding {
             VtuEncoding::Base64Zlib => "vtu",

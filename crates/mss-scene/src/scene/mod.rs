@@ -221,6 +221,44 @@ fn one_line(s: &str) -> String {
     s.split_whitespace().collect::<Vec<_>>().join(" ")
 }
 
+/// Levenshtein distance between two short names.
+fn edit_distance(a: &str, b: &str) -> usize {
+    let b: Vec<char> = b.chars().collect();
+    let mut row: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.chars().enumerate() {
+        let mut diagonal = row[0];
+        row[0] = i + 1;
+        for (j, &cb) in b.iter().enumerate() {
+            let above = row[j + 1];
+            row[j + 1] = (diagonal + usize::from(ca != cb))
+                .min(row[j] + 1)
+                .min(above + 1);
+            diagonal = above;
+        }
+    }
+    row[b.len()]
+}
+
+/// For serde's "unknown field `X`, expected one of `a`, `b`" (or an unknown
+/// variant), the valid name closest to `X` when it is a likely typo: within
+/// a third of its length in edits (at least one).
+fn did_you_mean(message: &str) -> Option<String> {
+    let (_, rest) = message
+        .split_once("unknown field `")
+        .or_else(|| message.split_once("unknown variant `"))?;
+    let (given, rest) = rest.split_once('`')?;
+    let (_, expected) = rest.split_once("expected")?;
+    let limit = (given.chars().count() / 3).max(1);
+    expected
+        .split('`')
+        .skip(1)
+        .step_by(2)
+        .map(|name| (edit_distance(given, name), name))
+        .filter(|&(d, _)| d <= limit)
+        .min_by_key(|&(d, _)| d)
+        .map(|(_, name)| name.to_owned())
+}
+
 /// 1-based line and column of byte offset `at` in `text`.
 fn line_column(text: &str, at: usize) -> (usize, usize) {
     let at = at.min(text.len());
@@ -253,11 +291,15 @@ impl Scene {
                 }
                 None => (0, 0, String::new()),
             };
+            let mut message = one_line(e.message());
+            if let Some(name) = did_you_mean(&message) {
+                message.push_str(&format!(" (did you mean `{name}`?)"));
+            }
             SceneError::Parse {
                 path: name.to_owned(),
                 line,
                 column,
-                message: one_line(e.message()),
+                message,
                 context,
             }
         })?;
@@ -606,6 +648,21 @@ mod tests {
             }
         );
         assert_eq!(t.output.every_time, Some(0.025));
+    }
+
+    #[test]
+    fn typos_get_the_closest_valid_name() {
+        let e = err(&format!("{MIN}[model]\nhourglas = 0.3\n"));
+        assert!(e.contains("(did you mean `hourglass`?)"), "{e}");
+        let e = err(&format!("{MIN}[solver]\ndurration = 1.0\n"));
+        assert!(e.contains("(did you mean `duration`?)"), "{e}");
+        let e = err(&format!("{MIN}[[fixed]]\nkind = \"lowest_layr\"\n"));
+        assert!(e.contains("(did you mean `lowest_layer`?)"), "{e}");
+        // Nothing close: no guess.
+        let e = err(&format!("{MIN}colour = 3\n"));
+        assert!(!e.contains("did you mean"), "{e}");
+        assert_eq!(edit_distance("kitten", "sitting"), 3);
+        assert_eq!(edit_distance("", "abc"), 3);
     }
 
     #[test]

@@ -65,6 +65,12 @@ fn frames_land_on_multiples_of_every_time() {
     for (k, t) in times.iter().enumerate() {
         assert!((t - 0.005 * k as f64).abs() < 1e-12, "frame {k} at {t}");
     }
+    // Printed as the round numbers they are, not the sums of the steps.
+    let text = std::fs::read_to_string(out.path().join("lattice.pvd")).unwrap();
+    for k in 0..5 {
+        let t = ["0", "0.005", "0.01", "0.015", "0.02"][k];
+        assert!(text.contains(&format!("timestep=\"{t}\"")), "{text}");
+    }
     assert!((summary.simulated_time - 0.02).abs() < 1e-12);
 }
 
@@ -882,4 +888,30 @@ fn resuming_refuses_a_forged_time_and_a_lost_frame() {
     std::fs::remove_file(dir.path().join("lattice_0001.vtu")).unwrap();
     assert!(refused("lattice_0001.vtu"));
     assert!(refused("missing"));
+}
+
+/// The summary carries the largest displacement over the run and its time:
+/// the bundled press squeezes the critter and lets go, so its peak is well
+/// above the displacement it ends with, and comes before the end.
+#[test]
+fn the_summary_carries_the_peak_displacement_and_its_time() {
+    let input = SceneInput::load(Some(std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../data/scenes/press.toml"
+    ))))
+    .unwrap();
+    let job = Job::prepare(input, Registry::default(), &no_progress).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let s = job.run(dir.path(), &no_progress, &Cancel::new()).unwrap();
+    assert!(
+        s.peak_displacement > 2.0 * s.max_displacement,
+        "peak {} end {}",
+        s.peak_displacement,
+        s.max_displacement
+    );
+    assert!(
+        s.peak_displacement_time > 0.0 && s.peak_displacement_time < s.simulated_time,
+        "{}",
+        s.peak_displacement_time
+    );
 }
