@@ -72,6 +72,9 @@ def test_bad_values_raise_typed_errors(call, kind, words):
         call()
     assert words.lower() in str(e.value).lower()
     assert "\n" not in str(e.value)
+    # A sentence, not Rust's Debug text or paths.
+    for raw in ["Some(", "None)", "Error {", "Error(", "::", "Resolution", " { "]:
+        assert raw not in str(e.value), str(e.value)
 
 
 def test_free_static_problem_is_a_mechanism():

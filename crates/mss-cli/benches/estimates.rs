@@ -1,8 +1,8 @@
-//! How close `mss check`'s memory and time estimates come to what runs
-//! measure: for the bundled scenes and voxelized cubes, the estimates of
+//! How close `mss check`'s memory, time and output estimates come to what
+//! runs measure: for the bundled scenes and voxelized cubes, the estimates of
 //! `mss_scene::check::CheckReport` (computed here on a pool of the run's
-//! thread count) beside the peak memory and stepping time that `mss run`
-//! (the binary, one process per run) writes to its summary.
+//! thread count) beside the peak memory, stepping time and bytes written
+//! that `mss run` (the binary, one process per run) writes to its summary.
 //!
 //! `cargo bench -p mss-cli --bench estimates [-- THREADS [LARGEST_CUBE]]`
 //! (defaults: 1 thread, cubes up to 64^3 cells). Not run by CI.
@@ -52,7 +52,7 @@ fn main() {
         .build()
         .expect("a thread pool");
     println!(
-        "{threads} thread(s)\n| scene | cells | memory estimate | peak memory | ratio | time estimate | stepping time | ratio |\n|---|---|---|---|---|---|---|---|"
+        "{threads} thread(s)\n| scene | cells | memory estimate | peak memory | ratio | time estimate | stepping time | ratio | output estimate | written | ratio |\n|---|---|---|---|---|---|---|---|---|---|---|"
     );
     for (name, path) in scenes {
         let (report, cells) = pool.install(|| {
@@ -75,6 +75,8 @@ fn main() {
         .expect("json");
         let peak = summary["peak_memory_bytes"].as_f64().unwrap_or(f64::NAN);
         let seconds = summary["simulate_seconds"].as_f64().unwrap_or(f64::NAN);
+        let written = summary["bytes_written"].as_f64().unwrap_or(f64::NAN);
+        let output = (report.frame_bytes * report.frames) as f64;
         let mib = |b: f64| b / f64::from(1 << 20);
         let (time, time_ratio) =
             report
@@ -87,10 +89,13 @@ fn main() {
                     )
                 });
         println!(
-            "| {name} | {cells} | {:.1} MiB | {:.1} MiB | {:.2} | {time} | {seconds:.2} s | {time_ratio} |",
+            "| {name} | {cells} | {:.1} MiB | {:.1} MiB | {:.2} | {time} | {seconds:.2} s | {time_ratio} | {:.1} MiB | {:.1} MiB | {:.2} |",
             mib(report.memory_bytes as f64),
             mib(peak),
             report.memory_bytes as f64 / peak,
+            mib(output),
+            mib(written),
+            output / written,
         );
     }
 }
