@@ -131,6 +131,26 @@ impl TimeEstimate {
 }
 
 impl CheckReport {
+    /// Whether the time estimate is only a lower bound: the body cannot
+    /// carry its load statically (it buckles or collapses, or the solve
+    /// failed), and a run's explicit steps shrink as it folds, which steps
+    /// timed at rest cannot see (the soft bunny hanging by its feet took 5
+    /// to 20 times the estimate).
+    pub fn time_is_lower_bound(&self) -> bool {
+        !self.load_check_is_static_run()
+            && matches!(
+                self.load_check,
+                LoadCheck::LoadLimit { .. } | LoadCheck::Failed { .. }
+            )
+    }
+
+    /// Whether the load check is the run itself (a static scene).
+    fn load_check_is_static_run(&self) -> bool {
+        self.time_estimate
+            .as_ref()
+            .is_some_and(|t| t.probe_steps == 0)
+    }
+
     /// Estimates and checks for `job`: counts zero-energy modes, solves the
     /// scene's load statically ([`LoadCheck`]; seconds on large lattices)
     /// and times a few of the run's steps ([`TimeEstimate`]).

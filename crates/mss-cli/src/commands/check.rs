@@ -119,11 +119,22 @@ pub fn run(args: &CheckArgs, global: &GlobalArgs) -> anyhow::Result<()> {
     );
     match &report.time_estimate {
         Some(t) if t.probe_steps > 0 => crate::outln!(
-            "time estimate    {} ({:.3e} s per step, timed on {} steps; writing {})",
+            "time estimate    {}{} ({:.3e} s per step, timed on {} steps; writing {}){}",
+            if report.time_is_lower_bound() {
+                "at least "
+            } else {
+                ""
+            },
             human_seconds(t.seconds),
             t.seconds_per_step,
             t.probe_steps,
-            human_seconds(t.writing_seconds)
+            human_seconds(t.writing_seconds),
+            if report.time_is_lower_bound() {
+                "; the body does not carry its load statically, and a run's steps shrink \
+                 as it folds: it may take several times longer"
+            } else {
+                ""
+            }
         ),
         Some(t) => crate::outln!(
             "time estimate    {} (the static solve took {}; writing {})",
