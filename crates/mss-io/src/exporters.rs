@@ -167,40 +167,27 @@ impl Default for Exporters {
             bytes,
         };
         let pvd = Some("pvd");
-        for (name, encoding, with_pvd, facts) in [
+        // Each encoding with and without its .pvd: `vtu`, `vtu-no-pvd`, ...
+        for (stem, encoding, bytes) in [
             (
                 "vtu",
                 VtuEncoding::Base64Zlib,
-                true,
-                facts("vtu", pvd, vtu_zlib_bytes),
+                vtu_zlib_bytes as fn(usize, usize) -> u64,
             ),
-            (
-                "vtu-no-pvd",
-                VtuEncoding::Base64Zlib,
-                false,
-                facts("vtu", None, vtu_zlib_bytes),
-            ),
-            (
-                "vtu-base64",
-                VtuEncoding::Base64,
-                true,
-                facts("vtu", pvd, vtu_base64_bytes),
-            ),
-            (
-                "vtu-base64-no-pvd",
-                VtuEncoding::Base64,
-                false,
-                facts("vtu", None, vtu_base64_bytes),
-            ),
-            (
-                "vtu-ascii",
-                VtuEncoding::Ascii,
-                true,
-                facts("vtu", pvd, text_bytes),
-            ),
+            ("vtu-base64", VtuEncoding::Base64, vtu_base64_bytes),
         ] {
-            e.register_frames_with(name, facts, vtu(encoding, with_pvd));
+            e.register_frames_with(stem, facts("vtu", pvd, bytes), vtu(encoding, true));
+            e.register_frames_with(
+                &format!("{stem}-no-pvd"),
+                facts("vtu", None, bytes),
+                vtu(encoding, false),
+            );
         }
+        e.register_frames_with(
+            "vtu-ascii",
+            facts("vtu", pvd, text_bytes),
+            vtu(VtuEncoding::Ascii, true),
+        );
         #[cfg(feature = "legacy-vtk")]
         {
             e.register_frames_with(

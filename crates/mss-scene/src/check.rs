@@ -136,19 +136,13 @@ impl CheckReport {
     /// failed), and a run's explicit steps shrink as it folds, which steps
     /// timed at rest cannot see (the soft bunny hanging by its feet took 5
     /// to 20 times the estimate).
+    /// (A static scene's estimate is the load check's own solve, made only
+    /// when it converged.)
     pub fn time_is_lower_bound(&self) -> bool {
-        !self.load_check_is_static_run()
-            && matches!(
-                self.load_check,
-                LoadCheck::LoadLimit { .. } | LoadCheck::Failed { .. }
-            )
-    }
-
-    /// Whether the load check is the run itself (a static scene).
-    fn load_check_is_static_run(&self) -> bool {
-        self.time_estimate
-            .as_ref()
-            .is_some_and(|t| t.probe_steps == 0)
+        matches!(
+            self.load_check,
+            LoadCheck::LoadLimit { .. } | LoadCheck::Failed { .. }
+        )
     }
 
     /// Estimates and checks for `job`: counts zero-energy modes, solves the

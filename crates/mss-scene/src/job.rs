@@ -276,10 +276,7 @@ impl Job {
         progress(Progress::StageDone);
         let vox = vox.map_err(stage_error)?;
         let voxelize_seconds = t0.elapsed().as_secs_f64();
-        if let Some(extent) = placed.mesh.bounding_box().map(|b| b.extent())
-            && let Some(odd) =
-                crate::stages::implausible_size(extent.into_iter().fold(0.0, f64::max))
-        {
+        if let Some(odd) = crate::stages::implausible_size(&placed.mesh) {
             log::warn!("{scene_name}: {odd} ([mesh] units = \"mm\" or \"cm\", or scale)");
         }
         let PlacedMesh {
@@ -507,12 +504,12 @@ impl Job {
         let default_kind = barrier && mss_core::modes::cells_are_rigid(model);
         // A free body (held by obstacles or by nothing) has no static
         // equilibrium to check: its rigid motions are no defect.
-        let held_by_contact = problem_is_free(&self.problem);
-        if default_kind && held_by_contact {
+        let free_body = problem_is_free(&self.problem);
+        if default_kind && free_body {
             return Ok(());
         }
         progress(Progress::Solving);
-        let check = self.load_check(held_by_contact, &cancel.0);
+        let check = self.load_check(free_body, &cancel.0);
         progress(Progress::StageDone);
         if default_kind {
             // The default model runs whatever the check says (it resists

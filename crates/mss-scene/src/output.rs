@@ -29,47 +29,82 @@ pub const SPRINGS_PREFIX: &str = "springs";
 /// [`write_lines_vtu`], not by a registered exporter.
 const SPRINGS_EXTENSION: &str = "vtu";
 
-/// Whether `name` is a file a run writes, with the exporters of
-/// `exporters`: `STEM_NNNN.EXT` (four or more digits) of the lattice series
-/// (the frame exporters' extensions), of the skin and surface series (the
-/// skin exporters'), or of the springs; a series' index file (`STEM.pvd`);
-/// a point cache and its rest shape (`STEM.pc2`, `STEM_rest.obj`);
-/// `summary.json` or the checkpoint.
-fn is_run_file(name: &str, exporters: &Exporters) -> bool {
-    if name == crate::checkpoint::CHECKPOINT_FILE || name == "summary.json" {
-        return true;
+/// One series of files a run writes: `STEM_NNNN.EXT` per frame, an index
+/// file `STEM.EXT`, and for a skin a point cache `STEM.pc2` beside its rest
+/// shape `STEM_rest.obj`.
+struct Series {
+    stem: &'static str,
+    extensions: Vec<&'static str>,
+    index_extensions: Vec<&'static str>,
+    point_cache: bool,
+}
+
+/// The names of the files a run writes, with the exporters of a registry
+/// (their `SeriesFacts`): built once per folder listed.
+struct RunFileNames {
+    series: [Series; 4],
+}
+
+impl RunFileNames {
+    fn new(exporters: &Exporters) -> Self {
+        let of = |facts: Vec<SeriesFacts>| {
+            let extensions = facts.iter().map(|f| f.extension).collect();
+            let index = facts.iter().filter_map(|f| f.index_extension).collect();
+            (extensions, index)
+        };
+        let (frames, frame_index) = of(exporters.all_frame_facts());
+        let (skins, skin_index): (Vec<_>, Vec<_>) = of(exporters.all_skin_facts());
+        let skin = |stem| Series {
+            stem,
+            extensions: skins.clone(),
+            index_extensions: skin_index.clone(),
+            point_cache: true,
+        };
+        RunFileNames {
+            series: [
+                Series {
+                    stem: LATTICE_PREFIX,
+                    extensions: frames,
+                    index_extensions: frame_index,
+                    point_cache: false,
+                },
+                skin(SKIN_PREFIX),
+                skin(SURFACE_PREFIX),
+                Series {
+                    stem: SPRINGS_PREFIX,
+                    extensions: vec![SPRINGS_EXTENSION],
+                    index_extensions: vec!["pvd"],
+                    point_cache: false,
+                },
+            ],
+        }
     }
-    let frames = exporters.all_frame_facts();
-    let skins = exporters.all_skin_facts();
-    let springs = [SeriesFacts {
-        extension: SPRINGS_EXTENSION,
-        index_extension: Some("pvd"),
-        bytes: |_, _| 0,
-    }];
-    let series: [(&str, &[SeriesFacts]); 4] = [
-        (LATTICE_PREFIX, &frames),
-        (SKIN_PREFIX, &skins),
-        (SURFACE_PREFIX, &skins),
-        (SPRINGS_PREFIX, &springs),
-    ];
-    series.iter().any(|&(stem, facts)| {
-        let Some(rest) = name.strip_prefix(stem) else {
-            return false;
-        };
-        if let Some(ext) = rest.strip_prefix('.') {
-            return facts.iter().any(|f| f.index_extension == Some(ext))
-                || ((stem == SKIN_PREFIX || stem == SURFACE_PREFIX) && ext == "pc2");
+
+    /// Whether `name` is a file a run writes: `STEM_NNNN.EXT` (four or more
+    /// digits) of a series, its index file, a point cache and its rest
+    /// shape, `summary.json` or the checkpoint.
+    fn matches(&self, name: &str) -> bool {
+        if name == crate::checkpoint::CHECKPOINT_FILE || name == "summary.json" {
+            return true;
         }
-        if rest == "_rest.obj" {
-            return stem == SKIN_PREFIX || stem == SURFACE_PREFIX;
-        }
-        let Some((digits, ext)) = rest.strip_prefix('_').and_then(|r| r.split_once('.')) else {
-            return false;
-        };
-        digits.len() >= 4
-            && digits.bytes().all(|b| b.is_ascii_digit())
-            && facts.iter().any(|f| f.extension == ext)
-    })
+        self.series.iter().any(|s| {
+            let Some(rest) = name.strip_prefix(s.stem) else {
+                return false;
+            };
+            if let Some(ext) = rest.strip_prefix('.') {
+                return s.index_extensions.contains(&ext) || (s.point_cache && ext == "pc2");
+            }
+            if rest == "_rest.obj" {
+                return s.point_cache;
+            }
+            let Some((digits, ext)) = rest.strip_prefix('_').and_then(|r| r.split_once('.')) else {
+                return false;
+            };
+            digits.len() >= 4
+                && digits.bytes().all(|b| b.is_ascii_digit())
+                && s.extensions.contains(&ext)
+        })
+    }
 }
 
 /// For a temporary file of [`mss_io::atomic::write_atomic`]
@@ -95,15 +130,15 @@ pub fn previous_run_files(dir: &Path, exporters: &Exporters) -> Vec<PathBuf> {
     let Ok(entries) = std::fs::read_dir(dir) else {
         return Vec::new();
     };
+    let names = RunFileNames::new(exporters);
     let mut out: Vec<PathBuf> = entries
         .filter_map(Result::ok)
         .filter(|e| e.file_type().is_ok_and(|t| t.is_file()))
         .filter_map(|e| {
             let name = e.file_name().to_str()?.to_owned();
-            let ours = is_run_file(&name, exporters)
-                || temporary_of(&name).is_some_and(|(target, pid)| {
-                    is_run_file(target, exporters) && !process_is_running(pid)
-                });
+            let ours = names.matches(&name)
+                || temporary_of(&name)
+                    .is_some_and(|(target, pid)| names.matches(target) && !process_is_running(pid));
             ours.then(|| e.path())
         })
         .collect();
@@ -693,6 +728,7 @@ mod tests {
 
     #[test]
     fn run_files_are_recognised_by_name() {
+        let builtin = RunFileNames::new(&Exporters::default());
         for yes in [
             "lattice_0000.vtu",
             "lattice_12345.vtk",
@@ -706,7 +742,7 @@ mod tests {
             "summary.json",
             crate::checkpoint::CHECKPOINT_FILE,
         ] {
-            assert!(is_run_file(yes, &Exporters::default()), "{yes}");
+            assert!(builtin.matches(yes), "{yes}");
         }
         for no in [
             "lattice_01.vtu",
@@ -720,7 +756,7 @@ mod tests {
             "lattice_rest.obj",
             "lattice_0001.vtp",
         ] {
-            assert!(!is_run_file(no, &Exporters::default()), "{no}");
+            assert!(!builtin.matches(no), "{no}");
         }
         // A program's exporter registered with its facts: its files are the
         // run's too.
@@ -734,8 +770,9 @@ mod tests {
             },
             std::sync::Arc::new(|_, _| unreachable!()),
         );
-        assert!(is_run_file("lattice_0001.vtp", &exporters));
-        assert!(!is_run_file("skin_0001.vtp", &exporters));
+        let names = RunFileNames::new(&exporters);
+        assert!(names.matches("lattice_0001.vtp"));
+        assert!(!names.matches("skin_0001.vtp"));
         assert_eq!(
             temporary_of(".lattice_0003.vtu.tmp-123-7"),
             Some(("lattice_0003.vtu", 123))

@@ -140,17 +140,23 @@ pub const PLAUSIBLE_EXTENT_MAX: f64 = 5.0;
 /// scaled down twice, or in another unit.
 pub const PLAUSIBLE_EXTENT_MIN: f64 = 0.005;
 
-/// What is odd about a placed mesh whose largest extent is `extent` metres
-/// for a soft body, if anything: the front end adds how to change its
+/// What is odd about the size of a placed mesh for a soft body (its
+/// largest extent), if anything: the front end adds how to change its
 /// units or scale in its own terms.
 ///
 /// ```
+/// use mss_scene::hexmesh::generate::box_mesh;
 /// use mss_scene::stages::implausible_size;
-/// assert!(implausible_size(9.7).unwrap().contains("9.700 m across"));
-/// assert!(implausible_size(0.2).is_none());
-/// assert!(implausible_size(0.0002).is_some());
+/// assert!(implausible_size(&box_mesh([0.0; 3], [9.7, 1.0, 1.0])).unwrap().contains("9.700 m across"));
+/// assert!(implausible_size(&box_mesh([0.0; 3], [0.2; 3])).is_none());
+/// assert!(implausible_size(&box_mesh([0.0; 3], [0.0002; 3])).is_some());
 /// ```
-pub fn implausible_size(extent: f64) -> Option<String> {
+pub fn implausible_size(mesh: &TriMesh) -> Option<String> {
+    let extent = mesh
+        .bounding_box()?
+        .extent()
+        .into_iter()
+        .fold(0.0, f64::max);
     if extent > PLAUSIBLE_EXTENT_MAX {
         Some(format!(
             "the mesh is {extent:.3} m across, large for a soft body: if its coordinates are \

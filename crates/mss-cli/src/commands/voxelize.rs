@@ -176,9 +176,7 @@ pub fn run(args: &VoxelizeArgs, global: &GlobalArgs) -> anyhow::Result<()> {
     let placed = stages::load_placed(&source, &placement, &registry.loaders)
         .context("cannot load the mesh (--units, --scale, --up)")?;
     let load_seconds = t0.elapsed().as_secs_f64();
-    if let Some(extent) = placed.mesh.bounding_box().map(|b| b.extent())
-        && let Some(odd) = stages::implausible_size(extent.into_iter().fold(0.0, f64::max))
-    {
+    if let Some(odd) = stages::implausible_size(&placed.mesh) {
         log::warn!("{}: {odd} (--units mm or cm, or --scale)", placed.name);
     }
     let t1 = Instant::now();
