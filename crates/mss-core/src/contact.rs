@@ -51,6 +51,11 @@ use std::fmt::Debug;
 
 use crate::{BlockCsr, Mat3, Model, Vec3};
 
+mod bodies;
+pub use bodies::{
+    BodyContact, BodyContactError, DEFAULT_BODY_FREQUENCY_FRACTION, DEPTH_LIMIT, SELF_EXCLUSION,
+};
+
 /// The `velocity` and `offset` of an obstacle that follows its `path`.
 macro_rules! path_motion {
     () => {
@@ -569,6 +574,22 @@ impl ContactSettings {
     }
 }
 
+/// The stick-slip friction force for the tangential offset `delta` from the
+/// anchor, stiffness `k` and normal force `f_n`, and whether it slides.
+fn coulomb(delta: Vec3, k: f64, f_n: f64, s: &ContactSettings) -> (Vec3, bool) {
+    let stick = delta * (-k);
+    if stick.norm() <= s.friction_static * f_n {
+        return (stick, false);
+    }
+    let len = delta.norm();
+    let dir = if len > 0.0 {
+        delta / len
+    } else {
+        Vec3::zeros()
+    };
+    (dir * (-s.friction_kinetic * f_n), true)
+}
+
 /// A point that can touch: a boundary node, or a vertex of the embedded
 /// surface bound to its cell's 8 nodes by trilinear weights.
 #[derive(Debug, Clone, Copy)]
@@ -625,6 +646,8 @@ pub struct Contact {
     node_points: Vec<u32>,
     /// Points that are surface vertices.
     surface_points: Vec<u32>,
+    /// Contact between the model's bodies (and of a body with itself).
+    bodies: Option<BodyContact>,
 }
 
 /// One point's force from one obstacle, and what friction did.
@@ -724,7 +747,82 @@ impl Contact {
             node_omega_sq_per_stiffness,
             node_points,
             surface_points,
+            bodies: None,
         }
+    }
+
+    /// Adds contact between the model's bodies ([`BodyContact`]); its
+    /// anchors follow the obstacles' in [`State::contact`](crate::solver::State).
+    pub fn with_bodies(mut self, bodies: BodyContact) -> Self {
+        self.bodies = Some(bodies);
+        self
+    }
+
+    /// The contact between bodies, if any.
+    pub fn bodies(&self) -> Option<&BodyContact> {
+        self.bodies.as_ref()
+    }
+
+    /// Entries of the anchor array that belong to the obstacles.
+    fn num_obstacle_anchors(&self) -> usize {
+        self.points.len() * self.obstacles.len()
+    }
+
+    /// The body contact's part of `anchors` (empty when it has none yet).
+    fn body_anchors<'a>(&self, anchors: &'a [Option<Vec3>]) -> &'a [Option<Vec3>] {
+        anchors.get(self.num_obstacle_anchors()..).unwrap_or(&[])
+    }
+
+    /// Whether some contact forces are integrated explicitly by the explicit
+    /// solver: those of surface vertices and between bodies
+    /// ([`Contact::add_explicit_forces`]).
+    pub fn has_explicit_part(&self) -> bool {
+        !self.surface_points.is_empty() || self.bodies.is_some()
+    }
+
+    /// Adds the forces the explicit solver integrates explicitly: the
+    /// surface vertices' and those between bodies.
+    pub fn add_explicit_forces(
+        &self,
+        t: f64,
+        x: &[Vec3],
+        v: &[Vec3],
+        anchors: &[Option<Vec3>],
+        f: &mut [Vec3],
+    ) {
+        self.add_forces_of(&self.surface_points, t, x, v, anchors, f);
+        if let Some(b) = &self.bodies {
+            b.add_forces(x, v, self.body_anchors(anchors), f);
+        }
+    }
+
+    /// Updates the anchors of the body contact alone (see
+    /// [`Contact::update_anchors`]).
+    pub fn update_body_anchors(&self, x: &[Vec3], v: &[Vec3], anchors: &mut Vec<Option<Vec3>>) {
+        let Some(b) = &self.bodies else {
+            return;
+        };
+        if anchors.len() != self.num_anchors() {
+            *anchors = vec![None; self.num_anchors()];
+        }
+        let mut tail = anchors.split_off(self.num_obstacle_anchors());
+        b.update_anchors(x, v, &mut tail);
+        anchors.extend(tail);
+    }
+
+    /// Anchors for a static solve started at `x` (time `t`): every point
+    /// anchored where it is, so that friction holds what starts in contact.
+    pub fn static_anchors(&self, t: f64, x: &[Vec3]) -> Vec<Option<Vec3>> {
+        let offsets: Vec<Vec3> = self.obstacles().map(|(o, _)| o.offset(t)).collect();
+        let mut anchors: Vec<Option<Vec3>> = self
+            .point_positions(x)
+            .into_iter()
+            .flat_map(|p| offsets.iter().map(move |o| Some(p - o)))
+            .collect();
+        if let Some(b) = &self.bodies {
+            anchors.extend(b.static_anchors(x));
+        }
+        anchors
     }
 
     /// The obstacles.
@@ -745,19 +843,24 @@ impl Contact {
     /// Entries of the anchor array of [`State::contact`](crate::solver::State):
     /// one per contact point and obstacle.
     pub fn num_anchors(&self) -> usize {
-        self.points.len() * self.obstacles.len()
+        self.num_obstacle_anchors() + self.bodies.as_ref().map_or(0, BodyContact::num_points)
     }
 
     /// What contact adds to `omega_max^2` (1/s^2): a Gershgorin bound of
     /// the contact stiffness over the nodes' masses.
     pub fn omega_sq(&self) -> f64 {
-        self.max_stiffness() * self.omega_sq_per_stiffness
+        self.max_stiffness() * self.omega_sq_per_stiffness + self.body_omega_sq()
     }
 
-    /// What the surface points alone add to `omega_max^2` (1/s^2): the part
-    /// the explicit step integrates explicitly ([`Contact::surface_points`]).
+    fn body_omega_sq(&self) -> f64 {
+        self.bodies.as_ref().map_or(0.0, BodyContact::omega_sq)
+    }
+
+    /// What the surface points and the contact between bodies add to
+    /// `omega_max^2` (1/s^2): the part the explicit step integrates
+    /// explicitly ([`Contact::add_explicit_forces`]).
     pub fn surface_omega_sq(&self) -> f64 {
-        self.max_stiffness() * self.surface_omega_sq_per_stiffness
+        self.max_stiffness() * self.surface_omega_sq_per_stiffness + self.body_omega_sq()
     }
 
     /// The highest contact frequency squared of a node point (1/s^2): what
@@ -794,19 +897,7 @@ impl Contact {
         let a = anchor.map_or(x, |a| a + obstacle.offset(t));
         let d = x - a;
         let delta = d - n * d.dot(&n);
-        let stick = delta * (-k);
-        let limit = s.friction_static * f_n;
-        let (friction, sliding) = if stick.norm() <= limit {
-            (stick, false)
-        } else {
-            let len = delta.norm();
-            let dir = if len > 0.0 {
-                delta / len
-            } else {
-                Vec3::zeros()
-            };
-            (dir * (-s.friction_kinetic * f_n), true)
-        };
+        let (friction, sliding) = coulomb(delta, k, f_n, s);
         Some((
             Touch {
                 force: n * f_n + friction,
@@ -836,6 +927,9 @@ impl Contact {
     ) {
         for i in 0..self.points.len() {
             self.add_point_forces(i, t, x, v, anchors, f);
+        }
+        if let Some(b) = &self.bodies {
+            b.add_forces(x, v, self.body_anchors(anchors), f);
         }
     }
 
@@ -1007,6 +1101,9 @@ impl Contact {
                 }
             }
         }
+        if let Some(b) = &self.bodies {
+            b.add_jacobian(x, v, self.body_anchors(anchors), dv_dx, jac);
+        }
     }
 
     /// After a step: sets the anchors of new contacts, lets sliding ones
@@ -1019,6 +1116,7 @@ impl Contact {
         for i in 0..self.points.len() {
             self.update_point_anchors(i, t, x, v, anchors);
         }
+        self.update_body_anchors(x, v, anchors);
     }
 
     /// [`Contact::update_anchors`] of the points `which` only; the others'
@@ -1094,7 +1192,7 @@ impl Contact {
                 }
             }
         }
-        e
+        e + self.bodies.as_ref().map_or(0.0, |b| b.energy(x))
     }
 }
 

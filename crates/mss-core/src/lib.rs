@@ -47,8 +47,8 @@ pub use constraints::{ConstraintSpec, Constraints, NodeSelector};
 pub use loads::{Damping, Load, LoadSpec};
 pub use material::{Material, MaterialError};
 pub use model::{
-    CellCoefficients, CellDiagnostics, ForceWorkspace, HourglassControl, HourglassError, Model,
-    ModelError, PaperModel, Parameterization, ParameterizationError, Parameterizations,
+    BodySpan, CellCoefficients, CellDiagnostics, ForceWorkspace, HourglassControl, HourglassError,
+    Model, ModelError, PaperModel, Parameterization, ParameterizationError, Parameterizations,
     SpringsOnly, UnknownParameterization, Volumetric, VolumetricBarrier,
 };
 pub use solver::{

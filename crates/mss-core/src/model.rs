@@ -54,6 +54,12 @@ pub enum ModelError {
         /// Cells in the lattice.
         cells: usize,
     },
+    /// [`Model::union`] of no bodies.
+    #[error("a model needs at least one body")]
+    NoBodies,
+    /// [`Model::union`] of more nodes than indices can hold.
+    #[error("{0} nodes in all bodies: more than 2^32 - 1")]
+    TooManyNodes(usize),
     /// The parameterization gave unusable cell constants.
     #[error(
         "parameterization '{name}' gave invalid cell constants (k_edge {k_edge}, k_diag {k_diag}, correction {correction:?}, lambda {lambda}, hourglass {hourglass}): the correction system is singular or a value is not finite; choose a Poisson's ratio inside the supported range"
@@ -552,6 +558,24 @@ pub struct Model {
     /// Estimate of omega_max^2 at rest (1/s^2), computed when first asked
     /// for (see [`frequency`]).
     omega_max_sq_estimate: std::sync::OnceLock<f64>,
+    /// The bodies the model is made of, in node and cell order (one for a
+    /// model built from a lattice; see [`Model::union`]).
+    bodies: Vec<BodySpan>,
+}
+
+/// Where one body of a [`Model`] lies in its node and cell arrays.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BodySpan {
+    /// Its nodes, a contiguous range of the model's.
+    pub nodes: std::ops::Range<usize>,
+    /// Its cells, a contiguous range of the model's.
+    pub cells: std::ops::Range<usize>,
+    /// Its materials, a contiguous range of [`Model::materials`].
+    pub materials: std::ops::Range<usize>,
+    /// Its cell edge (m).
+    pub h: f64,
+    /// The parameterization it was built with.
+    pub parameterization: String,
 }
 
 fn to_arr(v: &Vec3) -> [f64; 3] {
@@ -705,7 +729,8 @@ impl Model {
             .fold(0.0f64, f64::max);
         drop(row_sums);
         let layers = Layers::of(lattice.cell_coords());
-        let num_springs = lattice.num_unique_edges() + 4 * cells.len();
+        let num_cells = cells.len();
+        let num_springs = lattice.num_unique_edges() + 4 * num_cells;
         Ok(Self {
             rest,
             cells,
@@ -721,7 +746,131 @@ impl Model {
             param_name: param.name(),
             omega_max_sq,
             omega_max_sq_estimate: std::sync::OnceLock::new(),
+            bodies: vec![BodySpan {
+                nodes: 0..n,
+                cells: 0..num_cells,
+                materials: 0..materials.len(),
+                h,
+                parameterization: param.name(),
+            }],
         })
+    }
+
+    /// One model of several bodies, stepped together: `bodies[b]`'s nodes,
+    /// cells and materials follow those of the bodies before it, each body
+    /// keeping its own cell size, parameterization and materials. No node is
+    /// shared, so the bodies interact only through contact
+    /// ([`crate::contact::BodyContact`]). Forces, tangents and energies are
+    /// those of each body alone, bit for bit, in the same node sums.
+    pub fn union(bodies: &[Model]) -> Result<Self, ModelError> {
+        let Some(first) = bodies.first() else {
+            return Err(ModelError::NoBodies);
+        };
+        if bodies.len() == 1 {
+            return Ok(first.clone());
+        }
+        let nodes: usize = bodies.iter().map(Model::num_nodes).sum();
+        if nodes > u32::MAX as usize {
+            return Err(ModelError::TooManyNodes(nodes));
+        }
+        let mut rest = Vec::with_capacity(nodes);
+        let mut cells = Vec::new();
+        let mut masses = Vec::with_capacity(nodes);
+        let (mut params, mut volumetric_share, mut coefficients, mut materials) =
+            (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let mut cell_material = Vec::new();
+        let mut offsets = vec![0u32];
+        let mut spans = Vec::new();
+        let mut num_springs = 0;
+        let mut omega_max_sq = 0.0f64;
+        for body in bodies {
+            for span in &body.bodies {
+                let shift = |r: &std::ops::Range<usize>, by: usize| r.start + by..r.end + by;
+                spans.push(BodySpan {
+                    nodes: shift(&span.nodes, rest.len()),
+                    cells: shift(&span.cells, cells.len()),
+                    materials: shift(&span.materials, params.len()),
+                    ..span.clone()
+                });
+            }
+            let node_offset = rest.len() as u32;
+            let cell_offset = cells.len() as u32;
+            let material_offset = params.len() as u32;
+            rest.extend_from_slice(&body.rest);
+            cells.extend(body.cells.iter().map(|c| c.map(|v| v + node_offset)));
+            masses.extend_from_slice(&body.masses);
+            cell_material
+                .extend((0..body.num_cells()).map(|c| body.cell_material(c) + material_offset));
+            params.extend_from_slice(&body.params);
+            volumetric_share.extend_from_slice(&body.volumetric_share);
+            coefficients.extend_from_slice(&body.coefficients);
+            materials.extend_from_slice(&body.materials);
+            // A body's layers keep their parity (an empty layer between
+            // bodies if needed), so that each node sums its cells in the
+            // order it does alone: the same bits.
+            if (offsets.len() - 1) % 2 == 1 {
+                offsets.push(cell_offset);
+            }
+            offsets.extend(body.layers.offsets[1..].iter().map(|o| o + cell_offset));
+            num_springs += body.num_springs;
+            omega_max_sq = omega_max_sq.max(body.omega_max_sq);
+        }
+        let names: Vec<&str> = spans.iter().map(|s| s.parameterization.as_str()).collect();
+        let mut param_name = names[0].to_owned();
+        if names.iter().any(|n| *n != names[0]) {
+            param_name = names.join("+");
+        }
+        let h = spans.iter().map(|s| s.h).fold(f64::INFINITY, f64::min);
+        Ok(Self {
+            rest: rest.into(),
+            cells: cells.into(),
+            h,
+            masses,
+            params,
+            volumetric_share,
+            coefficients,
+            materials,
+            cell_material,
+            layers: Layers { offsets },
+            num_springs,
+            param_name,
+            omega_max_sq,
+            omega_max_sq_estimate: std::sync::OnceLock::new(),
+            bodies: spans,
+        })
+    }
+
+    /// The bodies of the model, in node order (one unless built by
+    /// [`Model::union`]).
+    pub fn bodies(&self) -> &[BodySpan] {
+        &self.bodies
+    }
+
+    /// The body that node `node` belongs to.
+    pub fn body_of_node(&self, node: usize) -> usize {
+        self.bodies.partition_point(|b| b.nodes.end <= node)
+    }
+
+    /// Integer lattice coordinates of the nodes (for the multigrid's
+    /// coarsening): each body's own grid, the bodies side by side along x
+    /// with an even gap, so that no two bodies share a coordinate or a
+    /// coarse cell.
+    pub(crate) fn grid_coords(&self) -> Vec<[i64; 3]> {
+        let rest = self.rest_positions();
+        let mut out = Vec::with_capacity(rest.len());
+        let mut x_start = 0i64;
+        for b in &self.bodies {
+            let mut coords = crate::solver::multigrid::grid_coords(&rest[b.nodes.clone()], b.h);
+            let width = coords.iter().map(|c| c[0]).max().unwrap_or(0);
+            for c in &mut coords {
+                c[0] += x_start;
+            }
+            out.extend(coords);
+            // An even start keeps every coarse level's cells within one body.
+            x_start += (width + 4) & !1;
+            x_start = (x_start + 63) & !63;
+        }
+        out
     }
 
     /// Rest positions of the nodes (m).
@@ -735,7 +884,8 @@ impl Model {
     pub fn cells(&self) -> &[[u32; 8]] {
         &self.cells
     }
-    /// Cell edge (m).
+    /// Cell edge (m); of a [`Model::union`], the smallest body's (each
+    /// body's own is in [`Model::bodies`]).
     pub fn h(&self) -> f64 {
         self.h
     }
@@ -898,8 +1048,14 @@ impl Model {
                         let last = (first + FORCE_BATCH).min(range.end);
                         let cells = &self.cells[first..last];
                         let fc = &mut buf[..8 * cells.len()];
-                        if batched && one_material {
-                            kernel::forces_batch(&self.params[0], cells, xs, fc);
+                        // A batch of one material (every batch of most
+                        // models, and most of a union's or regions') runs
+                        // the vector kernel: bitwise equal to the cell path.
+                        let uniform = one_material
+                            || (first..last)
+                                .all(|c| self.cell_material[c] == self.cell_material[first]);
+                        if batched && uniform {
+                            kernel::forces_batch(self.params_of(first), cells, xs, fc);
                         } else {
                             for (k, f) in fc.chunks_exact_mut(8).enumerate() {
                                 let cell = first + k;
@@ -1031,11 +1187,12 @@ impl Model {
     /// The symmetric rest stiffness of a cell of each parameter set (all
     /// cells are cubes of edge h, so one matrix per material).
     fn rest_cell_matrices(&self) -> Vec<[[f64; 24]; 24]> {
-        let cube: [[f64; 3]; 8] =
-            std::array::from_fn(|k| hexmesh::CORNER_OFFSETS[k].map(|o| o as f64 * self.h));
         self.params
             .iter()
             .map(|p| {
+                let cube: [[f64; 3]; 8] = std::array::from_fn(|k| {
+                    hexmesh::CORNER_OFFSETS[k].map(|o| o as f64 * p.rest_edge)
+                });
                 let j = kernel::cell_jacobian(p, &cube);
                 std::array::from_fn(|r| std::array::from_fn(|c| -0.5 * (j[r][c] + j[c][r])))
             })
@@ -1158,9 +1315,10 @@ impl Model {
             .into_par_iter()
             .map(|c| {
                 let xc = self.corners(x, c);
+                let h = self.params_of(c).rest_edge;
                 // The corner sign vectors are orthogonal, so the least-squares
                 // gradient is the centre gradient and the offset the mean.
-                let (cols, _) = kernel::deformation_gradient(&xc, 1.0 / (4.0 * self.h));
+                let (cols, _) = kernel::deformation_gradient(&xc, 1.0 / (4.0 * h));
                 let mean = xc
                     .iter()
                     .fold([0.0; 3], |a, p| [a[0] + p[0], a[1] + p[1], a[2] + p[2]]);
@@ -1170,13 +1328,13 @@ impl Model {
                         .map(|d| {
                             let fit = mean[d] / 8.0
                                 + (0..3)
-                                    .map(|j| cols[j][d] * kernel::corner_sign(n, j) * 0.5 * self.h)
+                                    .map(|j| cols[j][d] * kernel::corner_sign(n, j) * 0.5 * h)
                                     .sum::<f64>();
                             (xc[n][d] - fit).powi(2)
                         })
                         .sum::<f64>()
                 };
-                (0..8).map(residual2).fold(0.0, f64::max).sqrt() / self.h
+                (0..8).map(residual2).fold(0.0, f64::max).sqrt() / h
             })
             .collect()
     }
@@ -1216,14 +1374,15 @@ impl Model {
         // Element by element: omega^2 <= max over cells of the cell's
         // stiffness bound over its corner mass (the cell's share of its
         // nodes' lumped masses), here for the cells most likely to set it.
-        let h3 = self.h * self.h * self.h;
         let worst_cell_omega_sq = worst
             .entries
             .iter()
             .filter(|&&(_, c)| c != u32::MAX)
             .map(|&(_, c)| {
                 let c = c as usize;
-                let jac = kernel::cell_jacobian(self.params_of(c), &self.corners(x, c));
+                let p = self.params_of(c);
+                let jac = kernel::cell_jacobian(p, &self.corners(x, c));
+                let h3 = p.rest_edge * p.rest_edge * p.rest_edge;
                 let corner_mass = self.materials[self.cell_material(c) as usize].density * h3 / 8.0;
                 kernel::gershgorin(&jac) / corner_mass
             })

@@ -96,6 +96,54 @@ impl BlockCsr {
             .map(|k| lo + k)
     }
 
+    /// Grows the pattern by the positions `extra` (`(row, col)`, in any
+    /// order, repeats allowed), keeping every stored block; zero blocks at
+    /// the new positions. Contact between bodies couples nodes that share
+    /// no cell.
+    pub fn extend_pattern(&mut self, extra: &[(u32, u32)]) {
+        let mut missing: Vec<(u32, u32)> = extra
+            .iter()
+            .copied()
+            .filter(|&(r, c)| self.find(r as usize, c as usize).is_none())
+            .collect();
+        if missing.is_empty() {
+            return;
+        }
+        missing.sort_unstable();
+        missing.dedup();
+        let n = self.num_rows();
+        let mut offsets = Vec::with_capacity(n + 1);
+        let mut cols = Vec::with_capacity(self.col_indices.len() + missing.len());
+        let mut blocks = Vec::with_capacity(cols.capacity());
+        offsets.push(0u32);
+        let mut m = 0;
+        for r in 0..n {
+            let lo = self.row_offsets[r] as usize;
+            let hi = self.row_offsets[r + 1] as usize;
+            let mut k = lo;
+            // Merge the row's stored columns with its new ones.
+            while k < hi || (m < missing.len() && missing[m].0 as usize == r) {
+                let new = (m < missing.len() && missing[m].0 as usize == r).then(|| missing[m].1);
+                match new {
+                    Some(c) if k >= hi || c < self.col_indices[k] => {
+                        cols.push(c);
+                        blocks.push(Mat3::zeros());
+                        m += 1;
+                    }
+                    _ => {
+                        cols.push(self.col_indices[k]);
+                        blocks.push(self.blocks[k]);
+                        k += 1;
+                    }
+                }
+            }
+            offsets.push(cols.len() as u32);
+        }
+        self.row_offsets = offsets;
+        self.col_indices = cols;
+        self.blocks = blocks;
+    }
+
     /// Adds `block` at `(row, col)`; panics if the position is not in the
     /// pattern, which would be a bug in the caller's assembly.
     pub fn add(&mut self, row: usize, col: usize, block: &Mat3) {

@@ -621,7 +621,7 @@ impl Explicit {
 
     /// Zeroes the contact forces of the kicks.
     fn clear_contact_forces(&mut self, contact: &Contact) {
-        if contact.surface_points().is_empty() {
+        if !contact.has_explicit_part() {
             for &n in &self.contact_touched {
                 self.f_contact[n as usize] = Vec3::zeros();
             }
@@ -681,10 +681,9 @@ impl Explicit {
                 self.contact_touched.push(n as u32);
             }
         }
-        let surface = contact.surface_points();
-        if !surface.is_empty() {
+        if contact.has_explicit_part() {
             let f = &mut self.f_contact;
-            contact.add_forces_of(surface, state.time, &state.x, &state.v, &state.contact, f);
+            contact.add_explicit_forces(state.time, &state.x, &state.v, &state.contact, f);
         }
     }
 
@@ -791,10 +790,9 @@ impl Explicit {
                 state.v[n] += free(g) * (dt / masses[n]);
             }
         }
-        let surface = contact.surface_points();
-        if verlet && !surface.is_empty() {
+        if verlet && contact.has_explicit_part() {
             let f = &mut self.f_contact;
-            contact.add_forces_of(surface, t1, &state.x, &state.v, &state.contact, f);
+            contact.add_explicit_forces(t1, &state.x, &state.v, &state.contact, f);
         }
         ok
     }
@@ -807,6 +805,7 @@ impl Explicit {
         let (t, x, v) = (state.time, &state.x, &state.v);
         contact.update_anchors_of(&self.candidates, t, x, v, &mut state.contact);
         contact.update_anchors_of(contact.surface_points(), t, x, v, &mut state.contact);
+        contact.update_body_anchors(x, v, &mut state.contact);
     }
 
     fn check(&self, model: &Model, state: &State) -> Option<Divergence> {

@@ -315,12 +315,6 @@ impl NonlinearSystem for BackwardEuler<'_> {
         for l in p.loads() {
             l.add_jacobian(model, self.t1, x, 1.0, &mut j);
         }
-        if let Some(c) = p.contact() {
-            for i in 0..x.len() {
-                self.v1[i] = (x[i] - self.x0[i]) / dt;
-            }
-            c.add_jacobian(self.t1, x, &self.v1, self.anchors, 1.0 / dt, &mut j);
-        }
         for (i, &m) in model.masses().iter().enumerate() {
             let k = j.find(i, i).expect("diagonal in the lattice pattern");
             j.blocks[k] -= Mat3::identity() * (m * (1.0 + d.alpha * dt) / (dt * dt));
@@ -331,6 +325,13 @@ impl NonlinearSystem for BackwardEuler<'_> {
             for (b, k) in j.blocks.iter_mut().zip(&k0.blocks) {
                 *b -= k * (d.beta / dt);
             }
+        }
+        // Last: contact between bodies may grow the pattern.
+        if let Some(c) = p.contact() {
+            for i in 0..x.len() {
+                self.v1[i] = (x[i] - self.x0[i]) / dt;
+            }
+            c.add_jacobian(self.t1, x, &self.v1, self.anchors, 1.0 / dt, &mut j);
         }
         j
     }

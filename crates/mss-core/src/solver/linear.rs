@@ -314,17 +314,21 @@ impl std::fmt::Debug for LinearSolver {
 impl LinearSolver {
     /// A solver for matrices over the nodes of `model`'s lattice.
     pub fn new(model: &crate::Model, kind: LinearSolverKind) -> Self {
-        Self::for_lattice(model.cells(), model.rest_positions(), model.h(), kind)
+        Self::with_coords(model.cells(), model.grid_coords(), kind)
     }
 
     /// A solver for matrices over the nodes of a lattice given by its cells,
     /// rest positions and cell edge.
     pub fn for_lattice(cells: &[[u32; 8]], rest: &[Vec3], h: f64, kind: LinearSolverKind) -> Self {
+        Self::with_coords(cells, super::multigrid::grid_coords(rest, h), kind)
+    }
+
+    fn with_coords(cells: &[[u32; 8]], coords: Vec<[i64; 3]>, kind: LinearSolverKind) -> Self {
         Self {
             kind,
             lu: LuCache::new(),
             cells: cells.to_vec(),
-            coords: super::multigrid::grid_coords(rest, h),
+            coords,
             shape: None,
             stats: LinearStats::default(),
             keep_next: false,

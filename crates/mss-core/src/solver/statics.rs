@@ -221,13 +221,7 @@ fn solve_static_here(
         );
     }
     let anchors = match problem.contact() {
-        Some(c) => {
-            let offsets: Vec<Vec3> = c.obstacles().map(|(o, _)| o.offset(state.time)).collect();
-            c.point_positions(&state.x)
-                .into_iter()
-                .flat_map(|p| offsets.iter().map(move |o| Some(p - o)))
-                .collect()
-        }
+        Some(c) => c.static_anchors(state.time, &state.x),
         None => Vec::new(),
     };
     let mut sys = StaticSystem {

@@ -3,6 +3,7 @@
 //! (see README).
 
 mod barrier;
+mod bodies;
 mod contact;
 mod determinism;
 mod hourglass;

@@ -1,0 +1,642 @@
+//! Contact between the bodies of a [`Model::union`], and of a body with
+//! itself.
+//!
+//! **Geometry.** Each body's surface is its lattice's boundary: every cell
+//! face no other cell shares, split into two triangles along a diagonal,
+//! oriented outward. The points that touch are the boundary nodes. A point
+//! `p` is inside another body when its nearest surface triangle (among
+//! those it projects onto, within half a cell of that body) lies in front of
+//! it: the gap `g = n . (p - a)` to the triangle's plane is negative. The
+//! nearest one decides, so that a point just outside a thin body is not
+//! taken for inside the face behind it.
+//!
+//! **Broad phase.** The triangles' boxes, grown by the depth limit, go into
+//! a uniform grid of the largest cell size, as sorted `(grid cell,
+//! triangle)` keys; each point examines the triangles of its own grid cell.
+//! Building it is a sort of `O(n log n)` for `n` surface triangles, done at
+//! every force evaluation (the surface moves).
+//!
+//! **Forces.** The penalty `f_n = k d - c v_n` (never pulling) along the
+//! triangle's normal `n`, with `d = -g`, on the point, and `-beta_i` times
+//! it on the triangle's nodes (`beta` the barycentric coordinates of the
+//! point's projection): the forces sum to zero, so momentum is kept. As
+//! `dg/dp = n` and `dg/dx_i = -beta_i n` exactly at the projection, this is
+//! the gradient of the energy `k d^2 / 2`. Friction is the obstacles'
+//! stick-slip law, the anchor being a material point of the touched body: a
+//! triangle and barycentric coordinates, stored in
+//! [`State::contact`](crate::solver::State) as `(triangle, beta_b, beta_c)`
+//! after the obstacles' anchors.
+//!
+//! **Derivatives.** With `J = -k n n^T` (and the friction and damping
+//! terms, as for obstacles) the derivative of the force on the point, the
+//! blocks between the point and node `i` are `-beta_i J`, between nodes `i`
+//! and `j` `beta_i beta_j J`: the matrix's pattern grows by the pairs in
+//! contact ([`BlockCsr::extend_pattern`]). Left out is the turning of the
+//! normal and the sliding of the projection (`k d` times the gap's second
+//! derivative: small while the depth is). A static solve counts points
+//! within [`STATIC_MARGIN`] of a cell outside a surface as touching in its
+//! tangent (not in its forces): a body held by contact alone would
+//! otherwise have a singular tangent wherever an iterate lifts it off.
+//!
+//! **Self-contact** (per body) lets a body's points touch its own surface,
+//! except the triangles whose nodes lay within [`SELF_EXCLUSION`] cells of
+//! the point at rest: the point's own and neighbouring cells, which touch
+//! it by construction.
+
+use rayon::prelude::*;
+
+use super::ContactSettings;
+use crate::{BlockCsr, Mat3, Model, Vec3};
+
+/// Triangles of a body's own surface whose nodes lay within this many cell
+/// sizes of a point at rest do not touch it (its own cells and their
+/// neighbours).
+pub const SELF_EXCLUSION: f64 = 2.5;
+
+/// How deep (in cells of the touched body) a point may be inside a body
+/// and still be pushed out; deeper, it is taken for the far side's business.
+pub const DEPTH_LIMIT: f64 = 0.5;
+
+/// Default contact frequency between bodies as a fraction of the bound of
+/// the lattice's highest frequency: body contact is explicit in the
+/// explicit solver, so it shortens the step (by about 15 % here).
+pub const DEFAULT_BODY_FREQUENCY_FRACTION: f64 = 0.25;
+
+/// How close to a surface (in cells) a point counts as touching in a static
+/// solve's tangent (not in its forces).
+pub const STATIC_MARGIN: f64 = 0.1;
+
+/// Points per parallel task of the narrow phase.
+const POINT_CHUNK: usize = 256;
+
+#[derive(Debug, Clone, Copy)]
+struct Triangle {
+    nodes: [u32; 3],
+    body: u32,
+}
+
+/// One point inside a body: the triangle it is pushed out of.
+#[derive(Debug, Clone, Copy)]
+struct Pair {
+    point: u32,
+    triangle: u32,
+    beta: [f64; 3],
+    normal: Vec3,
+    /// Depth (m), > 0.
+    depth: f64,
+}
+
+/// One touch's force and what friction did.
+struct Touch {
+    /// Force on the point (N); its reaction goes to the triangle.
+    force: Vec3,
+    /// Tangential offset from the anchor.
+    delta: Vec3,
+    /// Normal force (N).
+    f_n: f64,
+    sliding: bool,
+    stiffness: f64,
+    damping: f64,
+}
+
+/// Contact between the bodies of a model, and self-contact where asked.
+#[derive(Debug, Clone)]
+pub struct BodyContact {
+    settings: ContactSettings,
+    triangles: Vec<Triangle>,
+    /// Boundary nodes that can touch.
+    points: Vec<u32>,
+    point_body: Vec<u32>,
+    /// Each point's stiffness over the settings' (its mass over the mean).
+    stiffness_ratio: Vec<f64>,
+    point_mass: Vec<f64>,
+    /// Per body: whether it touches itself, its cell size.
+    self_contact: Vec<bool>,
+    body_h: Vec<f64>,
+    /// Rest positions of the points and of the triangles' nodes, for the
+    /// self-contact exclusion.
+    rest: Vec<Vec3>,
+    grid_size: f64,
+    omega_sq_per_stiffness: f64,
+}
+
+/// Why body contact could not be set up.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum BodyContactError {
+    /// `self_contact` does not have one entry per body.
+    #[error("self_contact has {given} entries for {bodies} bodies")]
+    SelfContactCount {
+        /// Entries given.
+        given: usize,
+        /// Bodies in the model.
+        bodies: usize,
+    },
+    /// The settings are out of range.
+    #[error(transparent)]
+    Settings(#[from] super::ObstacleError),
+}
+
+impl ContactSettings {
+    /// Defaults for contact between `model`'s bodies: a stiffness that gives
+    /// [`DEFAULT_BODY_FREQUENCY_FRACTION`] of the lattice's highest
+    /// frequency, friction 0.5, damping ratio 0.2.
+    pub fn for_bodies(model: &Model) -> Self {
+        let omega = DEFAULT_BODY_FREQUENCY_FRACTION * model.omega_max_bound();
+        let mass = super::mean_boundary_mass(model, &model.boundary_nodes());
+        Self {
+            stiffness: mass * omega * omega,
+            ..Self::for_model(model)
+        }
+    }
+}
+
+/// The 2-triangle split of each boundary quad, oriented outward.
+fn boundary_triangles(model: &Model) -> Vec<Triangle> {
+    use std::collections::HashMap;
+    let mut seen: HashMap<[u32; 4], (u32, u8, u32)> = HashMap::new();
+    for (c, cell) in model.cells().iter().enumerate() {
+        for (f, corners) in hexmesh::CELL_FACES.iter().enumerate() {
+            let mut key = corners.map(|k| cell[k]);
+            key.sort_unstable();
+            seen.entry(key)
+                .and_modify(|e| e.2 += 1)
+                .or_insert((c as u32, f as u8, 1));
+        }
+    }
+    let mut faces: Vec<(u32, u8)> = seen
+        .into_values()
+        .filter(|&(_, _, count)| count == 1)
+        .map(|(c, f, _)| (c, f))
+        .collect();
+    faces.sort_unstable();
+    let mut out = Vec::with_capacity(2 * faces.len());
+    for (c, f) in faces {
+        let cell = &model.cells()[c as usize];
+        let q = hexmesh::CELL_FACES[f as usize].map(|k| cell[k]);
+        let body = model.body_of_node(q[0] as usize) as u32;
+        out.push(Triangle {
+            nodes: [q[0], q[1], q[2]],
+            body,
+        });
+        out.push(Triangle {
+            nodes: [q[0], q[2], q[3]],
+            body,
+        });
+    }
+    out
+}
+
+/// Grid cell of a position.
+fn grid_cell(p: Vec3, size: f64) -> [i64; 3] {
+    std::array::from_fn(|k| (p[k] / size).floor() as i64)
+}
+
+/// A key of a grid cell (distinct cells may share one: the narrow phase
+/// sorts them out).
+fn grid_key(c: [i64; 3]) -> u64 {
+    let mix = |v: i64, m: u64| (v as u64).wrapping_mul(m);
+    mix(c[0], 0x9E37_79B9_7F4A_7C15)
+        ^ mix(c[1], 0xC2B2_AE3D_27D4_EB4F)
+        ^ mix(c[2], 0x1656_67B1_9E37_79F9)
+}
+
+impl BodyContact {
+    /// Contact between `model`'s bodies ([`Model::bodies`]), with
+    /// self-contact for the bodies where `self_contact[b]` is true.
+    pub fn new(
+        model: &Model,
+        settings: ContactSettings,
+        self_contact: &[bool],
+    ) -> Result<Self, BodyContactError> {
+        settings.validate()?;
+        let bodies = model.bodies();
+        if self_contact.len() != bodies.len() {
+            return Err(BodyContactError::SelfContactCount {
+                given: self_contact.len(),
+                bodies: bodies.len(),
+            });
+        }
+        let triangles = boundary_triangles(model);
+        let boundary = model.boundary_nodes();
+        let masses = model.masses();
+        let mean = super::mean_boundary_mass(model, &boundary);
+        // A body touches something when another body exists or it touches itself.
+        let takes_part = |b: usize| bodies.len() > 1 || self_contact[b];
+        let points: Vec<u32> = boundary
+            .into_iter()
+            .filter(|&n| takes_part(model.body_of_node(n as usize)))
+            .collect();
+        let point_body = points
+            .iter()
+            .map(|&n| model.body_of_node(n as usize) as u32)
+            .collect();
+        let point_mass: Vec<f64> = points.iter().map(|&n| masses[n as usize]).collect();
+        let stiffness_ratio: Vec<f64> = point_mass
+            .iter()
+            .map(|&m| if mean > 0.0 { m / mean } else { 1.0 })
+            .collect();
+        // Gershgorin: a touching point couples itself and its triangle's
+        // nodes with a row sum of 2 k; a triangle node gathers about one
+        // point's share per node of the touching side (its mass grows as
+        // fast as the shares where resolutions differ). A margin of 1.5.
+        let omega_sq_per_stiffness = 3.0
+            * points
+                .iter()
+                .zip(&stiffness_ratio)
+                .map(|(&n, r)| r / masses[n as usize])
+                .fold(0.0, f64::max);
+        let grid_size = bodies.iter().map(|b| b.h).fold(0.0, f64::max);
+        Ok(Self {
+            settings,
+            triangles,
+            points,
+            point_body,
+            stiffness_ratio,
+            point_mass,
+            self_contact: self_contact.to_vec(),
+            body_h: bodies.iter().map(|b| b.h).collect(),
+            rest: if self_contact.iter().any(|&s| s) {
+                model.rest_positions().to_vec()
+            } else {
+                Vec::new()
+            },
+            grid_size,
+            omega_sq_per_stiffness,
+        })
+    }
+
+    /// The contact settings.
+    pub fn settings(&self) -> &ContactSettings {
+        &self.settings
+    }
+
+    /// Number of points that can touch another body (or their own).
+    pub fn num_points(&self) -> usize {
+        self.points.len()
+    }
+
+    /// Number of surface triangles.
+    pub fn num_triangles(&self) -> usize {
+        self.triangles.len()
+    }
+
+    /// What body contact adds to `omega_max^2` (1/s^2), a Gershgorin bound.
+    pub fn omega_sq(&self) -> f64 {
+        self.settings.stiffness * self.omega_sq_per_stiffness
+    }
+
+    fn excluded(&self, point: usize, tri: &Triangle) -> bool {
+        let body = self.point_body[point];
+        if tri.body != body {
+            return false;
+        }
+        if !self.self_contact[body as usize] {
+            return true;
+        }
+        let p = self.rest[self.points[point] as usize];
+        let r = SELF_EXCLUSION * self.body_h[body as usize];
+        tri.nodes
+            .iter()
+            .any(|&n| (self.rest[n as usize] - p).norm_squared() < r * r)
+    }
+
+    /// The sorted `(grid key, triangle)` entries of the broad phase at `x`.
+    fn broad_phase(&self, x: &[Vec3]) -> Vec<(u64, u32)> {
+        let size = self.grid_size;
+        let mut keys = Vec::with_capacity(2 * self.triangles.len());
+        for (t, tri) in self.triangles.iter().enumerate() {
+            let grow = DEPTH_LIMIT * self.body_h[tri.body as usize];
+            let [a, b, c] = tri.nodes.map(|n| x[n as usize]);
+            let lo = grid_cell(a.inf(&b).inf(&c).add_scalar(-grow), size);
+            let hi = grid_cell(a.sup(&b).sup(&c).add_scalar(grow), size);
+            // A degenerate or exploded surface must not make the grid blow
+            // up: such a triangle is left out (the solver's checks see it).
+            let span: i64 = (0..3).map(|k| hi[k] - lo[k] + 1).product();
+            if !(1..=64).contains(&span) {
+                continue;
+            }
+            for i in lo[0]..=hi[0] {
+                for j in lo[1]..=hi[1] {
+                    for k in lo[2]..=hi[2] {
+                        keys.push((grid_key([i, j, k]), t as u32));
+                    }
+                }
+            }
+        }
+        keys.sort_unstable();
+        keys
+    }
+
+    /// The points inside a body at `x`, in point order.
+    fn pairs(&self, x: &[Vec3]) -> Vec<Pair> {
+        self.pairs_within(x, 0.0)
+    }
+
+    /// The points deeper than `-margin` cells in a body at `x` (a negative
+    /// depth: outside, that close), in point order.
+    fn pairs_within(&self, x: &[Vec3], margin: f64) -> Vec<Pair> {
+        if self.points.is_empty() {
+            return Vec::new();
+        }
+        let keys = self.broad_phase(x);
+        let per_chunk: Vec<Vec<Pair>> = self
+            .points
+            .par_chunks(POINT_CHUNK)
+            .enumerate()
+            .map(|(ci, chunk)| {
+                let mut out = Vec::new();
+                for (k, &node) in chunk.iter().enumerate() {
+                    let i = ci * POINT_CHUNK + k;
+                    if let Some(pair) = self.nearest(i, x[node as usize], x, &keys) {
+                        let h = self.body_h[self.triangles[pair.triangle as usize].body as usize];
+                        if pair.depth > -margin * h {
+                            out.push(pair);
+                        }
+                    }
+                }
+                out
+            })
+            .collect();
+        per_chunk.into_iter().flatten().collect()
+    }
+
+    /// The nearest triangle that point `i` at `p` projects onto, within the
+    /// depth limit on either side (its depth may be negative: outside).
+    fn nearest(&self, i: usize, p: Vec3, x: &[Vec3], keys: &[(u64, u32)]) -> Option<Pair> {
+        let key = grid_key(grid_cell(p, self.grid_size));
+        let start = keys.partition_point(|&(k, _)| k < key);
+        let mut best: Option<Pair> = None;
+        for &(k, t) in &keys[start..] {
+            if k != key {
+                break;
+            }
+            let tri = &self.triangles[t as usize];
+            if self.excluded(i, tri) {
+                continue;
+            }
+            let Some(pair) = project(p, tri.nodes.map(|n| x[n as usize])) else {
+                continue;
+            };
+            let (gap, beta, normal) = pair;
+            if gap.abs() >= DEPTH_LIMIT * self.body_h[tri.body as usize] {
+                continue;
+            }
+            let better = best.as_ref().is_none_or(|b| gap.abs() < b.depth.abs());
+            if better {
+                best = Some(Pair {
+                    point: i as u32,
+                    triangle: t,
+                    beta,
+                    normal,
+                    depth: -gap,
+                });
+            }
+        }
+        best
+    }
+
+    fn anchor_of(anchors: &[Option<Vec3>], i: usize) -> Option<(u32, f64, f64)> {
+        let a = anchors.get(i).copied().flatten()?;
+        let t = a.x;
+        (t >= 0.0 && t.fract() == 0.0).then_some((t as u32, a.y, a.z))
+    }
+
+    /// Where the anchor `(triangle, beta_b, beta_c)` is at `x`.
+    fn anchor_position(&self, x: &[Vec3], anchor: (u32, f64, f64)) -> Option<Vec3> {
+        let tri = self.triangles.get(anchor.0 as usize)?;
+        let [a, b, c] = tri.nodes.map(|n| x[n as usize]);
+        Some(a + (b - a) * anchor.1 + (c - a) * anchor.2)
+    }
+
+    fn touch(&self, pair: &Pair, x: &[Vec3], v: &[Vec3], anchors: &[Option<Vec3>]) -> Touch {
+        let i = pair.point as usize;
+        let tri = &self.triangles[pair.triangle as usize];
+        let node = self.points[i] as usize;
+        let s = &self.settings;
+        let k = s.stiffness * self.stiffness_ratio[i];
+        let c = 2.0 * s.damping_ratio * (k * self.point_mass[i]).sqrt();
+        let n = pair.normal;
+        let v_face: Vec3 = (0..3)
+            .map(|j| v[tri.nodes[j] as usize] * pair.beta[j])
+            .sum();
+        let v_rel = v[node] - v_face;
+        let f_n = (k * pair.depth - c * v_rel.dot(&n)).max(0.0);
+        let p = x[node];
+        let anchored = Self::anchor_of(anchors, i).and_then(|a| self.anchor_position(x, a));
+        let d = anchored.map_or(Vec3::zeros(), |a| p - a);
+        let delta = d - n * d.dot(&n);
+        let (friction, sliding) = super::coulomb(delta, k, f_n, s);
+        Touch {
+            force: n * f_n + friction,
+            delta,
+            f_n,
+            sliding,
+            stiffness: k,
+            damping: c,
+        }
+    }
+
+    /// Adds the contact forces at positions `x` and velocities `v` to `f`;
+    /// `anchors` are this contact's entries of the state's anchors (empty:
+    /// every contact is new).
+    pub fn add_forces(&self, x: &[Vec3], v: &[Vec3], anchors: &[Option<Vec3>], f: &mut [Vec3]) {
+        for pair in self.pairs(x) {
+            let touch = self.touch(&pair, x, v, anchors);
+            self.spread(&pair, touch.force, f);
+        }
+    }
+
+    /// The force on the point and minus it on the triangle, by its weights.
+    fn spread(&self, pair: &Pair, force: Vec3, f: &mut [Vec3]) {
+        let tri = &self.triangles[pair.triangle as usize];
+        f[self.points[pair.point as usize] as usize] += force;
+        for (j, &n) in tri.nodes.iter().enumerate() {
+            f[n as usize] -= force * pair.beta[j];
+        }
+    }
+
+    /// Adds the contact's `d(force)/dx` to `jac` (see the module docs for
+    /// what is left out); `dv_dx` as in [`super::Contact::add_jacobian`].
+    pub fn add_jacobian(
+        &self,
+        x: &[Vec3],
+        v: &[Vec3],
+        anchors: &[Option<Vec3>],
+        dv_dx: f64,
+        jac: &mut BlockCsr,
+    ) {
+        // A static solve (no velocity) takes the points just outside a
+        // surface as touching in its tangent: a body that only contact holds
+        // otherwise has a singular tangent wherever an iterate lifts it off.
+        let margin = if dv_dx == 0.0 { STATIC_MARGIN } else { 0.0 };
+        let pairs = self.pairs_within(x, margin);
+        // The point and its triangle's nodes are coupled: grow the pattern.
+        let mut extra = Vec::with_capacity(6 * pairs.len());
+        for pair in &pairs {
+            let p = self.points[pair.point as usize];
+            for &n in &self.triangles[pair.triangle as usize].nodes {
+                extra.push((p, n));
+                extra.push((n, p));
+            }
+        }
+        jac.extend_pattern(&extra);
+        for pair in pairs {
+            let mut touch = self.touch(&pair, x, v, anchors);
+            if pair.depth <= 0.0 {
+                touch.f_n = 0.0;
+                touch.sliding = false;
+            }
+            let n = pair.normal;
+            let nn = n * n.transpose();
+            let tangent = Mat3::identity() - nn;
+            let mut block = -nn * (touch.stiffness + touch.damping * dv_dx);
+            if touch.sliding {
+                let len = touch.delta.norm();
+                if len > 0.0 {
+                    let dir = touch.delta / len;
+                    let mu = self.settings.friction_kinetic;
+                    block -= (tangent - dir * dir.transpose()) * (mu * touch.f_n / len);
+                    block += dir * n.transpose() * (mu * (touch.stiffness + touch.damping * dv_dx));
+                }
+            } else if Self::anchor_of(anchors, pair.point as usize).is_some() {
+                block -= tangent * touch.stiffness;
+            }
+            // The force F(p - sum beta_j x_j) on the point, minus beta_i F on
+            // the triangle's nodes.
+            let p = self.points[pair.point as usize];
+            let tri = &self.triangles[pair.triangle as usize];
+            let mut weights = [(p, 1.0); 4];
+            for (k, &node) in tri.nodes.iter().enumerate() {
+                weights[k + 1] = (node, -pair.beta[k]);
+            }
+            for &(a, wa) in &weights {
+                for &(b, wb) in &weights {
+                    if let Some(idx) = jac.find(a as usize, b as usize) {
+                        jac.blocks[idx] += block * (wa * wb);
+                    }
+                }
+            }
+        }
+    }
+
+    /// After a step: anchors new contacts where they touched, lets sliding
+    /// ones follow to the kinetic limit, clears those that left. `anchors`
+    /// holds one entry per point (resized if needed).
+    pub fn update_anchors(&self, x: &[Vec3], v: &[Vec3], anchors: &mut Vec<Option<Vec3>>) {
+        if anchors.len() != self.points.len() {
+            *anchors = vec![None; self.points.len()];
+        }
+        let mut next = vec![None; self.points.len()];
+        for pair in self.pairs(x) {
+            let i = pair.point as usize;
+            let encode = |t: u32, beta: [f64; 3]| Some(Vec3::new(f64::from(t), beta[1], beta[2]));
+            let here = encode(pair.triangle, pair.beta);
+            let old = Self::anchor_of(anchors, i);
+            next[i] = match old {
+                None => here,
+                Some(anchor) => {
+                    let touch = self.touch(&pair, x, v, anchors);
+                    if !touch.sliding {
+                        anchors[i]
+                    } else {
+                        let len = touch.delta.norm();
+                        let back = if len > 0.0 {
+                            touch.delta
+                                * ((self.settings.friction_kinetic * touch.f_n / touch.stiffness)
+                                    / len)
+                        } else {
+                            Vec3::zeros()
+                        };
+                        let target = x[self.points[i] as usize] - back;
+                        // The anchor stays a point of its triangle's plane,
+                        // outside the triangle if it slid past it.
+                        let tri = &self.triangles[anchor.0 as usize];
+                        match barycentric(target, tri.nodes.map(|n| x[n as usize])) {
+                            Some((_, beta, _)) => encode(anchor.0, beta),
+                            None => here,
+                        }
+                    }
+                }
+            };
+        }
+        *anchors = next;
+    }
+
+    /// Anchors for a static solve: every point that lies within the depth
+    /// limit of a surface at `x` is anchored at its projection there (so
+    /// that friction holds it where it starts, as for obstacles).
+    pub fn static_anchors(&self, x: &[Vec3]) -> Vec<Option<Vec3>> {
+        let keys = self.broad_phase(x);
+        (0..self.points.len())
+            .map(|i| {
+                let pair = self.nearest(i, x[self.points[i] as usize], x, &keys)?;
+                Some(Vec3::new(
+                    f64::from(pair.triangle),
+                    pair.beta[1],
+                    pair.beta[2],
+                ))
+            })
+            .collect()
+    }
+
+    /// Penalty energy `k d^2 / 2` over the touching points (J).
+    pub fn energy(&self, x: &[Vec3]) -> f64 {
+        self.pairs(x)
+            .iter()
+            .map(|p| {
+                0.5 * self.settings.stiffness
+                    * self.stiffness_ratio[p.point as usize]
+                    * p.depth
+                    * p.depth
+            })
+            .sum()
+    }
+
+    /// Total contact force on each body (N), at `x` and `v`: equal and
+    /// opposite between two bodies (self-contact adds zero to its body).
+    pub fn body_forces(&self, x: &[Vec3], v: &[Vec3], anchors: &[Option<Vec3>]) -> Vec<Vec3> {
+        let mut out = vec![Vec3::zeros(); self.body_h.len()];
+        for pair in self.pairs(x) {
+            let touch = self.touch(&pair, x, v, anchors);
+            let tri = &self.triangles[pair.triangle as usize];
+            out[self.point_body[pair.point as usize] as usize] += touch.force;
+            out[tri.body as usize] -= touch.force;
+        }
+        out
+    }
+
+    /// How deep the deepest point is inside another body (or its own
+    /// surface) at `x` (m; 0 when none is).
+    pub fn max_depth(&self, x: &[Vec3]) -> f64 {
+        self.pairs(x).iter().map(|p| p.depth).fold(0.0, f64::max)
+    }
+}
+
+/// The gap of `p` to the plane of triangle `[a, b, c]` (positive on the
+/// side its counter-clockwise normal points to), the barycentric
+/// coordinates of its projection and the unit normal, when the projection
+/// falls inside the triangle (with a small tolerance, so that no point
+/// slips between two triangles).
+fn project(p: Vec3, tri: [Vec3; 3]) -> Option<(f64, [f64; 3], Vec3)> {
+    const EDGE: f64 = 1e-9;
+    barycentric(p, tri).filter(|(_, beta, _)| beta.iter().all(|&w| w >= -EDGE))
+}
+
+/// As [`project`], wherever the projection falls in the triangle's plane;
+/// `None` only for a degenerate triangle.
+fn barycentric(p: Vec3, [a, b, c]: [Vec3; 3]) -> Option<(f64, [f64; 3], Vec3)> {
+    let (e1, e2) = (b - a, c - a);
+    let cross = e1.cross(&e2);
+    let area2 = cross.norm();
+    if !(area2 > 0.0 && area2.is_finite()) {
+        return None;
+    }
+    let normal = cross / area2;
+    let w = p - a;
+    let gap = normal.dot(&w);
+    // Barycentric coordinates of the projection, by areas.
+    let beta_b = normal.dot(&w.cross(&e2)) / area2;
+    let beta_c = normal.dot(&e1.cross(&w)) / area2;
+    let beta_a = 1.0 - beta_b - beta_c;
+    Some((gap, [beta_a, beta_b, beta_c], normal))
+}
