@@ -236,20 +236,40 @@ fn run_job<'py>(
 
 #[pymethods]
 impl PyJob {
-    /// The mesh (placed as the scene says).
+    /// The mesh (placed as the scene says; the first body's in a scene of
+    /// `[[bodies]]`).
     #[getter]
     fn mesh(&self, py: Python<'_>) -> PyResult<Py<PyMesh>> {
         cached_object(py, &self.mesh, || {
-            PyMesh::wrap(self.job.mesh.clone(), self.job.mesh_name.clone())
+            PyMesh::wrap(self.job.mesh().clone(), self.job.mesh_name().to_owned())
         })
     }
 
-    /// The lattice.
+    /// The lattice (the first body's in a scene of `[[bodies]]`).
     #[getter]
     fn lattice(&self, py: Python<'_>) -> PyResult<Py<PyLattice>> {
         cached_object(py, &self.lattice, || {
-            PyLattice::wrap(self.job.lattice.clone())
+            PyLattice::wrap(self.job.lattice().clone())
         })
+    }
+
+    /// The names of the bodies, in the order of the model's nodes.
+    #[getter]
+    fn body_names(&self) -> Vec<String> {
+        self.job.bodies.iter().map(|b| b.name.clone()).collect()
+    }
+
+    /// The first and one-past-last node index of each body, in the order
+    /// of `body_names`: `positions()[start:end]` are that body's.
+    #[getter]
+    fn body_nodes(&self) -> Vec<(usize, usize)> {
+        self.job
+            .problem
+            .model()
+            .bodies()
+            .iter()
+            .map(|b| (b.nodes.start, b.nodes.end))
+            .collect()
     }
 
     /// The model.
@@ -313,7 +333,7 @@ impl PyJob {
     fn simulation(&self, py: Python<'_>) -> PyResult<PySimulation> {
         let job = Arc::clone(&self.job);
         let (problem, surface) = detached(py, || {
-            let surface = mss_scene::hexmesh::Embedding::new(&job.lattice, &job.mesh);
+            let surface = job.embedding();
             (job.rebuild_problem(), surface)
         });
         PySimulation::build(problem.map_err(job_error)?, Some(Arc::new(surface)))

@@ -81,6 +81,18 @@ impl Embedding {
         &self.coords
     }
 
+    /// Appends `other`, the surface of another body whose nodes come
+    /// `node_offset` after this one's first node in a shared node array (as
+    /// in a model of several bodies): one embedding of both surfaces.
+    pub fn append(&mut self, other: &Embedding, node_offset: u32) {
+        let vertex_offset = self.coords.len() as u32;
+        self.cells
+            .extend(other.cells.iter().map(|c| c.map(|n| n + node_offset)));
+        self.coords.extend_from_slice(&other.coords);
+        self.triangles
+            .extend(other.triangles.iter().map(|t| t.map(|v| v + vertex_offset)));
+    }
+
     /// The deformed surface as a mesh.
     pub fn deformed_mesh(&self, node_positions: &[[f64; 3]]) -> TriMesh {
         TriMesh {

@@ -28,6 +28,17 @@ pub struct Skin {
 }
 
 impl Skin {
+    /// Appends `other`, the skin of another body whose nodes come
+    /// `node_offset` after this one's first node in a shared node array:
+    /// one skin of both.
+    pub fn append(&mut self, other: &Skin, node_offset: u32) {
+        let vertex_offset = self.vertex_nodes.len() as u32;
+        self.vertex_nodes
+            .extend(other.vertex_nodes.iter().map(|n| n + node_offset));
+        self.triangles
+            .extend(other.triangles.iter().map(|t| t.map(|v| v + vertex_offset)));
+    }
+
     /// Positions of the skin vertices given positions of the lattice nodes.
     pub fn positions(&self, node_positions: &[[f64; 3]]) -> Vec<[f64; 3]> {
         self.vertex_nodes

@@ -598,6 +598,21 @@ impl Constraints {
         Ok(())
     }
 
+    /// The constraints of several bodies side by side: `parts[b]` holds the
+    /// nodes of body `b`, which follow those of the bodies before it (as in
+    /// [`crate::Model::union`]).
+    pub fn union(parts: &[Constraints]) -> Self {
+        let mut out = Self::none(0);
+        for part in parts {
+            let shift = out.motions.len() as u32;
+            out.held
+                .extend(part.held.iter().map(|h| h.map(|k| k.map(|k| k + shift))));
+            out.motions.extend_from_slice(&part.motions);
+            out.num_held += part.num_held;
+        }
+        out
+    }
+
     /// Fixes all dofs of `nodes`.
     pub fn fix(&mut self, nodes: &[u32]) -> Result<(), ConstraintError> {
         self.hold(nodes, Dofs::ALL, Motion::Fixed)

@@ -80,6 +80,67 @@ pub trait Load: Send + Sync + Debug {
     }
 }
 
+/// A load of one body of a [`Model::union`]: `inner` was built for the
+/// body's own model, whose nodes are `nodes` of the union.
+#[derive(Debug)]
+pub struct OnBody {
+    body: std::sync::Arc<Model>,
+    nodes: std::ops::Range<usize>,
+    inner: Box<dyn Load>,
+    /// The body's matrix pattern, for the inner load's derivative (made on
+    /// first use, for loads that have one).
+    pattern: std::sync::OnceLock<BlockCsr>,
+}
+
+impl OnBody {
+    /// `inner`, built for the body model `body`, acting on the union's
+    /// nodes `nodes` (as many as `body` has).
+    pub fn new(
+        body: std::sync::Arc<Model>,
+        nodes: std::ops::Range<usize>,
+        inner: Box<dyn Load>,
+    ) -> Self {
+        debug_assert_eq!(body.num_nodes(), nodes.len());
+        Self {
+            body,
+            nodes,
+            inner,
+            pattern: std::sync::OnceLock::new(),
+        }
+    }
+}
+
+impl Load for OnBody {
+    fn name(&self) -> String {
+        self.inner.name()
+    }
+    fn add_forces(&self, _model: &Model, t: f64, x: &[Vec3], scale: f64, f: &mut [Vec3]) {
+        let r = self.nodes.clone();
+        self.inner
+            .add_forces(&self.body, t, &x[r.clone()], scale, &mut f[r]);
+    }
+    fn add_jacobian(&self, _model: &Model, t: f64, x: &[Vec3], scale: f64, jac: &mut BlockCsr) {
+        let pattern = self
+            .pattern
+            .get_or_init(|| BlockCsr::lattice_pattern(self.body.num_nodes(), self.body.cells()));
+        let mut local = pattern.clone();
+        self.inner
+            .add_jacobian(&self.body, t, &x[self.nodes.clone()], scale, &mut local);
+        let shift = self.nodes.start;
+        for row in 0..local.num_rows() {
+            for k in local.row_offsets[row] as usize..local.row_offsets[row + 1] as usize {
+                let block = local.blocks[k];
+                if block != Mat3::zeros() {
+                    jac.add(row + shift, local.col_indices[k] as usize + shift, &block);
+                }
+            }
+        }
+    }
+    fn restrains(&self) -> bool {
+        self.inner.restrains()
+    }
+}
+
 /// How a force given on a selection of nodes is shared among them.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "snake_case")]

@@ -13,8 +13,8 @@ use thiserror::Error;
 use crate::error::JobError;
 use crate::registry::Registry;
 use crate::scene::{
-    BUILTIN_MESHES, BUNDLED_CRITTER_OBJ, DEFAULT_SCENE_TOML, IMPLICIT_AUTO_STEPS, MeshSource,
-    Scene, SceneOrigin, TimeStep,
+    BUILTIN_MESHES, BUNDLED_CRITTER_OBJ, BodyView, DEFAULT_SCENE_TOML, IMPLICIT_AUTO_STEPS,
+    MeshSource, Scene, SceneOrigin, TimeStep,
 };
 use crate::stages::ProblemStageError;
 
@@ -89,24 +89,39 @@ impl SceneInput {
         }
     }
 
-    /// The material and parameterization of the scene (`[model]` resolved
-    /// against `registry`), checked against each other.
+    /// The material and parameterization of the scene's first body (the
+    /// only one without `[[bodies]]`), checked against each other.
     pub fn material(
         &self,
         registry: &Registry,
     ) -> Result<(Material, Box<dyn Parameterization>), JobError> {
-        let m = &self.scene.model;
+        let bodies = self.scene.bodies();
+        self.material_of(&bodies[0], registry)
+    }
+
+    /// The material and parameterization of `body` (its `[model]` resolved
+    /// against `registry`), checked against each other.
+    pub fn material_of(
+        &self,
+        body: &BodyView<'_>,
+        registry: &Registry,
+    ) -> Result<(Material, Box<dyn Parameterization>), JobError> {
+        let m = body.model;
         let param = registry
             .parameterizations
             .build(&m.parameterization, m.hourglass)
             .map_err(|e| match e {
-                ParameterizationError::Unknown(u) => self.setting("[model] parameterization", u),
-                ParameterizationError::Hourglass(h) => self.setting("[model] hourglass", h),
+                ParameterizationError::Unknown(u) => {
+                    self.setting(&body.key("[model] parameterization"), u)
+                }
+                ParameterizationError::Hourglass(h) => {
+                    self.setting(&body.key("[model] hourglass"), h)
+                }
             })?;
-        let material = self.scene.material;
+        let material = body.material;
         param
             .validate(&material)
-            .map_err(|e| self.setting("[material]", e))?;
+            .map_err(|e| self.setting(&body.key("[material]"), e))?;
         Ok((material, param))
     }
 
@@ -116,15 +131,26 @@ impl SceneInput {
     }
 
     /// Loads a second mesh the scene names (a region's, an obstacle's),
-    /// resolved like `[mesh] path` and placed like the body's mesh; errors
-    /// as one line naming the file.
+    /// resolved like `[mesh] path` and placed like the first body's mesh;
+    /// errors as one line naming the file.
     pub fn load_placed_mesh(
         &self,
         path: &str,
         loaders: &Loaders,
     ) -> Result<hexmesh::TriMesh, String> {
+        let placement = self.scene.bodies()[0].mesh.placement();
+        self.load_placed_mesh_with(path, &placement, loaders)
+    }
+
+    /// [`SceneInput::load_placed_mesh`] placed by `placement`.
+    pub fn load_placed_mesh_with(
+        &self,
+        path: &str,
+        placement: &hexmesh::Placement,
+        loaders: &Loaders,
+    ) -> Result<hexmesh::TriMesh, String> {
         let source = Scene::source_of(path, &self.origin);
-        crate::stages::load_placed(&source, &self.scene.mesh.placement(), loaders)
+        crate::stages::load_placed(&source, placement, loaders)
             .map(|placed| placed.mesh)
             .map_err(|e| e.to_string())
     }
@@ -143,21 +169,18 @@ impl SceneInput {
     }
 
     /// [`SceneInput::problem_with`] with `extra` obstacles after the
-    /// scene's `[[obstacles]]` (the tools of an interactive front end).
+    /// scene's `[[obstacles]]` (the tools of an interactive front end),
+    /// for the scene's first body (the only one without `[[bodies]]`).
     pub fn problem_with_obstacles(
         &self,
         model: mss_core::Model,
         registry: &Registry,
         surface: Option<&hexmesh::Embedding>,
-        extra: Vec<(
-            Box<dyn mss_core::contact::Obstacle>,
-            mss_core::contact::ContactSettings,
-        )>,
+        extra: crate::build::ExtraObstacles,
     ) -> Result<Problem, JobError> {
         let scene = &self.scene;
-        let n_fixed = scene.fixed.len();
-        let mesh_of = |path: &str| self.load_placed_mesh(path, &registry.loaders);
-        let constraints = scene.constraint_specs();
+        let body = &scene.bodies()[0];
+        let constraints = body.constraint_specs(scene.solver.duration);
         let loads = scene.loads.specs();
         let specs = crate::stages::ProblemSpecs {
             constraints: &constraints,
@@ -169,24 +192,126 @@ impl SceneInput {
             points: scene.contact.points,
             shapes: &registry.shapes,
         };
-        crate::stages::problem(model, &specs, &mesh_of, surface, extra).map_err(|e| match e {
+        self.stage_problem(model, &specs, body, registry, surface, extra)
+    }
+
+    /// The problem of one of `[[bodies]]` alone: its held nodes, motions
+    /// and loads (no obstacles: they are scene-wide).
+    pub fn body_problem(
+        &self,
+        body: &BodyView<'_>,
+        model: mss_core::Model,
+        registry: &Registry,
+    ) -> Result<Problem, JobError> {
+        let scene = &self.scene;
+        let constraints = body.constraint_specs(scene.solver.duration);
+        let (loads, custom) = match body.loads {
+            Some(l) => (l.specs(), l.custom.as_slice()),
+            None => (Vec::new(), &[][..]),
+        };
+        let specs = crate::stages::ProblemSpecs {
+            constraints: &constraints,
+            loads: &loads,
+            custom_loads: custom,
+            load_kinds: &registry.loads,
+            damping: scene.solver.damping(),
+            obstacles: &[],
+            points: mss_core::contact::ContactPoints::Nodes,
+            shapes: &registry.shapes,
+        };
+        self.stage_problem(model, &specs, body, registry, None, Vec::new())
+    }
+
+    /// The scene-wide part of a scene of `[[bodies]]` added to the union
+    /// of its bodies' problems: the top-level `[loads]` (on every body) and
+    /// the `[[obstacles]]` (touched by every body's boundary nodes).
+    pub fn scene_wide_problem(
+        &self,
+        union: Problem,
+        registry: &Registry,
+        extra: crate::build::ExtraObstacles,
+    ) -> Result<Problem, JobError> {
+        let scene = &self.scene;
+        let model = union.model();
+        let placement = scene.bodies()[0].mesh.placement();
+        let mesh_of = |path: &str| self.load_placed_mesh_with(path, &placement, &registry.loaders);
+        if scene.contact.points != mss_core::contact::ContactPoints::Nodes {
+            return Err(self.setting(
+                "[contact] points",
+                "with [[bodies]], the lattices' boundary nodes touch (\"nodes\"); the embedded surfaces' vertices do not yet",
+            ));
+        }
+        let contact = crate::obstacles::build_contact_with(
+            model,
+            &scene.obstacles,
+            &registry.shapes,
+            extra,
+            &mesh_of,
+            mss_core::contact::ContactPoints::Nodes,
+            None,
+        )
+        .map_err(|(index, source)| {
+            self.setting(&format!("[[obstacles]] #{}", index + 1), source)
+        })?;
+        let mut loads = Vec::new();
+        for spec in scene.loads.specs() {
+            loads.push(
+                spec.resolve(model)
+                    .map_err(|e| self.setting("[loads]", e))?,
+            );
+        }
+        for (index, table) in scene.loads.custom.iter().enumerate() {
+            loads.push(
+                registry
+                    .loads
+                    .build(table, model)
+                    .map_err(|e| self.setting(&format!("[[loads.custom]] #{}", index + 1), e))?,
+            );
+        }
+        let mut problem = loads.into_iter().fold(union, Problem::with_load);
+        if let Some(c) = contact {
+            problem = problem.with_contact(c);
+        }
+        Ok(problem)
+    }
+
+    /// [`crate::stages::problem`] with its errors named as `body`'s keys.
+    fn stage_problem(
+        &self,
+        model: mss_core::Model,
+        specs: &crate::stages::ProblemSpecs<'_>,
+        body: &BodyView<'_>,
+        registry: &Registry,
+        surface: Option<&hexmesh::Embedding>,
+        extra: crate::build::ExtraObstacles,
+    ) -> Result<Problem, JobError> {
+        let n_fixed = body.fixed.len();
+        let placement = body.mesh.placement();
+        let mesh_of = |path: &str| self.load_placed_mesh_with(path, &placement, &registry.loaders);
+        let loads_key = |list: &str| match body.index {
+            None => list.to_owned(),
+            Some(_) => body.key(list),
+        };
+        crate::stages::problem(model, specs, &mesh_of, surface, extra).map_err(|e| match e {
             ProblemStageError::Obstacle { index, source } => {
                 self.setting(&format!("[[obstacles]] #{}", index + 1), source)
             }
             ProblemStageError::Problem(ProblemError::Constraint { index, source })
                 if index < n_fixed =>
             {
-                self.setting(&format!("[[fixed]] #{}", index + 1), source)
+                self.setting(&body.key(&format!("[[fixed]] #{}", index + 1)), source)
             }
-            ProblemStageError::Problem(ProblemError::Constraint { index, source }) => {
-                self.setting(&format!("[[motions]] #{}", index - n_fixed + 1), source)
-            }
+            ProblemStageError::Problem(ProblemError::Constraint { index, source }) => self.setting(
+                &body.key(&format!("[[motions]] #{}", index - n_fixed + 1)),
+                source,
+            ),
             ProblemStageError::Problem(ProblemError::Load { source, .. }) => {
-                self.setting("[loads]", source)
+                self.setting(&loads_key("[loads]"), source)
             }
-            ProblemStageError::CustomLoad { index, source } => {
-                self.setting(&format!("[[loads.custom]] #{}", index + 1), source)
-            }
+            ProblemStageError::CustomLoad { index, source } => self.setting(
+                &loads_key(&format!("[[loads.custom]] #{}", index + 1)),
+                source,
+            ),
             ProblemStageError::Problem(other) => self.setting("[solver]", other),
         })
     }
@@ -360,6 +485,13 @@ pub enum MeshSourceError {
     Load(#[from] hexmesh::LoadError),
 }
 
+/// Obstacles a front end adds after a scene's `[[obstacles]]` (a viewer's
+/// poking sphere, a haptic tool), with their contact settings.
+pub type ExtraObstacles = Vec<(
+    Box<dyn mss_core::contact::Obstacle>,
+    mss_core::contact::ContactSettings,
+)>;
+
 /// Loads (and cleans) the mesh `source` names with `loaders`. Returns a
 /// display name and the mesh.
 pub fn load_mesh(
@@ -371,6 +503,15 @@ pub fn load_mesh(
             let label = "builtin:critter".to_owned();
             let m = hexmesh::load::load_mesh_bytes(BUNDLED_CRITTER_OBJ, MeshFormat::Obj, &label)?;
             Ok((label, m))
+        }
+        MeshSource::Builtin(name) if name == "cube" || name == "sphere" => {
+            let label = format!("builtin:{name}");
+            let raw = if name == "cube" {
+                hexmesh::generate::box_mesh([-0.5; 3], [0.5; 3])
+            } else {
+                hexmesh::generate::sphere(0.5, 3)
+            };
+            Ok((label.clone(), hexmesh::load::clean_mesh(raw, 0.0, &label)?))
         }
         MeshSource::Builtin(name) => Err(MeshSourceError::UnknownBuiltin {
             name: name.clone(),

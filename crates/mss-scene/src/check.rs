@@ -184,7 +184,9 @@ impl CheckReport {
         CheckReport {
             held_nodes,
             memory_bytes: run_memory_estimate(model.num_cells(), model.num_nodes(), needs_matrix)
-                + crate::limits::mesh_memory_estimate(job.mesh.vertices.len()),
+                + crate::limits::mesh_memory_estimate(
+                    job.bodies.iter().map(|b| b.mesh.vertices.len()).sum(),
+                ),
             frames,
             frame_bytes,
             hourglass_stiffness: model.cell_coefficients(0).hourglass,

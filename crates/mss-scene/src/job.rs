@@ -19,6 +19,7 @@ use crate::limits::Limits;
 use crate::load_check::LoadCheck;
 use crate::output::{FrameWriter, remove_previous_run};
 use crate::registry::Registry;
+use crate::scene::{BodyView, Scene};
 use crate::stages::{PlacedMesh, RunNeeds, StageError, lattice_within, load_placed};
 
 /// What a running job reports, through the callback given to
@@ -85,33 +86,103 @@ pub struct Job {
     pub input: SceneInput,
     /// The plug points it was built with.
     pub registry: Registry,
-    /// Display name of the mesh.
-    pub mesh_name: String,
-    /// The cleaned input surface.
-    pub mesh: hexmesh::TriMesh,
-    /// The voxelized lattice.
-    pub lattice: hexmesh::Lattice,
-    /// Voxelization statistics.
-    pub vox_stats: hexmesh::voxelize::VoxelizeStats,
-    /// The materials of `[[regions]]` and the cells they hold (`None`
-    /// without regions).
-    pub regions: Option<crate::regions::RegionAssignment>,
-    /// The problem (model, constraints, loads, damping).
+    /// The bodies: each one's surface, lattice and regions, in the model's
+    /// node order (one for a scene without `[[bodies]]`).
+    pub bodies: Vec<JobBody>,
+    /// The problem (model, constraints, loads, damping, contact).
     pub problem: Problem,
     /// The resource limits it was prepared with.
     pub limits: Limits,
     /// Time stepping plan.
     pub plan: TimePlan,
-    /// Seconds spent loading and voxelizing the mesh.
+    /// Seconds spent loading and voxelizing the meshes.
     pub voxelize_seconds: f64,
+}
+
+/// One body of a [`Job`].
+#[derive(Debug, Clone)]
+pub struct JobBody {
+    /// Its name (`[[bodies]] name`, or `"body"`).
+    pub name: String,
+    /// Display name of its mesh.
+    pub mesh_name: String,
+    /// The cleaned input surface, placed.
+    pub mesh: hexmesh::TriMesh,
+    /// How the mesh was placed (`[mesh]` units, scale, ...), described.
+    pub placement: String,
+    /// The voxelized lattice.
+    pub lattice: hexmesh::Lattice,
+    /// Voxelization statistics.
+    pub vox_stats: hexmesh::voxelize::VoxelizeStats,
+    /// The materials of its `[[regions]]` and the cells they hold (`None`
+    /// without regions).
+    pub regions: Option<crate::regions::RegionAssignment>,
+}
+
+impl Job {
+    /// The first body's mesh (the only one without `[[bodies]]`).
+    pub fn mesh(&self) -> &hexmesh::TriMesh {
+        &self.bodies[0].mesh
+    }
+    /// The first body's lattice.
+    pub fn lattice(&self) -> &hexmesh::Lattice {
+        &self.bodies[0].lattice
+    }
+    /// The first body's mesh name.
+    pub fn mesh_name(&self) -> &str {
+        &self.bodies[0].mesh_name
+    }
+    /// The first body's voxelization statistics.
+    pub fn vox_stats(&self) -> &hexmesh::voxelize::VoxelizeStats {
+        &self.bodies[0].vox_stats
+    }
+    /// The first body's regions.
+    pub fn regions(&self) -> Option<&crate::regions::RegionAssignment> {
+        self.bodies[0].regions.as_ref()
+    }
+
+    /// Where each body's nodes start in the model's node array.
+    fn node_offsets(&self) -> impl Iterator<Item = u32> + '_ {
+        self.bodies.iter().scan(0u32, |start, b| {
+            let at = *start;
+            *start += b.lattice.num_nodes() as u32;
+            Some(at)
+        })
+    }
+
+    /// Every body's input surface embedded in its lattice, as one embedding
+    /// over the model's nodes (vertices and triangles in body order).
+    pub fn embedding(&self) -> hexmesh::Embedding {
+        let mut all: Option<hexmesh::Embedding> = None;
+        for (b, offset) in self.bodies.iter().zip(self.node_offsets()) {
+            let e = hexmesh::Embedding::new(&b.lattice, &b.mesh);
+            match &mut all {
+                None => all = Some(e),
+                Some(all) => all.append(&e, offset),
+            }
+        }
+        all.unwrap_or_else(|| hexmesh::Embedding::new(self.lattice(), self.mesh()))
+    }
+
+    /// Every body's lattice skin, as one skin over the model's nodes.
+    pub fn skin(&self) -> hexmesh::Skin {
+        let mut all = hexmesh::Skin::default();
+        for (b, offset) in self.bodies.iter().zip(self.node_offsets()) {
+            all.append(&hexmesh::boundary_skin(&b.lattice), offset);
+        }
+        all
+    }
 }
 
 impl std::fmt::Debug for Job {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Job")
             .field("scene", &self.input.name())
-            .field("mesh", &self.mesh_name)
-            .field("cells", &self.lattice.num_cells())
+            .field(
+                "bodies",
+                &self.bodies.iter().map(|b| &b.name).collect::<Vec<_>>(),
+            )
+            .field("cells", &self.problem.model().num_cells())
             .field("plan", &self.plan)
             .finish()
     }
@@ -180,6 +251,35 @@ pub struct RunSummary {
     /// Whether the run was stopped through its [`Cancel`] flag before the
     /// end (the frames written stop at `simulated_time`).
     pub interrupted: bool,
+    /// Each body's figures (one entry without `[[bodies]]`); the fields
+    /// above are the totals, or the first body's for its mesh.
+    pub bodies: Vec<BodySummary>,
+}
+
+/// One body's figures in a [`RunSummary`].
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct BodySummary {
+    /// Its name.
+    pub name: String,
+    /// Its mesh.
+    pub mesh: String,
+    /// How its mesh was placed.
+    pub placement: String,
+    /// Its cells.
+    pub cells: usize,
+    /// Its nodes.
+    pub nodes: usize,
+    /// Its cell edge (m).
+    pub cell_size: f64,
+    /// Its mass (kg).
+    pub mass: f64,
+    /// Its cells per material (its `[material]`, then its regions).
+    pub cells_per_material: Vec<usize>,
+    /// Its largest node displacement at the end (m).
+    pub max_displacement: f64,
+    /// The total force the other bodies (and its own self-contact, which
+    /// sums to zero) exert on it at the end (N).
+    pub contact_force_from_bodies: [f64; 3],
 }
 
 impl Job {
@@ -203,141 +303,22 @@ impl Job {
         limits: Limits,
         progress: ProgressFn<'_>,
     ) -> Result<Job, JobError> {
-        let scene_name = input.name();
         let scene = &input.scene;
         let t0 = Instant::now();
         let mut registry = registry;
         limits.bound_loaders(&mut registry.loaders);
-        let stage_error = |e: StageError| match e {
-            StageError::Source(crate::build::MeshSourceError::Load(source)) => JobError::Mesh {
-                scene: scene_name.clone(),
-                source,
-            },
-            StageError::Source(other) => JobError::Setting {
-                scene: scene_name.clone(),
-                key: "[mesh] path".into(),
-                message: other.to_string(),
-            },
-            e @ StageError::Placement { .. } => JobError::Setting {
-                scene: scene_name.clone(),
-                key: "[mesh]".into(),
-                message: e.to_string(),
-            },
-            StageError::Memory {
-                what,
-                needed,
-                limit,
-                limit_origin,
-                hint,
-            } => JobError::Memory {
-                scene: scene_name.clone(),
-                what,
-                needed,
-                limit,
-                limit_origin,
-                hint,
-            },
-            StageError::Voxelize { mesh, source } => JobError::Voxelize {
-                scene: scene_name.clone(),
-                mesh,
-                source,
-            },
-        };
-        // The rule's name is resolved before the mesh is read: a typo costs
-        // nothing.
-        let voxelize_options =
-            scene
-                .voxelize
-                .options(&registry.occupancy)
-                .map_err(|e| JobError::Setting {
-                    scene: scene_name.clone(),
-                    key: e.scene_key("[voxelize]"),
-                    message: e.message,
-                })?;
-        let placed = load_placed(
-            &input.mesh_source(),
-            &scene.mesh.placement(),
-            &registry.loaders,
-        )
-        .map_err(stage_error)?;
-        let needs = RunNeeds {
-            solver: &scene.solver.kind,
-            needs_matrix: !scene.solver.is_explicit(&registry.integrators),
-        };
-        let hook = |done: u64, total: u64| progress(Progress::Voxelizing { done, total });
-        let vox = lattice_within(
-            &placed.mesh,
-            &placed.name,
-            &voxelize_options,
-            &limits,
-            needs,
-            &hook,
-        );
-        progress(Progress::StageDone);
-        let vox = vox.map_err(stage_error)?;
+        let mut bodies = Vec::new();
+        for view in scene.bodies() {
+            bodies.push(prepare_body(&input, &view, &registry, &limits, progress)?);
+        }
         let voxelize_seconds = t0.elapsed().as_secs_f64();
-        if let Some(odd) = crate::stages::implausible_size(&placed.mesh) {
-            log::warn!("{scene_name}: {odd} ([mesh] units = \"mm\" or \"cm\", or scale)");
-        }
-        let PlacedMesh {
-            name: mesh_name,
-            mesh,
-            ..
-        } = placed;
-        let (material, param) = input.material(&registry)?;
-        let regions = if scene.regions.is_empty() {
-            None
-        } else {
-            let mesh_of = |path: &str| input.load_placed_mesh(path, &registry.loaders);
-            let a = crate::regions::assign_regions(
-                &vox.lattice,
-                &material,
-                &scene.regions,
-                &registry.regions,
-                &mesh_of,
-            )
-            .map_err(|e| JobError::Setting {
-                scene: scene_name.clone(),
-                key: format!("[[regions]] #{}", e.region + 1),
-                message: e.message,
-            })?;
-            for (r, m) in a.materials.iter().enumerate().skip(1) {
-                param.validate(m).map_err(|e| JobError::Setting {
-                    scene: scene_name.clone(),
-                    key: format!("[[regions]] #{r}"),
-                    message: e.to_string(),
-                })?;
-            }
-            log::info!(
-                "{} regions: cells per material {:?}",
-                scene.regions.len(),
-                a.cells_per_material()
-            );
-            Some(a)
-        };
-        let model = match &regions {
-            None => Model::new(&vox.lattice, material, &*param),
-            Some(a) => {
-                Model::with_cell_materials(&vox.lattice, &a.materials, &a.cell_material, &*param)
-            }
-        }
-        .map_err(|source| JobError::Model {
-            scene: scene_name.clone(),
-            source,
-        })?;
-        let surface = (scene.contact.points != mss_core::contact::ContactPoints::Nodes)
-            .then(|| hexmesh::Embedding::new(&vox.lattice, &mesh));
-        let problem = input.problem_with(model, &registry, surface.as_ref())?;
+        let problem = build_problem(&input, &registry, &bodies, Vec::new())?;
         let plan = input.time_plan(&problem, &registry.integrators)?;
         // Refuse a bad integrator choice (unknown name, a dt above the
         // stability limit) here, before anything is written.
         input.integrator(&registry, &problem, &plan)?;
         Ok(Job {
-            mesh_name,
-            mesh,
-            lattice: vox.lattice,
-            vox_stats: vox.stats,
-            regions,
+            bodies,
             limits,
             problem,
             plan,
@@ -360,16 +341,9 @@ impl Job {
     /// usually [`Steered`](mss_core::contact::Steered) ones.
     pub fn interactive_problem(
         &self,
-        extra: Vec<(
-            Box<dyn mss_core::contact::Obstacle>,
-            mss_core::contact::ContactSettings,
-        )>,
+        extra: crate::build::ExtraObstacles,
     ) -> Result<Problem, JobError> {
-        let model = self.problem.model().clone();
-        let surface = (self.input.scene.contact.points != mss_core::contact::ContactPoints::Nodes)
-            .then(|| hexmesh::Embedding::new(&self.lattice, &self.mesh));
-        self.input
-            .problem_with_obstacles(model, &self.registry, surface.as_ref(), extra)
+        build_problem(&self.input, &self.registry, &self.bodies, extra)
     }
 
     /// Time-steps (or statically solves) the job, writing frames into
@@ -465,9 +439,11 @@ impl Job {
         cancel: &std::sync::atomic::AtomicBool,
     ) -> LoadCheck {
         let extent = self
-            .mesh
-            .bounding_box()
-            .map(|b| b.extent().into_iter().fold(0.0, f64::max));
+            .bodies
+            .iter()
+            .filter_map(|b| b.mesh.bounding_box())
+            .map(|b| b.extent().into_iter().fold(0.0, f64::max))
+            .reduce(f64::max);
         LoadCheck::solve(
             &self.problem,
             self.input.static_options(),
@@ -743,15 +719,17 @@ impl Job {
         let held_nodes = (0..model.num_nodes())
             .filter(|&n| problem.constraints().mask(n).iter().any(|&h| h))
             .count();
+        let body_summaries = self.body_summaries(&state);
+        let first = &self.bodies[0];
         Ok(RunSummary {
             scene: name,
-            mesh: self.mesh_name.clone(),
-            placement: scene.mesh.placement().describe(),
-            mesh_extent: self.mesh.bounding_box().map_or([0.0; 3], |b| b.extent()),
-            cells_per_material: self
-                .regions
-                .as_ref()
-                .map_or_else(|| vec![model.num_cells()], |a| a.cells_per_material()),
+            mesh: first.mesh_name.clone(),
+            placement: first.placement.clone(),
+            mesh_extent: first.mesh.bounding_box().map_or([0.0; 3], |b| b.extent()),
+            cells_per_material: body_summaries
+                .iter()
+                .flat_map(|b| b.cells_per_material.iter().copied())
+                .collect(),
             cells: model.num_cells(),
             nodes: model.num_nodes(),
             springs: model.num_springs(),
@@ -775,13 +753,61 @@ impl Job {
             peak_memory_bytes: peak_memory_bytes(),
             output_folder: out_dir.display().to_string(),
             interrupted,
+            bodies: body_summaries,
         })
+    }
+
+    /// Each body's figures at `state`.
+    fn body_summaries(&self, state: &State) -> Vec<BodySummary> {
+        let problem = &self.problem;
+        let model = problem.model();
+        let between = problem.contact().and_then(|c| {
+            let b = c.bodies()?;
+            let anchors = &state.contact[state.contact.len().saturating_sub(b.num_points())..];
+            Some(b.body_forces(&state.x, &state.v, anchors))
+        });
+        self.bodies
+            .iter()
+            .zip(model.bodies())
+            .enumerate()
+            .map(|(b, (body, span))| {
+                let nodes = span.nodes.clone();
+                let rest = &model.rest_positions()[nodes.clone()];
+                let max_displacement = state.x[nodes.clone()]
+                    .iter()
+                    .zip(rest)
+                    .map(|(x, r)| (x - r).norm())
+                    .fold(0.0, f64::max);
+                BodySummary {
+                    name: body.name.clone(),
+                    mesh: body.mesh_name.clone(),
+                    placement: body.placement.clone(),
+                    cells: span.cells.len(),
+                    nodes: nodes.len(),
+                    cell_size: span.h,
+                    mass: model.masses()[nodes].iter().sum(),
+                    cells_per_material: body
+                        .regions
+                        .as_ref()
+                        .map_or_else(|| vec![span.cells.len()], |a| a.cells_per_material()),
+                    max_displacement,
+                    contact_force_from_bodies: between
+                        .as_ref()
+                        .map_or([0.0; 3], |f| [f[b].x, f[b].y, f[b].z]),
+                }
+            })
+            .collect()
     }
 
     /// Estimated bytes of one frame and frames written by [`Job::run`].
     pub fn output_estimate(&self) -> (u64, u64) {
         let model = self.problem.model();
-        let skin = hexmesh::boundary_skin(&self.lattice);
+        let (mut skin_vertices, mut skin_triangles) = (0, 0);
+        for b in &self.bodies {
+            let skin = hexmesh::boundary_skin(&b.lattice);
+            skin_vertices += skin.vertex_nodes.len();
+            skin_triangles += skin.triangles.len();
+        }
         let frame_bytes = crate::output::frame_size_estimate(
             &self.input.scene.output,
             &self.registry.exporters,
@@ -789,10 +815,10 @@ impl Job {
                 nodes: model.num_nodes(),
                 cells: model.num_cells(),
                 springs: model.num_springs(),
-                skin_vertices: skin.vertex_nodes.len(),
-                skin_triangles: skin.triangles.len(),
-                surface_vertices: self.mesh.vertices.len(),
-                surface_triangles: self.mesh.triangles.len(),
+                skin_vertices,
+                skin_triangles,
+                surface_vertices: self.bodies.iter().map(|b| b.mesh.vertices.len()).sum(),
+                surface_triangles: self.bodies.iter().map(|b| b.mesh.triangles.len()).sum(),
             },
         );
         (frame_bytes, self.plan.num_frames())
@@ -844,8 +870,11 @@ impl Job {
             out_dir,
             &self.input.scene.output,
             &self.registry.exporters,
-            &self.lattice,
-            &self.mesh,
+            &self
+                .bodies
+                .iter()
+                .map(|b| (&b.lattice, &b.mesh))
+                .collect::<Vec<_>>(),
         )?
         .with_time_decimals(
             self.frame_interval().and_then(|every| {
@@ -866,6 +895,195 @@ impl Job {
             self.input.scene.solver.duration / crate::build::DEFAULT_FRAMES as f64,
         ))
     }
+}
+
+/// Loads, places and voxelizes one body of a scene, and assigns its
+/// regions.
+fn prepare_body(
+    input: &SceneInput,
+    view: &BodyView<'_>,
+    registry: &Registry,
+    limits: &Limits,
+    progress: ProgressFn<'_>,
+) -> Result<JobBody, JobError> {
+    let scene_name = input.name();
+    let scene = &input.scene;
+    let setting = |key: String, message: String| JobError::Setting {
+        scene: scene_name.clone(),
+        key,
+        message,
+    };
+    let stage_error = |e: StageError| match e {
+        StageError::Source(crate::build::MeshSourceError::Load(source)) => JobError::Mesh {
+            scene: scene_name.clone(),
+            source,
+        },
+        StageError::Source(other) => setting(view.key("[mesh] path"), other.to_string()),
+        e @ StageError::Placement { .. } => setting(view.key("[mesh]"), e.to_string()),
+        StageError::Memory {
+            what,
+            needed,
+            limit,
+            limit_origin,
+            hint,
+        } => JobError::Memory {
+            scene: scene_name.clone(),
+            what,
+            needed,
+            limit,
+            limit_origin,
+            hint,
+        },
+        StageError::Voxelize { mesh, source } => JobError::Voxelize {
+            scene: scene_name.clone(),
+            mesh,
+            source,
+        },
+    };
+    // The rule's name is resolved before the mesh is read: a typo costs
+    // nothing.
+    let voxelize_options = view
+        .voxelize
+        .options(&registry.occupancy)
+        .map_err(|e| setting(view.key(&e.scene_key("[voxelize]")), e.message))?;
+    let placement = view.mesh.placement();
+    let source = Scene::source_of(&view.mesh.path, &input.origin);
+    let placed = load_placed(&source, &placement, &registry.loaders).map_err(stage_error)?;
+    let needs = RunNeeds {
+        solver: &scene.solver.kind,
+        needs_matrix: !scene.solver.is_explicit(&registry.integrators),
+    };
+    let hook = |done: u64, total: u64| progress(Progress::Voxelizing { done, total });
+    let vox = lattice_within(
+        &placed.mesh,
+        &placed.name,
+        &voxelize_options,
+        limits,
+        needs,
+        &hook,
+    );
+    progress(Progress::StageDone);
+    let vox = vox.map_err(stage_error)?;
+    if let Some(odd) = crate::stages::implausible_size(&placed.mesh) {
+        log::warn!(
+            "{scene_name}: {}{odd} ([mesh] units = \"mm\" or \"cm\", or scale)",
+            view.index
+                .map_or(String::new(), |_| format!("body {}: ", view.name))
+        );
+    }
+    let PlacedMesh {
+        name: mesh_name,
+        mesh,
+        ..
+    } = placed;
+    let (material, param) = input.material_of(view, registry)?;
+    let regions = if view.regions.is_empty() {
+        None
+    } else {
+        let mesh_of = |path: &str| input.load_placed_mesh_with(path, &placement, &registry.loaders);
+        let a = crate::regions::assign_regions(
+            &vox.lattice,
+            &material,
+            view.regions,
+            &registry.regions,
+            &mesh_of,
+        )
+        .map_err(|e| {
+            setting(
+                view.key(&format!("[[regions]] #{}", e.region + 1)),
+                e.message,
+            )
+        })?;
+        for (r, m) in a.materials.iter().enumerate().skip(1) {
+            param
+                .validate(m)
+                .map_err(|e| setting(view.key(&format!("[[regions]] #{r}")), e.to_string()))?;
+        }
+        log::info!(
+            "{} regions: cells per material {:?}",
+            view.regions.len(),
+            a.cells_per_material()
+        );
+        Some(a)
+    };
+    Ok(JobBody {
+        name: view.name.to_owned(),
+        mesh_name,
+        mesh,
+        placement: placement.describe(),
+        lattice: vox.lattice,
+        vox_stats: vox.stats,
+        regions,
+    })
+}
+
+/// The model of one prepared body.
+fn body_model(
+    input: &SceneInput,
+    view: &BodyView<'_>,
+    body: &JobBody,
+    registry: &Registry,
+) -> Result<Model, JobError> {
+    let (material, param) = input.material_of(view, registry)?;
+    match &body.regions {
+        None => Model::new(&body.lattice, material, &*param),
+        Some(a) => {
+            Model::with_cell_materials(&body.lattice, &a.materials, &a.cell_material, &*param)
+        }
+    }
+    .map_err(|source| JobError::Model {
+        scene: input.name(),
+        source,
+    })
+}
+
+/// The problem of prepared bodies (`extra` obstacles after the scene's):
+/// one body as its tables say, several as the union of each one's, with
+/// the scene-wide loads and contact (between bodies too) on top.
+fn build_problem(
+    input: &SceneInput,
+    registry: &Registry,
+    bodies: &[JobBody],
+    extra: crate::build::ExtraObstacles,
+) -> Result<Problem, JobError> {
+    let scene = &input.scene;
+    let views = scene.bodies();
+    let problem = if !scene.has_bodies() {
+        let (view, body) = (&views[0], &bodies[0]);
+        let model = body_model(input, view, body, registry)?;
+        let surface = (scene.contact.points != mss_core::contact::ContactPoints::Nodes)
+            .then(|| hexmesh::Embedding::new(&body.lattice, &body.mesh));
+        input.problem_with_obstacles(model, registry, surface.as_ref(), extra)?
+    } else {
+        let mut parts = Vec::with_capacity(bodies.len());
+        for (view, body) in views.iter().zip(bodies) {
+            let model = body_model(input, view, body, registry)?;
+            parts.push(input.body_problem(view, model, registry)?);
+        }
+        let union = Problem::union(parts).map_err(|e| JobError::Setting {
+            scene: input.name(),
+            key: "[[bodies]]".into(),
+            message: e.to_string(),
+        })?;
+        input.scene_wide_problem(union, registry, extra)?
+    };
+    let self_contact: Vec<bool> = views.iter().map(|v| v.self_contact).collect();
+    if views.len() < 2 && !self_contact.iter().any(|&s| s) {
+        return Ok(problem);
+    }
+    let model = problem.model();
+    let settings = scene
+        .contact
+        .body_settings(mss_core::contact::ContactSettings::for_bodies(model));
+    let contact =
+        mss_core::contact::BodyContact::new(model, settings, &self_contact).map_err(|e| {
+            JobError::Setting {
+                scene: input.name(),
+                key: "[contact]".into(),
+                message: e.to_string(),
+            }
+        })?;
+    Ok(problem.with_body_contact(contact))
 }
 
 /// Writes `summary` as `summary.json` in `dir` (atomically).

@@ -206,6 +206,8 @@ struct FrameScratch {
     /// Constant over a run: filled at the first frame.
     fixed: Vec<bool>,
     material: Vec<u32>,
+    /// Body of each cell (empty for one body).
+    body: Vec<u32>,
     diag: Vec<mss_core::CellDiagnostics>,
     vol: Vec<f64>,
     shear: Vec<f64>,
@@ -225,6 +227,7 @@ struct FrameArrays<'a> {
     shear: &'a [f64],
     corr: &'a [f64],
     material: &'a [u32],
+    body: &'a [u32],
     contact_force: Option<&'a [[f64; 3]]>,
 }
 
@@ -251,21 +254,41 @@ pub struct FrameWriter {
 
 impl FrameWriter {
     /// Prepares the writers the `[output]` table asks for, from `exporters`
-    /// (the folder must exist).
+    /// (the folder must exist), for the bodies `bodies` (each one's lattice
+    /// and input surface, in the model's node order: see
+    /// [`mss_core::Model::union`]). Several bodies share each file: one
+    /// lattice (with a `body` cell field), one skin and one surface per
+    /// frame, each body an object of its own in the OBJ files.
     pub fn new(
         dir: &Path,
         out: &OutputSection,
         exporters: &Exporters,
-        lattice: &Lattice,
-        mesh: &TriMesh,
+        bodies: &[(&Lattice, &TriMesh)],
     ) -> Result<Self, JobError> {
         let mut lattice_exporters = Vec::new();
         for name in frame_exporter_names(out) {
             let extension = exporters.frame_facts(name).map(|f| f.extension);
             lattice_exporters.push((exporters.frames(name, dir, LATTICE_PREFIX)?, extension));
         }
-        let skin =
-            (out.skin_obj || out.skin_stl || out.pc2).then(|| hexmesh::boundary_skin(lattice));
+        let rest: Vec<[f64; 3]> = bodies
+            .iter()
+            .flat_map(|(l, _)| l.nodes().iter().copied())
+            .collect();
+        let node_offsets: Vec<u32> = bodies
+            .iter()
+            .scan(0u32, |start, (l, _)| {
+                let at = *start;
+                *start += l.num_nodes() as u32;
+                Some(at)
+            })
+            .collect();
+        let skin = (out.skin_obj || out.skin_stl || out.pc2).then(|| {
+            let mut skin = hexmesh::Skin::default();
+            for ((lattice, _), &offset) in bodies.iter().zip(&node_offsets) {
+                skin.append(&hexmesh::boundary_skin(lattice), offset);
+            }
+            skin
+        });
         let mut skin_exporters = Vec::new();
         for name in skin_exporter_names(out) {
             let e = exporters.skins(name, dir, SKIN_PREFIX, SkinFrames::Every)?;
@@ -276,15 +299,31 @@ impl FrameWriter {
             (Some(skin), true) => Some(start_cache(
                 dir,
                 SKIN_PREFIX,
-                &skin.positions(lattice.nodes()),
+                &skin.positions(&rest),
                 &skin.triangles,
                 out.skin_normals,
             )?),
             _ => None,
         };
-        let embedded = if out.embedded {
+        let mut mesh = TriMesh::default();
+        let mut embedding: Option<Embedding> = None;
+        if out.embedded {
+            for ((lattice, surface), &offset) in bodies.iter().zip(&node_offsets) {
+                let e = Embedding::new(lattice, surface);
+                match &mut embedding {
+                    None => embedding = Some(e),
+                    Some(all) => all.append(&e, offset),
+                }
+                let first = mesh.vertices.len() as u32;
+                mesh.vertices.extend_from_slice(&surface.vertices);
+                mesh.triangles
+                    .extend(surface.triangles.iter().map(|t| t.map(|v| v + first)));
+            }
+        }
+        let mesh = &mesh;
+        let embedded = if let Some(embedding) = embedding {
             Some(EmbeddedOutput {
-                embedding: Embedding::new(lattice, mesh),
+                embedding,
                 triangles: mesh.triangles.clone(),
                 exporter: exporters.skins(
                     crate::scene::obj_exporter(out.surface_normals),
@@ -456,6 +495,16 @@ impl FrameWriter {
             } else {
                 Vec::new()
             };
+            sc.body = if model.bodies().len() > 1 {
+                model
+                    .bodies()
+                    .iter()
+                    .enumerate()
+                    .flat_map(|(b, span)| std::iter::repeat_n(b as u32, span.cells.len()))
+                    .collect()
+            } else {
+                Vec::new()
+            };
         }
         model.cell_diagnostics_into(&state.x, &mut sc.diag);
         sc.vol.clear();
@@ -467,7 +516,8 @@ impl FrameWriter {
         let contact_force = problem.contact().map(|_| problem.contact_forces(state));
         let f_int = mss_core::as_arrays(&sc.f_int);
         let f_ext = mss_core::as_arrays(&sc.f_ext);
-        let (displacement, fixed, material) = (&sc.displacement, &sc.fixed, &sc.material);
+        let (displacement, fixed, material, body) =
+            (&sc.displacement, &sc.fixed, &sc.material, &sc.body);
         let (vol, shear, corr) = (&sc.vol, &sc.shear, &sc.corr);
         let result = self.write_frame(
             problem,
@@ -484,6 +534,7 @@ impl FrameWriter {
                 shear,
                 corr,
                 material,
+                body,
                 contact_force: contact_force.as_deref().map(mss_core::as_arrays),
             },
         );
@@ -511,6 +562,9 @@ impl FrameWriter {
                 .with_cell_field(Field::scalars("correction_force", a.corr));
             if !a.material.is_empty() {
                 frame = frame.with_cell_field(Field::ids("material", a.material));
+            }
+            if !a.body.is_empty() {
+                frame = frame.with_cell_field(Field::ids("body", a.body));
             }
             if let Some(f) = a.contact_force {
                 frame = frame.with_point_field(Field::vectors("contact_force", f));

@@ -64,7 +64,7 @@ fn main() {
         job.plan.dt,
         job.plan.steps
     );
-    let lat = &job.lattice;
+    let lat = &job.lattice();
     let neighbours = |c: usize| {
         let [i, j, k] = lat.cell_coords()[c];
         let mut n = 0;

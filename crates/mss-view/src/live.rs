@@ -170,8 +170,8 @@ impl Body {
             .map_err(|e| mss_scene::error::one_line(&e))?;
         let sim = Simulation::new(problem).map_err(|e| e.to_string())?;
 
-        let embedding = Embedding::new(&job.lattice, &job.mesh);
-        let skin = mss_scene::hexmesh::skin::boundary_skin(&job.lattice);
+        let embedding = job.embedding();
+        let skin = job.skin();
         let n = model.num_nodes();
         let mut node_cell = vec![0u32; n];
         let mut node_cell_count = vec![0u32; n];
@@ -211,7 +211,7 @@ impl Body {
             surfaces: vec![
                 SurfaceInfo {
                     name: "surface".into(),
-                    vertices: job.mesh.vertices.len() as u32,
+                    vertices: embedding.vertex_cells().len() as u32,
                     triangles: embedding.triangles().len() as u32,
                     has_jacobian: true,
                 },

@@ -127,7 +127,7 @@ fn the_embedded_surface_can_touch_too() {
         let mut embedding = None;
         let (job, _) = run(&scene, |job, s| {
             let e =
-                embedding.get_or_insert_with(|| hexmesh::Embedding::new(&job.lattice, &job.mesh));
+                embedding.get_or_insert_with(|| hexmesh::Embedding::new(job.lattice(), job.mesh()));
             let nodes: Vec<[f64; 3]> = s.x.iter().map(|p| [p.x, p.y, p.z]).collect();
             let (o, _) = job.problem.contact().unwrap().obstacles().next().unwrap();
             for v in e.deform(&nodes) {

@@ -157,7 +157,7 @@ fn the_soft_stanford_bunny_runs_to_the_end() {
         assert!(toml.contains(key), "{key}");
     }
     let (job, state) = run_to_end(&toml).unwrap();
-    let extent = job.mesh.bounding_box().unwrap().extent();
+    let extent = job.mesh().bounding_box().unwrap().extent();
     assert!((extent[2] - 0.15).abs() < 1e-6, "{extent:?}");
     assert!(job.problem.model().inverted_cells(&state.x).is_empty());
 }

@@ -51,51 +51,27 @@ pub fn run(args: &CheckArgs, global: &GlobalArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     crate::outln!("scene            {}: OK", job.input.name());
-    let [ex, ey, ez] = job.mesh.bounding_box().map_or([0.0; 3], |b| b.extent());
-    crate::outln!(
-        "mesh             {}: {} vertices, {} triangles, {ex:.4} x {ey:.4} x {ez:.4} m \
-         (placement: {})",
-        job.mesh_name,
-        job.mesh.vertices.len(),
-        job.mesh.triangles.len(),
-        scene.mesh.placement()
-    );
-    crate::outln!(
-        "lattice          {} cells, {} nodes, {} springs, cell size {}",
-        model.num_cells(),
-        model.num_nodes(),
-        model.num_springs(),
-        crate::progress::human_length(model.h())
-    );
-    let m = &scene.material;
-    crate::outln!(
-        "material         E = {} Pa, nu = {}, density = {} kg/m^3, model \"{}\"{}",
-        m.young,
-        m.poisson,
-        m.density,
-        model.parameterization_name(),
-        if report.hourglass_stiffness > 0.0 {
-            format!(
-                " (hourglass stiffness {:.4e} N/m per cell)",
-                report.hourglass_stiffness
-            )
-        } else {
-            String::new()
-        }
-    );
-    if let Some(a) = &job.regions {
-        let cells = a.cells_per_material();
-        for (k, m) in a.materials.iter().enumerate().skip(1) {
+    let views = scene.bodies();
+    let several = job.bodies.len() > 1;
+    for ((body, view), span) in job.bodies.iter().zip(&views).zip(model.bodies()) {
+        if several {
             crate::outln!(
-                "region #{k:<8} E = {} Pa, nu = {}, density = {} kg/m^3: {} cells ({} selected)",
-                m.young,
-                m.poisson,
-                m.density,
-                cells[k],
-                a.selected[k - 1]
+                "body             {}: {} cells, {} nodes, {:.4} kg",
+                body.name,
+                span.cells.len(),
+                span.nodes.len(),
+                model.masses()[span.nodes.clone()].iter().sum::<f64>()
             );
         }
-        crate::outln!("[material]       {} cells", cells[0]);
+        print_body(body, view, span, &report)?;
+    }
+    if several {
+        crate::outln!(
+            "lattices         {} cells, {} nodes, {} springs in all",
+            model.num_cells(),
+            model.num_nodes(),
+            model.num_springs()
+        );
     }
     crate::outln!("mass             {:.4} kg", model.total_mass());
     crate::outln!("held nodes       {}", report.held_nodes);
@@ -178,4 +154,59 @@ fn human_seconds(s: f64) -> String {
     } else {
         format!("{:.1} h", s / 3600.0)
     }
+}
+
+/// The mesh, lattice, material and regions lines of one body.
+fn print_body(
+    body: &mss_scene::job::JobBody,
+    view: &mss_scene::scene::BodyView<'_>,
+    span: &mss_scene::mss_core::BodySpan,
+    report: &CheckReport,
+) -> anyhow::Result<()> {
+    let [ex, ey, ez] = body.mesh.bounding_box().map_or([0.0; 3], |b| b.extent());
+    crate::outln!(
+        "mesh             {}: {} vertices, {} triangles, {ex:.4} x {ey:.4} x {ez:.4} m \
+         (placement: {})",
+        body.mesh_name,
+        body.mesh.vertices.len(),
+        body.mesh.triangles.len(),
+        body.placement
+    );
+    crate::outln!(
+        "lattice          {} cells, {} nodes, cell size {}",
+        span.cells.len(),
+        span.nodes.len(),
+        crate::progress::human_length(span.h)
+    );
+    let m = &view.material;
+    crate::outln!(
+        "material         E = {} Pa, nu = {}, density = {} kg/m^3, model \"{}\"{}",
+        m.young,
+        m.poisson,
+        m.density,
+        span.parameterization,
+        if report.hourglass_stiffness > 0.0 {
+            format!(
+                " (hourglass stiffness {:.4e} N/m per cell)",
+                report.hourglass_stiffness
+            )
+        } else {
+            String::new()
+        }
+    );
+    if let Some(a) = &body.regions {
+        let cells = a.cells_per_material();
+        for (k, m) in a.materials.iter().enumerate().skip(1) {
+            crate::outln!(
+                "region #{k:<8} E = {} Pa, nu = {}, density = {} kg/m^3: {} cells ({} selected)",
+                m.young,
+                m.poisson,
+                m.density,
+                cells[k],
+                a.selected[k - 1]
+            );
+        }
+        crate::outln!("[material]       {} cells", cells[0]);
+    }
+    Ok(())
 }

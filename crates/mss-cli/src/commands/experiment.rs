@@ -171,7 +171,13 @@ fn run_scene(
     bars.clear();
     let job = job?;
     let scene = &job.input.scene;
-    let constraints = scene.constraint_specs();
+    if job.bodies.len() > 1 {
+        anyhow::bail!(
+            "{name}: mss experiment compares one body with the FEM; this scene has {} ([[bodies]])",
+            job.bodies.len()
+        );
+    }
+    let constraints = scene.bodies()[0].constraint_specs(scene.solver.duration);
     let loads = scene.loads.specs();
     let (material, param) = job.input.material(&registry)?;
     std::fs::create_dir_all(out_dir)
@@ -189,7 +195,7 @@ fn run_scene(
             vec![SharedParameterization::from(param)]
         },
     };
-    let l = &job.lattice;
+    let l = job.lattice();
     log::info!(
         "comparing {name} ({} cells) with Q1 FEM refined {} times",
         l.num_cells(),

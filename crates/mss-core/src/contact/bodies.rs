@@ -4,11 +4,13 @@
 //! **Geometry.** Each body's surface is its lattice's boundary: every cell
 //! face no other cell shares, split into two triangles along a diagonal,
 //! oriented outward. The points that touch are the boundary nodes. A point
-//! `p` is inside another body when its nearest surface triangle (among
-//! those it projects onto, within half a cell of that body) lies in front of
-//! it: the gap `g = n . (p - a)` to the triangle's plane is negative. The
-//! nearest one decides, so that a point just outside a thin body is not
-//! taken for inside the face behind it.
+//! `p` is inside another body when its nearest surface triangle (by the
+//! distance to the triangle's closest point, within half a cell of that
+//! body) lies in front of it: the gap `g = n . (p - a)` to the triangle's
+//! plane is negative. The nearest one decides, so that a point just outside
+//! a thin body is not taken for inside the face behind it, and a point
+//! pressed into a vertex or an edge of the other surface (where it projects
+//! onto no triangle) still touches: its force goes to the closest point.
 //!
 //! **Broad phase.** The triangles' boxes, grown by the depth limit, go into
 //! a uniform grid of the largest cell size, as sorted `(grid cell,
@@ -19,9 +21,10 @@
 //! **Forces.** The penalty `f_n = k d - c v_n` (never pulling) along the
 //! triangle's normal `n`, with `d = -g`, on the point, and `-beta_i` times
 //! it on the triangle's nodes (`beta` the barycentric coordinates of the
-//! point's projection): the forces sum to zero, so momentum is kept. As
-//! `dg/dp = n` and `dg/dx_i = -beta_i n` exactly at the projection, this is
-//! the gradient of the energy `k d^2 / 2`. Friction is the obstacles'
+//! point's closest point on it): the forces sum to zero, so momentum is
+//! kept. As `dg/dp = n` and `dg/dx_i = -beta_i n` exactly where the point
+//! projects inside the triangle, this is there the gradient of the energy
+//! `k d^2 / 2`. Friction is the obstacles'
 //! stick-slip law, the anchor being a material point of the touched body: a
 //! triangle and barycentric coordinates, stored in
 //! [`State::contact`](crate::solver::State) as `(triangle, beta_b, beta_c)`
@@ -245,7 +248,9 @@ impl BodyContact {
                 .zip(&stiffness_ratio)
                 .map(|(&n, r)| r / masses[n as usize])
                 .fold(0.0, f64::max);
-        let grid_size = bodies.iter().map(|b| b.h).fold(0.0, f64::max);
+        // Twice the largest cell: a triangle's grown box spans at most two
+        // grid cells per axis.
+        let grid_size = 2.0 * bodies.iter().map(|b| b.h).fold(0.0, f64::max);
         Ok(Self {
             settings,
             triangles,
@@ -300,15 +305,49 @@ impl BodyContact {
             .any(|&n| (self.rest[n as usize] - p).norm_squared() < r * r)
     }
 
-    /// The sorted `(grid key, triangle)` entries of the broad phase at `x`.
-    fn broad_phase(&self, x: &[Vec3]) -> Vec<(u64, u32)> {
+    /// Each body's box at `x` (of its boundary points), grown by half its
+    /// cell: what another body's points must be inside to touch it.
+    fn body_boxes(&self, x: &[Vec3]) -> Vec<(Vec3, Vec3)> {
+        let mut boxes =
+            vec![(Vec3::repeat(f64::INFINITY), Vec3::repeat(f64::NEG_INFINITY)); self.body_h.len()];
+        for (&node, &b) in self.points.iter().zip(&self.point_body) {
+            let (lo, hi) = &mut boxes[b as usize];
+            *lo = lo.inf(&x[node as usize]);
+            *hi = hi.sup(&x[node as usize]);
+        }
+        for (b, (lo, hi)) in boxes.iter_mut().enumerate() {
+            let grow = DEPTH_LIMIT * self.body_h[b];
+            *lo = lo.add_scalar(-grow);
+            *hi = hi.add_scalar(grow);
+        }
+        boxes
+    }
+
+    /// Whether something of body `body` with the box `[lo, hi]` can touch:
+    /// the body touches itself, or another body's box meets it.
+    fn may_touch(&self, body: usize, lo: &Vec3, hi: &Vec3, boxes: &[(Vec3, Vec3)]) -> bool {
+        self.self_contact[body]
+            || boxes.iter().enumerate().any(|(other, (olo, ohi))| {
+                other != body && (0..3).all(|k| lo[k] <= ohi[k] && olo[k] <= hi[k])
+            })
+    }
+
+    /// The sorted `(grid key, triangle)` entries of the broad phase at `x`,
+    /// of the triangles that another body (or their own) may touch.
+    fn broad_phase(&self, x: &[Vec3], boxes: &[(Vec3, Vec3)]) -> Vec<(u64, u32)> {
         let size = self.grid_size;
-        let mut keys = Vec::with_capacity(2 * self.triangles.len());
+        let mut keys = Vec::new();
         for (t, tri) in self.triangles.iter().enumerate() {
             let grow = DEPTH_LIMIT * self.body_h[tri.body as usize];
             let [a, b, c] = tri.nodes.map(|n| x[n as usize]);
-            let lo = grid_cell(a.inf(&b).inf(&c).add_scalar(-grow), size);
-            let hi = grid_cell(a.sup(&b).sup(&c).add_scalar(grow), size);
+            let (lo, hi) = (
+                a.inf(&b).inf(&c).add_scalar(-grow),
+                a.sup(&b).sup(&c).add_scalar(grow),
+            );
+            if !self.may_touch(tri.body as usize, &lo, &hi, boxes) {
+                continue;
+            }
+            let (lo, hi) = (grid_cell(lo, size), grid_cell(hi, size));
             // A degenerate or exploded surface must not make the grid blow
             // up: such a triangle is left out (the solver's checks see it).
             let span: i64 = (0..3).map(|k| hi[k] - lo[k] + 1).product();
@@ -338,7 +377,11 @@ impl BodyContact {
         if self.points.is_empty() {
             return Vec::new();
         }
-        let keys = self.broad_phase(x);
+        let boxes = self.body_boxes(x);
+        let keys = self.broad_phase(x, &boxes);
+        if keys.is_empty() {
+            return Vec::new();
+        }
         let per_chunk: Vec<Vec<Pair>> = self
             .points
             .par_chunks(POINT_CHUNK)
@@ -347,7 +390,11 @@ impl BodyContact {
                 let mut out = Vec::new();
                 for (k, &node) in chunk.iter().enumerate() {
                     let i = ci * POINT_CHUNK + k;
-                    if let Some(pair) = self.nearest(i, x[node as usize], x, &keys) {
+                    let p = x[node as usize];
+                    if !self.may_touch(self.point_body[i] as usize, &p, &p, &boxes) {
+                        continue;
+                    }
+                    if let Some(pair) = self.nearest(i, p, x, &keys) {
                         let h = self.body_h[self.triangles[pair.triangle as usize].body as usize];
                         if pair.depth > -margin * h {
                             out.push(pair);
@@ -365,7 +412,10 @@ impl BodyContact {
     fn nearest(&self, i: usize, p: Vec3, x: &[Vec3], keys: &[(u64, u32)]) -> Option<Pair> {
         let key = grid_key(grid_cell(p, self.grid_size));
         let start = keys.partition_point(|&(k, _)| k < key);
-        let mut best: Option<Pair> = None;
+        // The nearest triangle by true distance (to its closest point),
+        // then by the gap to its plane: continuous as the point moves from
+        // one triangle's region to the next, edges and vertices included.
+        let mut best: Option<(f64, Pair)> = None;
         for &(k, t) in &keys[start..] {
             if k != key {
                 break;
@@ -374,25 +424,29 @@ impl BodyContact {
             if self.excluded(i, tri) {
                 continue;
             }
-            let Some(pair) = project(p, tri.nodes.map(|n| x[n as usize])) else {
+            let Some(near) = closest(p, tri.nodes.map(|n| x[n as usize])) else {
                 continue;
             };
-            let (gap, beta, normal) = pair;
-            if gap.abs() >= DEPTH_LIMIT * self.body_h[tri.body as usize] {
+            if near.distance >= DEPTH_LIMIT * self.body_h[tri.body as usize] {
                 continue;
             }
-            let better = best.as_ref().is_none_or(|b| gap.abs() < b.depth.abs());
+            let better = best.as_ref().is_none_or(|(d, b)| {
+                near.distance < *d || (near.distance == *d && near.gap.abs() < b.depth.abs())
+            });
             if better {
-                best = Some(Pair {
-                    point: i as u32,
-                    triangle: t,
-                    beta,
-                    normal,
-                    depth: -gap,
-                });
+                best = Some((
+                    near.distance,
+                    Pair {
+                        point: i as u32,
+                        triangle: t,
+                        beta: near.beta,
+                        normal: near.normal,
+                        depth: -near.gap,
+                    },
+                ));
             }
         }
-        best
+        best.map(|(_, pair)| pair)
     }
 
     fn anchor_of(anchors: &[Option<Vec3>], i: usize) -> Option<(u32, f64, f64)> {
@@ -566,7 +620,7 @@ impl BodyContact {
     /// limit of a surface at `x` is anchored at its projection there (so
     /// that friction holds it where it starts, as for obstacles).
     pub fn static_anchors(&self, x: &[Vec3]) -> Vec<Option<Vec3>> {
-        let keys = self.broad_phase(x);
+        let keys = self.broad_phase(x, &self.body_boxes(x));
         (0..self.points.len())
             .map(|i| {
                 let pair = self.nearest(i, x[self.points[i] as usize], x, &keys)?;
@@ -612,18 +666,63 @@ impl BodyContact {
     }
 }
 
-/// The gap of `p` to the plane of triangle `[a, b, c]` (positive on the
-/// side its counter-clockwise normal points to), the barycentric
-/// coordinates of its projection and the unit normal, when the projection
-/// falls inside the triangle (with a small tolerance, so that no point
-/// slips between two triangles).
-fn project(p: Vec3, tri: [Vec3; 3]) -> Option<(f64, [f64; 3], Vec3)> {
-    const EDGE: f64 = 1e-9;
-    barycentric(p, tri).filter(|(_, beta, _)| beta.iter().all(|&w| w >= -EDGE))
+/// Where a point is against a triangle.
+struct Closest {
+    /// Distance to the triangle's closest point (m).
+    distance: f64,
+    /// Gap to the triangle's plane along its normal (m, negative behind).
+    gap: f64,
+    /// Barycentric coordinates of the closest point (in the triangle).
+    beta: [f64; 3],
+    /// The triangle's unit normal.
+    normal: Vec3,
 }
 
-/// As [`project`], wherever the projection falls in the triangle's plane;
-/// `None` only for a degenerate triangle.
+/// The closest point of triangle `tri` to `p` (inside it, or on an edge
+/// or a vertex), with the gap to its plane; `None` for a degenerate
+/// triangle.
+fn closest(p: Vec3, tri: [Vec3; 3]) -> Option<Closest> {
+    let (gap, beta, normal) = barycentric(p, tri)?;
+    if beta.iter().all(|&w| w >= 0.0) {
+        return Some(Closest {
+            distance: gap.abs(),
+            gap,
+            beta,
+            normal,
+        });
+    }
+    // Outside: the nearest point of the three edges.
+    let mut best = (f64::INFINITY, [0.0; 3]);
+    for (i, j) in [(0, 1), (1, 2), (2, 0)] {
+        let e = tri[j] - tri[i];
+        let len2 = e.norm_squared();
+        let s = if len2 > 0.0 {
+            ((p - tri[i]).dot(&e) / len2).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let q = tri[i] + e * s;
+        let d = (p - q).norm();
+        if d < best.0 {
+            let mut w = [0.0; 3];
+            w[i] = 1.0 - s;
+            w[j] = s;
+            best = (d, w);
+        }
+    }
+    Some(Closest {
+        distance: best.0,
+        gap,
+        beta: best.1,
+        normal,
+    })
+}
+
+/// The gap of `p` to the plane of triangle `[a, b, c]` (positive on the
+/// side its counter-clockwise normal points to), the barycentric
+/// coordinates of its projection onto the plane (outside `[0, 1]` where it
+/// falls outside the triangle) and the unit normal; `None` for a degenerate
+/// triangle.
 fn barycentric(p: Vec3, [a, b, c]: [Vec3; 3]) -> Option<(f64, [f64; 3], Vec3)> {
     let (e1, e2) = (b - a, c - a);
     let cross = e1.cross(&e2);

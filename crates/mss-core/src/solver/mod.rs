@@ -80,6 +80,9 @@ pub enum ProblemError {
     /// Damping coefficients are invalid.
     #[error(transparent)]
     Damping(LoadError),
+    /// The bodies do not make one model.
+    #[error(transparent)]
+    Model(crate::ModelError),
     /// Constraints made for another model.
     #[error("constraints cover {given} nodes but the model has {expected}")]
     ConstraintSize {
@@ -145,6 +148,45 @@ impl Problem {
         Ok(p)
     }
 
+    /// The problems of several bodies stepped together: the model is the
+    /// [`Model::union`] of theirs, each body keeps its constraints and loads
+    /// (on its own nodes). Contact is the union's to add
+    /// ([`Problem::with_contact`], with [`crate::contact::BodyContact`]); a
+    /// part's own contact is dropped. Damping is scene-wide: the first
+    /// part's.
+    pub fn union(parts: Vec<Problem>) -> Result<Self, ProblemError> {
+        let models: Vec<Model> = parts.iter().map(|p| p.model.clone()).collect();
+        let model = Model::union(&models).map_err(ProblemError::Model)?;
+        let constraints = Constraints::union(
+            &parts
+                .iter()
+                .map(|p| p.constraints.clone())
+                .collect::<Vec<_>>(),
+        );
+        let damping = parts.first().map_or(Damping::NONE, |p| p.damping);
+        let mut loads: Vec<Box<dyn Load>> = Vec::new();
+        let mut start = 0;
+        for part in parts {
+            let nodes = start..start + part.model.num_nodes();
+            start = nodes.end;
+            if part.loads.is_empty() {
+                continue;
+            }
+            let body = std::sync::Arc::new(part.model);
+            for load in part.loads {
+                loads.push(Box::new(crate::loads::OnBody::new(
+                    body.clone(),
+                    nodes.clone(),
+                    load,
+                )));
+            }
+        }
+        let mut p = Self::new(model).with_constraints(constraints)?;
+        p.loads = loads;
+        p.set_damping(damping)?;
+        Ok(p)
+    }
+
     /// Replaces the constraints.
     pub fn with_constraints(mut self, constraints: Constraints) -> Result<Self, ProblemError> {
         if constraints.num_nodes() != self.model.num_nodes() {
@@ -166,6 +208,17 @@ impl Problem {
     /// Adds contact with obstacles ([`crate::contact`]).
     pub fn with_contact(mut self, contact: Contact) -> Self {
         self.contact = Some(contact);
+        self
+    }
+
+    /// Adds contact between the model's bodies (or of a body with
+    /// itself) to the contact with obstacles, if any.
+    pub fn with_body_contact(mut self, bodies: crate::contact::BodyContact) -> Self {
+        let contact = self
+            .contact
+            .take()
+            .unwrap_or_else(|| Contact::new(&self.model, Vec::new()));
+        self.contact = Some(contact.with_bodies(bodies));
         self
     }
 

@@ -11,7 +11,7 @@ use mss_core::solver::{
     Explicit, ExplicitOptions, Implicit, ImplicitOptions, Integrator, Problem, State,
     StaticOptions, solve_static,
 };
-use mss_core::{ConstraintSpec, Material, Model, NodeSelector, Vec3};
+use mss_core::{ConstraintSpec, Material, Model, NodeSelector, SpringsOnly, Vec3};
 
 const G: f64 = 9.81;
 
@@ -261,4 +261,115 @@ fn the_contact_tangent_between_bodies_matches_finite_differences() {
         }
     }
     assert!(worst < 3e-3 * scale, "worst {worst} of {scale}");
+}
+
+#[test]
+fn a_union_of_problems_keeps_each_bodys_constraints_and_loads() {
+    // Two held cubes apart, each pushed sideways by its own force: solved
+    // together, each ends where it ends alone.
+    let part = |origin: [f64; 3], force: [f64; 3]| {
+        let m = cube(3, 0.02, origin, 1e5);
+        let base = ConstraintSpec::fixed(NodeSelector::Box {
+            min: [-1.0, -1.0, -1.0],
+            max: [1.0, 1.0, origin[2] + 1e-6],
+            relative: false,
+        });
+        let push = LoadSpec::Force {
+            select: NodeSelector::Box {
+                min: [-1.0, -1.0, origin[2] + 0.059],
+                max: [1.0, 1.0, 1.0],
+                relative: false,
+            },
+            force,
+            distribution: Default::default(),
+        };
+        Problem::from_specs(m, &[base], &[push], Damping::NONE).unwrap()
+    };
+    let solve = |p: &Problem| {
+        let mut s = State::at_rest(p.model());
+        solve_static(p, &mut s, &StaticOptions::default()).unwrap();
+        s.x
+    };
+    let a = part([0.0, 0.0, 0.0], [2.0, 0.0, 0.0]);
+    let b = part([0.5, 0.0, 0.2], [0.0, -3.0, 0.0]);
+    let (xa, xb) = (solve(&a), solve(&b));
+    let u = Problem::union(vec![a, b]).unwrap();
+    assert_eq!(u.constraints().num_held_dofs(), 2 * 3 * 16);
+    let xu = solve(&u);
+    let alone: Vec<Vec3> = xa.into_iter().chain(xb).collect();
+    let rest = u.model().rest_positions();
+    let scale = alone
+        .iter()
+        .zip(rest)
+        .map(|(x, r)| (x - r).norm())
+        .fold(0.0, f64::max);
+    let worst = xu
+        .iter()
+        .zip(&alone)
+        .map(|(p, q)| (p - q).norm())
+        .fold(0.0, f64::max);
+    assert!(scale > 1e-5 && worst < 1e-6 * scale, "{worst} of {scale}");
+}
+
+#[test]
+fn a_cube_dropped_on_another_gains_no_energy_without_damping() {
+    // The lower cube held at its base, the upper one dropped from 3 mm,
+    // no damping anywhere (material or contact), no friction: the energy
+    // (kinetic, elastic, gravity, contact) may only be lost, never gained.
+    let base = ConstraintSpec::fixed(NodeSelector::Box {
+        min: [-1.0, -1.0, -1.0],
+        max: [1.0, 1.0, 1e-6],
+        relative: false,
+    });
+    // Springs only: every force has an energy.
+    let springs = |n: u32, h: f64, origin: [f64; 3], e: f64| {
+        let lattice = Lattice::block([n, n, n], h, origin).unwrap();
+        Model::new(
+            &lattice,
+            Material::new(e, 0.3, 1000.0).unwrap(),
+            &SpringsOnly,
+        )
+        .unwrap()
+    };
+    let lower = springs(4, 0.025, [0.0, 0.0, 0.0], 2e5);
+    // Inside the lower cube's top face: its edges are not the lower's.
+    let upper = springs(5, 0.016, [0.01, 0.01, 0.103], 1e5);
+    let model = Model::union(&[lower, upper]).unwrap();
+    let settings = ContactSettings {
+        friction_static: 0.0,
+        friction_kinetic: 0.0,
+        damping_ratio: 0.0,
+        ..ContactSettings::for_bodies(&model)
+    };
+    let bodies = BodyContact::new(&model, settings, &[false, false]).unwrap();
+    let contact = Contact::new(&model, Vec::new()).with_bodies(bodies);
+    let gravity = LoadSpec::Gravity { g: [0.0, 0.0, -G] };
+    let p = Problem::from_specs(model, &[base], &[gravity], Damping::NONE)
+        .unwrap()
+        .with_contact(contact);
+    let model = p.model();
+    let energy = |s: &State| {
+        let potential: f64 =
+            s.x.iter()
+                .zip(model.masses())
+                .map(|(x, m)| m * G * x.z)
+                .sum();
+        s.kinetic_energy(model.masses())
+            + model.energy(&s.x)
+            + potential
+            + p.contact().unwrap().energy(s.time, &s.x)
+    };
+    let mut it = Explicit::new(&p, ExplicitOptions::default()).unwrap();
+    let mut s = State::at_rest(model);
+    let e0 = energy(&s);
+    let upper_mass: f64 = model.masses()[model.bodies()[1].nodes.clone()].iter().sum();
+    let drop = upper_mass * G * 0.003;
+    let (mut worst, mut touched) = (f64::MIN, false);
+    while s.time < 0.15 {
+        it.step(&p, &mut s).unwrap();
+        worst = worst.max(energy(&s) - e0);
+        touched |= p.contact().unwrap().bodies().unwrap().max_depth(&s.x) > 0.0;
+    }
+    assert!(touched, "it must have landed");
+    assert!(worst < 0.01 * drop, "gained {worst} J of a {drop} J drop");
 }

@@ -45,10 +45,11 @@
 use std::path::{Path, PathBuf};
 
 use mss_core::Material;
-use mss_core::constraints::{ConstraintSpec, NodeSelector};
+use mss_core::constraints::NodeSelector;
 use serde::Deserialize;
 use thiserror::Error;
 
+mod bodies;
 mod constraints;
 mod contact;
 mod key;
@@ -60,6 +61,7 @@ mod output;
 mod solver;
 mod voxelize;
 
+pub use bodies::{BodySpec, BodyView, SINGLE_BODY_NAME};
 pub use constraints::*;
 pub use contact::*;
 pub use key::{KeyError, value_from_str};
@@ -89,8 +91,10 @@ pub const DEFAULT_SCENE_TOML: &str = include_str!("../../../../data/scenes/defau
 /// job runs from any folder.
 pub const BUNDLED_CRITTER_OBJ: &[u8] = include_bytes!("../../../../data/meshes/critter.obj");
 
-/// Names of the bundled meshes (`"builtin:NAME"` in a scene).
-pub const BUILTIN_MESHES: &[&str] = &["critter"];
+/// Names of the bundled meshes (`"builtin:NAME"` in a scene): the critter,
+/// a cube of edge 1 m and a sphere of diameter 1 m (1,280 triangles), both
+/// centred at the origin (`[mesh] scale` and `translate` size and place them).
+pub const BUILTIN_MESHES: &[&str] = &["critter", "cube", "sphere"];
 
 /// The commented template scene (`data/scenes/template.toml`) written by `mss init`.
 pub const TEMPLATE_SCENE_TOML: &str = include_str!("../../../../data/scenes/template.toml");
@@ -148,14 +152,18 @@ pub enum SceneError {
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Scene {
-    /// `[mesh]`: the input surface.
-    pub mesh: MeshSection,
+    /// `[mesh]`: the input surface (required unless the scene has
+    /// `[[bodies]]`, where each body has its own).
+    #[serde(default)]
+    pub mesh: Option<MeshSection>,
     /// `[voxelize]`: how the surface becomes a cubic lattice.
     #[serde(default)]
     pub voxelize: VoxelizeSection,
     /// `[material]`: Young's modulus `young` (Pa), Poisson's ratio `poisson`
-    /// and density `density` (kg/m^3).
-    pub material: Material,
+    /// and density `density` (kg/m^3) (required unless the scene has
+    /// `[[bodies]]`).
+    #[serde(default)]
+    pub material: Option<Material>,
     /// `[model]`: the spring parameterization.
     #[serde(default)]
     pub model: ModelSection,
@@ -180,9 +188,13 @@ pub struct Scene {
     /// `[[obstacles]]`: rigid obstacles the body touches (see [`crate::obstacles`]).
     #[serde(default)]
     pub obstacles: Vec<ObstacleSpec>,
-    /// `[contact]`: which points touch them.
+    /// `[contact]`: which points touch them, and contact between bodies.
     #[serde(default)]
     pub contact: ContactSection,
+    /// `[[bodies]]`: the bodies of a scene of several (see
+    /// [`Scene::bodies`]); empty: the top-level tables are the one body.
+    #[serde(default)]
+    pub bodies: Vec<BodySpec>,
 }
 
 /// Where a scene's mesh comes from.
@@ -353,7 +365,8 @@ impl Scene {
     /// bundled mesh; a relative path is relative to the scene file's folder. In
     /// the bundled scene, [`BUNDLED_MESH_PATH`] is the bundled critter.
     pub fn mesh_source(&self, origin: &SceneOrigin) -> MeshSource {
-        Self::source_of(&self.mesh.path, origin)
+        let path = self.mesh.as_ref().map_or("", |m| m.path.as_str());
+        Self::source_of(path, origin)
     }
 
     /// Where a mesh path of a scene from `origin` points (the rules of
@@ -375,20 +388,6 @@ impl Scene {
         }
     }
 
-    /// The library's boundary conditions: `[[fixed]]` sets, then `[[motions]]`.
-    pub fn constraint_specs(&self) -> Vec<ConstraintSpec> {
-        self.fixed
-            .iter()
-            .cloned()
-            .map(ConstraintSpec::fixed)
-            .chain(
-                self.motions
-                    .iter()
-                    .map(|m| m.constraint(self.solver.duration)),
-            )
-            .collect()
-    }
-
     /// Checks ranges and consistency that need no physics: each table by
     /// its own `check`, then what involves two tables. Material and
     /// parameterization are checked by the library when the model is built,
@@ -407,17 +406,7 @@ impl Scene {
             let e = e.within(&entry);
             invalid(e.key, e.message)
         };
-        self.mesh.check().map_err(|e| in_table("[mesh]", e))?;
-        self.voxelize
-            .check()
-            .map_err(|e| in_table("[voxelize]", e))?;
-        check_material(&self.material).map_err(|e| in_table("[material]", e))?;
-        for (i, s) in self.fixed.iter().enumerate() {
-            check_selector(s).map_err(|e| in_list("[[fixed]]", i, e))?;
-        }
-        for (i, r) in self.regions.iter().enumerate() {
-            r.check().map_err(|e| in_list("[[regions]]", i, e))?;
-        }
+        self.check_tables_of_bodies(&invalid)?;
         self.loads
             .check()
             .map_err(|e| match e.key.split_once(" #") {
@@ -425,19 +414,118 @@ impl Scene {
                 Some((list, n)) => invalid(format!("[[loads.{list}]] #{n}"), e.message),
                 None => in_table("[loads]", e),
             })?;
-        for (i, m) in self.motions.iter().enumerate() {
-            m.check().map_err(|e| in_list("[[motions]]", i, e))?;
-        }
         self.solver.check().map_err(|e| in_table("[solver]", e))?;
         self.output.check().map_err(|e| in_table("[output]", e))?;
         for (i, o) in self.obstacles.iter().enumerate() {
             o.check().map_err(|e| in_list("[[obstacles]]", i, e))?;
         }
+        self.contact.check().map_err(|e| in_table("[contact]", e))?;
         if self.output.checkpoint_every.is_some() && self.solver.is_static() {
             return Err(invalid(
                 "[output] checkpoint_every".into(),
                 "a static solve is one step and has nothing to resume; remove the key or use a time-stepping solver".into(),
             ));
+        }
+        Ok(())
+    }
+}
+
+impl Scene {
+    /// The checks of each body's tables, and of `[[bodies]]` against the
+    /// top level: with bodies, the tables that belong to a body are not
+    /// given at the top level; without, `[mesh]` and `[material]` are.
+    fn check_tables_of_bodies(
+        &self,
+        invalid: &dyn Fn(String, String) -> SceneError,
+    ) -> Result<(), SceneError> {
+        if self.bodies.is_empty() {
+            if self.mesh.is_none() {
+                return Err(invalid(
+                    "[mesh]".into(),
+                    "missing field `mesh`: a scene needs a [mesh] table (path = \"...\"), or [[bodies]] each with its own".into(),
+                ));
+            }
+            if self.material.is_none() {
+                return Err(invalid(
+                    "[material]".into(),
+                    "missing field `material`: a scene needs a [material] table (young, poisson, density), or [[bodies]] each with its own".into(),
+                ));
+            }
+        } else {
+            let per_body = [
+                ("[mesh]", self.mesh.is_some()),
+                ("[material]", self.material.is_some()),
+                ("[voxelize]", self.voxelize != VoxelizeSection::default()),
+                ("[model]", self.model != ModelSection::default()),
+                ("[[fixed]]", !self.fixed.is_empty()),
+                ("[[motions]]", !self.motions.is_empty()),
+                ("[[regions]]", !self.regions.is_empty()),
+                ("[contact] self_contact", self.contact.self_contact),
+            ];
+            if let Some((table, _)) = per_body.iter().find(|(_, given)| *given) {
+                return Err(invalid(
+                    (*table).into(),
+                    format!(
+                        "with [[bodies]], {table} belongs to each body: move it into the [[bodies]] tables (as [bodies.{}])",
+                        table
+                            .trim_matches(['[', ']'])
+                            .split(' ')
+                            .next()
+                            .unwrap_or("")
+                    ),
+                ));
+            }
+            for (i, b) in self.bodies.iter().enumerate() {
+                bodies::check_name(&b.name).map_err(|e| {
+                    let e = e.within(&format!("[[bodies]] #{}", i + 1));
+                    invalid(e.key, e.message)
+                })?;
+                if self.bodies[..i].iter().any(|o| o.name == b.name) {
+                    return Err(invalid(
+                        format!("[[bodies]] #{} name", i + 1),
+                        format!(
+                            "= {:?}: another body has that name; names must differ (they name the output files)",
+                            b.name
+                        ),
+                    ));
+                }
+                if b.loads.gravity.is_some() {
+                    return Err(invalid(
+                        format!("[[bodies]] #{} ({}) [loads] gravity", i + 1, b.name),
+                        "gravity is scene-wide: set it in the top-level [loads]".into(),
+                    ));
+                }
+            }
+        }
+        for body in self.bodies() {
+            let in_table =
+                |table: &str, e: KeyError| invalid(body.key(&e.scene_key(table)), e.message);
+            let in_list = |list: &str, i: usize, e: KeyError| {
+                let e = e.within(&format!("{list} #{}", i + 1));
+                invalid(body.key(&e.key), e.message)
+            };
+            body.mesh.check().map_err(|e| in_table("[mesh]", e))?;
+            body.voxelize
+                .check()
+                .map_err(|e| in_table("[voxelize]", e))?;
+            check_material(&body.material).map_err(|e| in_table("[material]", e))?;
+            for (i, s) in body.fixed.iter().enumerate() {
+                check_selector(s).map_err(|e| in_list("[[fixed]]", i, e))?;
+            }
+            for (i, r) in body.regions.iter().enumerate() {
+                r.check().map_err(|e| in_list("[[regions]]", i, e))?;
+            }
+            for (i, m) in body.motions.iter().enumerate() {
+                m.check().map_err(|e| in_list("[[motions]]", i, e))?;
+            }
+            if let Some(loads) = body.loads {
+                loads.check().map_err(|e| match e.key.split_once(" #") {
+                    Some((list, n)) => {
+                        invalid(body.key(&format!("[[loads.{list}]] #{n}")), e.message)
+                    }
+                    None => in_table("[loads]", e),
+                })?;
+            }
         }
         Ok(())
     }
@@ -574,12 +662,12 @@ mod tests {
             s.mesh_source(&origin),
             MeshSource::File(PathBuf::from("dir/m.obj"))
         );
-        s.mesh.path = BUNDLED_MESH_PATH.into();
+        s.mesh.as_mut().unwrap().path = BUNDLED_MESH_PATH.into();
         assert_eq!(
             s.mesh_source(&SceneOrigin::Bundled),
             MeshSource::Builtin("critter".into())
         );
-        s.mesh.path = "builtin:critter".into();
+        s.mesh.as_mut().unwrap().path = "builtin:critter".into();
         assert_eq!(
             s.mesh_source(&origin),
             MeshSource::Builtin("critter".into())
@@ -630,7 +718,7 @@ mod tests {
     #[test]
     fn bundled_scenes_parse() {
         let d = Scene::from_toml_str(DEFAULT_SCENE_TOML, "default.toml").unwrap();
-        assert_eq!(d.mesh.path, BUNDLED_MESH_PATH);
+        assert_eq!(d.mesh.as_ref().unwrap().path, BUNDLED_MESH_PATH);
         assert_eq!(d.fixed, vec![NodeSelector::LowestLayer]);
         assert_eq!(d.loads.gravity, Some([0.0, 0.0, -9.81]));
         let t = Scene::from_toml_str(TEMPLATE_SCENE_TOML, "template.toml").unwrap();

@@ -385,7 +385,7 @@ fn resource_limits_refuse_before_allocating_or_writing() {
         &no_progress,
     )
     .unwrap();
-    let (cells, nodes) = (fits.lattice.num_cells(), fits.lattice.num_nodes());
+    let (cells, nodes) = (fits.lattice().num_cells(), fits.lattice().num_nodes());
     let explicit = mss_scene::limits::run_memory_estimate(cells, nodes, false);
     let matrices = mss_scene::limits::run_memory_estimate(cells, nodes, true);
     // The lattice: allowed to classify, not to build the run.
@@ -738,7 +738,7 @@ fn resuming_refuses_a_changed_scene_a_missing_checkpoint_and_a_static_solve() {
     cancel.cancel();
     job.run(dir.path(), &no_progress, &cancel).unwrap();
     let mut changed = resumable_scene();
-    changed.scene.material.young *= 1.01;
+    changed.scene.material.as_mut().unwrap().young *= 1.01;
     let other = Job::prepare(changed, Registry::default(), &no_progress).unwrap();
     let e = other
         .resume(dir.path(), &no_progress, &Cancel::new())

@@ -3,6 +3,7 @@
 //! (see README).
 
 mod blender;
+mod bodies;
 mod job;
 mod placement;
 mod plug_points;

@@ -16,7 +16,7 @@ fn job(mesh_keys: &str) -> Result<Job, String> {
 }
 
 fn cell_keys(job: &Job) -> Vec<[i64; 3]> {
-    let l = &job.lattice;
+    let l = &job.lattice();
     let mut keys: Vec<[i64; 3]> = l
         .cell_coords()
         .iter()
@@ -37,7 +37,7 @@ fn a_y_up_mesh_in_centimetres_stands_on_z_and_every_format_gives_its_cells() {
     };
     let obj = job(&keys("bunny.obj")).unwrap();
     // 9.657897 cm tall along y in the file: 0.09657897 m along z now.
-    let b = obj.mesh.bounding_box().unwrap();
+    let b = obj.mesh().bounding_box().unwrap();
     assert!(
         (b.extent()[2] - 0.09657897).abs() < 1e-12,
         "{:?}",
@@ -52,7 +52,7 @@ fn a_y_up_mesh_in_centimetres_stands_on_z_and_every_format_gives_its_cells() {
     assert!((b.min[0] - (0.01 * rb.min[2] + 1.0)).abs() < 1e-12);
     assert!((b.min[2] - (0.01 * rb.min[1] + 3.0)).abs() < 1e-12);
     // The lowest layer is the bunny's base, not its side.
-    let l = &obj.lattice;
+    let l = &obj.lattice();
     let lowest = l.nodes().iter().map(|p| p[2]).fold(f64::MAX, f64::min);
     assert!((lowest - b.min[2]).abs() < l.h());
     let reference = cell_keys(&obj);

@@ -157,7 +157,7 @@ fn a_registered_region_selector_is_used_by_name() {
 #[test]
 fn a_registered_occupancy_rule_is_used_by_name() {
     let cells =
-        |extra: &str, registry: Registry| prepare(extra, registry).unwrap().lattice.num_cells();
+        |extra: &str, registry: Registry| prepare(extra, registry).unwrap().lattice().num_cells();
     let mut registry = Registry::default();
     // The fraction rule sampled more finely.
     registry.occupancy.register(

@@ -71,7 +71,7 @@ fn a_stiff_clamped_half_deflects_as_beam_theory_says_and_is_written_as_cell_data
     let dir = tempfile::tempdir().unwrap();
     // E = 10 MPa: a small deflection, so beam theory applies.
     let plain = job_with(dir.path(), "", 1.0e7).unwrap();
-    assert!(plain.regions.is_none());
+    assert!(plain.regions().is_none());
     let stiff = job_with(
         dir.path(),
         "[[regions]]\nselect = { kind = \"box\", min = [0.0, 0.0, 0.0], max = [0.5, 1.0, 1.0], \
@@ -79,7 +79,7 @@ fn a_stiff_clamped_half_deflects_as_beam_theory_says_and_is_written_as_cell_data
         1.0e7,
     )
     .unwrap();
-    let a = stiff.regions.as_ref().unwrap();
+    let a = stiff.regions().unwrap();
     assert_eq!(a.cells_per_material(), vec![20, 20]);
     let (out_plain, out_stiff) = (dir.path().join("plain"), dir.path().join("stiff"));
     let (w_plain, w_stiff) = (tip(&plain, &out_plain), tip(&stiff, &out_stiff));
@@ -119,7 +119,7 @@ fn a_region_of_the_same_material_changes_nothing_and_later_regions_win() {
          max = [0.2, 0.04, 0.04] }\npoisson = 0.4\n",
     )
     .unwrap();
-    let r = two.regions.as_ref().unwrap();
+    let r = two.regions().unwrap();
     assert_eq!(r.cells_per_material(), vec![0, 0, 40]);
     assert!(r.selected[0] > 0);
     assert_eq!(r.materials[2].poisson, 0.4);
@@ -146,7 +146,7 @@ fn a_second_mesh_selects_the_cells_inside_it() {
         "[[regions]]\nselect = {{ kind = \"mesh\", path = {root:?} }}\nyoung = 2.0e5\n"
     ))
     .unwrap();
-    assert_eq!(j.regions.unwrap().cells_per_material(), vec![28, 12]);
+    assert_eq!(j.regions().unwrap().cells_per_material(), vec![28, 12]);
 }
 
 #[test]
@@ -221,7 +221,7 @@ fn the_templates_region_example_works_on_the_critter() {
     assert!(text.contains("\n[[regions]]\nselect = "));
     let input = SceneInput::from_toml(&text, "template.toml").unwrap();
     let job = Job::prepare(input, Registry::default(), &no_progress).unwrap();
-    let a = job.regions.unwrap();
+    let a = job.regions().unwrap();
     assert!(a.selected[0] > 0 && a.materials[1].young == 2.0e5);
 }
 

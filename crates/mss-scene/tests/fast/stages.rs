@@ -32,7 +32,7 @@ fn a_job_builds_the_lattice_the_stages_build() {
         &Default::default(),
     )
     .unwrap();
-    assert_eq!(placed.mesh.vertices, job.mesh.vertices);
+    assert_eq!(placed.mesh.vertices, job.mesh().vertices);
     let options = VoxelizeOptions {
         resolution: Resolution::CellsAlongLongestAxis(10),
         ..Default::default()
@@ -46,8 +46,8 @@ fn a_job_builds_the_lattice_the_stages_build() {
         &|_, _| {},
     )
     .unwrap();
-    assert_eq!(vox.lattice.cells(), job.lattice.cells());
-    assert_eq!(vox.lattice.nodes(), job.lattice.nodes());
+    assert_eq!(vox.lattice.cells(), job.lattice().cells());
+    assert_eq!(vox.lattice.nodes(), job.lattice().nodes());
 }
 
 #[test]

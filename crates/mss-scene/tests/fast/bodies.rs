@@ -1,0 +1,247 @@
+//! Scenes of several bodies (`[[bodies]]`): the bundled stack rests with
+//! the upper cube's weight carried by the lower one; each body keeps its own
+//! held nodes and loads; the outputs hold every body; bad values of every
+//! new key are typed errors naming the key.
+
+use mss_core::Vec3;
+use mss_core::solver::State;
+use mss_scene::{Job, Registry, SceneInput, no_progress};
+
+const STACK: &str = include_str!("../../../../data/scenes/stack.toml");
+const SQUEEZE: &str = include_str!("../../../../data/scenes/squeeze.toml");
+
+fn job(text: &str) -> Job {
+    let input = SceneInput::from_toml(text, "bodies.toml").unwrap();
+    Job::prepare(input, Registry::default(), &no_progress).unwrap()
+}
+
+/// Steps `job` to `seconds`; returns the state.
+fn run_to(job: &Job, seconds: f64) -> State {
+    let mut it = job
+        .input
+        .integrator(&job.registry, &job.problem, &job.plan)
+        .unwrap()
+        .unwrap();
+    let mut s = State::at_rest(job.problem.model());
+    while s.time < seconds {
+        it.step(&job.problem, &mut s).unwrap();
+    }
+    s
+}
+
+#[test]
+fn the_bundled_stack_rests_with_the_upper_weight_carried_by_the_lower_cube() {
+    let text = STACK.replace("damping = 10.0", "damping = 25.0");
+    let job = job(&text);
+    assert_eq!(job.bodies.len(), 2);
+    assert_eq!(job.bodies[1].name, "upper");
+    let s = run_to(&job, 1.0);
+    let model = job.problem.model();
+    let contact = job.problem.contact().unwrap();
+    let bodies = contact.bodies().unwrap();
+    let anchors = &s.contact[s.contact.len() - bodies.num_points()..];
+    let between = bodies.body_forces(&s.x, &s.v, anchors);
+    let g = 9.81;
+    let upper: f64 = model.masses()[model.bodies()[1].nodes.clone()]
+        .iter()
+        .sum::<f64>()
+        * g;
+    assert!(
+        (between[1].z - upper).abs() < 0.01 * upper,
+        "{} N for a weight of {upper} N",
+        between[1].z
+    );
+    assert!((between[0] + between[1]).norm() < 1e-9 * upper);
+    let ground: Vec3 = job.problem.contact_forces(&s).iter().sum();
+    let weight = model.total_mass() * g;
+    assert!(
+        (ground.z - weight).abs() < 0.01 * weight,
+        "{ground:?} vs {weight}"
+    );
+    // Nothing is inside anything beyond 2 % of the finer cell.
+    assert!(bodies.max_depth(&s.x) < 0.02 * model.h());
+}
+
+#[test]
+fn a_squeezed_ball_and_the_block_push_each_other_equally_and_the_outputs_hold_both() {
+    // The bundled squeeze until the plate presses hardest, frames every 0.1 s.
+    let text = SQUEEZE
+        .replace("duration = 1.2", "duration = 0.6")
+        .replace("every_time = 0.02", "every_time = 0.1")
+        .replace("cells = 12", "cells = 8");
+    let job = job(&text);
+    let out = tempfile::tempdir().unwrap();
+    let summary = job
+        .run(out.path(), &no_progress, &mss_scene::Cancel::new())
+        .unwrap();
+    assert_eq!(summary.bodies.len(), 2);
+    assert_eq!(summary.bodies[0].name, "block");
+    assert_eq!(
+        summary.cells,
+        summary.bodies.iter().map(|b| b.cells).sum::<usize>()
+    );
+    // The plate pushes the ball into the block: equal and opposite.
+    let (a, b) = (
+        summary.bodies[0].contact_force_from_bodies,
+        summary.bodies[1].contact_force_from_bodies,
+    );
+    assert!(
+        a[2] < -1.0 && (a[2] + b[2]).abs() < 1e-9 * a[2].abs(),
+        "{a:?} {b:?}"
+    );
+    let vtu = std::fs::read_to_string(out.path().join("lattice_0006.vtu")).unwrap();
+    assert!(
+        vtu.contains("Name=\"body\""),
+        "the lattice frame has a body field"
+    );
+    let skin = std::fs::read_to_string(out.path().join("skin_0006.obj")).unwrap_or_default();
+    let surface = std::fs::read_to_string(out.path().join("surface_0006.obj")).unwrap_or_default();
+    assert!(
+        !(skin.is_empty() && surface.is_empty()),
+        "a skin or surface per frame"
+    );
+}
+
+#[test]
+fn each_body_keeps_its_own_held_nodes_and_loads() {
+    // Two columns side by side, each held at its base, pushed sideways by
+    // its own force: each bends its own way; the top-level gravity pulls
+    // both.
+    let column = |name: &str, x: f64, force: &str| {
+        format!(
+            "[[bodies]]\nname = \"{name}\"\n[bodies.mesh]\npath = \"builtin:cube\"\n\
+             scale = [0.02, 0.02, 0.1]\ntranslate = [{x}, 0.0, 0.05]\n[bodies.voxelize]\n\
+             cells = 10\n[bodies.material]\nyoung = 1.0e6\npoisson = 0.3\ndensity = 1000.0\n\
+             [[bodies.fixed]]\nkind = \"lowest_layer\"\n[[bodies.loads.forces]]\n\
+             select = {{ kind = \"box\", min = [-1.0, -1.0, 0.099], max = [1.0, 1.0, 1.0] }}\n\
+             force = {force}\n"
+        )
+    };
+    let text = format!(
+        "[loads]\ngravity = [0.0, 0.0, -9.81]\n[solver]\nkind = \"static\"\n{}{}",
+        column("left", 0.0, "[0.5, 0.0, 0.0]"),
+        column("right", 0.1, "[0.0, -0.5, 0.0]")
+    );
+    let job = job(&text);
+    let model = job.problem.model();
+    let mut s = State::at_rest(model);
+    mss_core::solve_static(&job.problem, &mut s, &job.input.static_options()).unwrap();
+    let tip = |b: usize| {
+        let span = &model.bodies()[b];
+        let (x, r) = (
+            &s.x[span.nodes.clone()],
+            &model.rest_positions()[span.nodes.clone()],
+        );
+        let top = r.iter().map(|p| p.z).fold(f64::MIN, f64::max);
+        let moved: Vec<Vec3> = x
+            .iter()
+            .zip(r)
+            .filter(|(_, p)| p.z > top - 1e-9)
+            .map(|(x, p)| x - p)
+            .collect();
+        moved.iter().sum::<Vec3>() / moved.len() as f64
+    };
+    let (left, right) = (tip(0), tip(1));
+    assert!(left.x > 1e-4 && left.y.abs() < 1e-3 * left.x, "{left:?}");
+    assert!(
+        right.y < -1e-4 && right.x.abs() < 1e-3 * right.y.abs(),
+        "{right:?}"
+    );
+    assert!(left.z < 0.0 && right.z < 0.0, "gravity on both");
+    let held = model
+        .bodies()
+        .iter()
+        .map(|b| {
+            b.nodes
+                .clone()
+                .filter(|&n| job.problem.constraints().mask(n)[0])
+                .count()
+        })
+        .collect::<Vec<_>>();
+    assert_eq!(held[0], held[1]);
+    assert!(held[0] > 0);
+}
+
+#[test]
+fn bad_bodies_are_typed_errors_naming_the_key() {
+    let body = |name: &str, extra: &str| {
+        format!(
+            "[[bodies]]\nname = \"{name}\"\n[bodies.mesh]\npath = \"builtin:cube\"\nscale = 0.1\n\
+             [bodies.material]\nyoung = 1e5\npoisson = 0.3\ndensity = 1000.0\n{extra}"
+        )
+    };
+    let cases = [
+        (
+            format!("{}{}", body("a", ""), body("a", "")),
+            "[[bodies]] #2 name",
+        ),
+        (body("a b", ""), "[[bodies]] #1 name"),
+        (
+            format!("[mesh]\npath = \"builtin:cube\"\n{}", body("a", "")),
+            "[mesh]",
+        ),
+        (
+            format!("[[fixed]]\nkind = \"lowest_layer\"\n{}", body("a", "")),
+            "[[fixed]]",
+        ),
+        (
+            body("a", "[bodies.loads]\ngravity = [0.0, 0.0, -9.81]\n"),
+            "[[bodies]] #1 (a) [loads] gravity",
+        ),
+        (
+            body("a", "[bodies.voxelize]\ncells = 0\n"),
+            "[[bodies]] #1 (a) [voxelize] cells",
+        ),
+        (body("a", "[bodies.material]\n"), "material"),
+        (
+            format!("[contact]\nfriction = -1.0\n{}", body("a", "")),
+            "[contact] friction",
+        ),
+        (
+            format!("[contact]\nstiffness = 0.0\n{}", body("a", "")),
+            "[contact] stiffness",
+        ),
+        (
+            format!(
+                "[contact]\nfriction = 0.2\nfriction_kinetic = 0.5\n{}",
+                body("a", "")
+            ),
+            "[contact] friction_kinetic",
+        ),
+        (body("a", "self_contact = 3\n"), "self_contact"),
+        (
+            body(
+                "a",
+                "[[bodies.fixed]]\nkind = \"box\"\nmin = [1.0, 0.0, 0.0]\nmax = [0.0, 1.0, 1.0]\n",
+            ),
+            "[[bodies]] #1 (a) [[fixed]] #1",
+        ),
+        ("[solver]\nkind = \"static\"\n".to_owned(), "[mesh]"),
+    ];
+    for (text, key) in cases {
+        let e = SceneInput::from_toml(&text, "bad.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(key), "{key}: {e}");
+        assert!(!e.contains('\n'), "{e}");
+    }
+    // Found when the job is built: a body whose selection is empty, and
+    // surface contact points, which bodies do not have yet.
+    let prepare = |text: String| {
+        let input = SceneInput::from_toml(&text, "bad.toml").unwrap();
+        Job::prepare(input, Registry::default(), &no_progress)
+            .unwrap_err()
+            .to_string()
+    };
+    let e = prepare(body(
+        "a",
+        "[[bodies.fixed]]\nkind = \"box\"\nmin = [5.0, 5.0, 5.0]\nmax = [6.0, 6.0, 6.0]\n",
+    ));
+    assert!(e.contains("[[bodies]] #1 (a) [[fixed]] #1"), "{e}");
+    let e = prepare(format!(
+        "[contact]\npoints = \"surface\"\n{}{}",
+        body("a", ""),
+        body("b", "")
+    ));
+    assert!(e.contains("[contact] points"), "{e}");
+}
