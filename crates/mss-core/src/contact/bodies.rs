@@ -78,6 +78,88 @@ struct Triangle {
     body: u32,
 }
 
+/// A triangle in a grid cell of the broad phase, with its grown box.
+#[derive(Debug, Clone, Copy)]
+struct Entry {
+    key: u64,
+    triangle: u32,
+    lo: Vec3,
+    hi: Vec3,
+}
+
+/// The broad phase's grid: its entries bucketed by a hash of their grid
+/// cell (a counting sort: linear, and in triangle order within a bucket,
+/// so the same for any thread count).
+struct Grid {
+    mask: u64,
+    starts: Vec<u32>,
+    entries: Vec<Entry>,
+}
+
+impl Grid {
+    fn new(unsorted: Vec<Entry>) -> Self {
+        let size = (2 * unsorted.len()).next_power_of_two().max(1);
+        let mask = size as u64 - 1;
+        let mut starts = vec![0u32; size + 1];
+        for e in &unsorted {
+            starts[(Self::bucket_of(e.key) & mask) as usize + 1] += 1;
+        }
+        for b in 0..size {
+            starts[b + 1] += starts[b];
+        }
+        let mut fill = starts.clone();
+        let mut entries = Vec::with_capacity(unsorted.len());
+        entries.resize(
+            unsorted.len(),
+            unsorted.first().copied().unwrap_or(Entry {
+                key: 0,
+                triangle: 0,
+                lo: Vec3::zeros(),
+                hi: Vec3::zeros(),
+            }),
+        );
+        for e in unsorted {
+            let b = (Self::bucket_of(e.key) & mask) as usize;
+            entries[fill[b] as usize] = e;
+            fill[b] += 1;
+        }
+        Self {
+            mask,
+            starts,
+            entries,
+        }
+    }
+
+    fn bucket_of(key: u64) -> u64 {
+        (key ^ (key >> 29)).wrapping_mul(0xBF58_476D_1CE4_E5B9) >> 17
+    }
+
+    /// The entries whose cell's key falls in `key`'s bucket (others too:
+    /// compare the key).
+    fn bucket(&self, key: u64) -> &[Entry] {
+        let b = (Self::bucket_of(key) & self.mask) as usize;
+        &self.entries[self.starts[b] as usize..self.starts[b + 1] as usize]
+    }
+}
+
+/// The pairs of the last positions asked about: a step asks two or three
+/// times at the same positions (its forces, its anchors, the next step's
+/// start).
+#[derive(Default)]
+struct PairCache(std::sync::Mutex<Option<(u64, std::sync::Arc<Vec<Pair>>)>>);
+
+impl Clone for PairCache {
+    fn clone(&self) -> Self {
+        Self::default()
+    }
+}
+
+impl std::fmt::Debug for PairCache {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("PairCache")
+    }
+}
+
 /// One point inside a body: the triangle it is pushed out of.
 #[derive(Debug, Clone, Copy)]
 struct Pair {
@@ -121,6 +203,7 @@ pub struct BodyContact {
     rest: Vec<Vec3>,
     grid_size: f64,
     omega_sq_per_stiffness: f64,
+    cache: PairCache,
 }
 
 /// Why body contact could not be set up.
@@ -267,6 +350,7 @@ impl BodyContact {
             },
             grid_size,
             omega_sq_per_stiffness,
+            cache: PairCache::default(),
         })
     }
 
@@ -305,8 +389,10 @@ impl BodyContact {
             .any(|&n| (self.rest[n as usize] - p).norm_squared() < r * r)
     }
 
-    /// Each body's box at `x` (of its boundary points), grown by half its
-    /// cell: what another body's points must be inside to touch it.
+    /// Each body's box at `x` (of its boundary points), grown by one and a
+    /// half of its cells: what another body's points must be inside to
+    /// touch it (half a cell deep), and its triangles' nodes to be touched
+    /// (a cell further).
     fn body_boxes(&self, x: &[Vec3]) -> Vec<(Vec3, Vec3)> {
         let mut boxes =
             vec![(Vec3::repeat(f64::INFINITY), Vec3::repeat(f64::NEG_INFINITY)); self.body_h.len()];
@@ -316,7 +402,7 @@ impl BodyContact {
             *hi = hi.sup(&x[node as usize]);
         }
         for (b, (lo, hi)) in boxes.iter_mut().enumerate() {
-            let grow = DEPTH_LIMIT * self.body_h[b];
+            let grow = (DEPTH_LIMIT + 1.0) * self.body_h[b];
             *lo = lo.add_scalar(-grow);
             *hi = hi.add_scalar(grow);
         }
@@ -332,43 +418,83 @@ impl BodyContact {
             })
     }
 
-    /// The sorted `(grid key, triangle)` entries of the broad phase at `x`,
-    /// of the triangles that another body (or their own) may touch.
-    fn broad_phase(&self, x: &[Vec3], boxes: &[(Vec3, Vec3)]) -> Vec<(u64, u32)> {
+    /// The broad phase's grid at `x`: the triangles with a node in
+    /// `near` (a node another body's box holds, or of a body that touches
+    /// itself), each in the grid cells its box covers.
+    fn broad_phase(&self, x: &[Vec3], near: &[bool]) -> Grid {
         let size = self.grid_size;
-        let mut keys = Vec::new();
+        let mut entries = Vec::new();
         for (t, tri) in self.triangles.iter().enumerate() {
-            let grow = DEPTH_LIMIT * self.body_h[tri.body as usize];
-            let [a, b, c] = tri.nodes.map(|n| x[n as usize]);
-            let (lo, hi) = (
-                a.inf(&b).inf(&c).add_scalar(-grow),
-                a.sup(&b).sup(&c).add_scalar(grow),
-            );
-            if !self.may_touch(tri.body as usize, &lo, &hi, boxes) {
+            if !tri.nodes.iter().any(|&n| near[n as usize]) {
                 continue;
             }
-            let (lo, hi) = (grid_cell(lo, size), grid_cell(hi, size));
+            let grow = DEPTH_LIMIT * self.body_h[tri.body as usize];
+            let [a, b, c] = tri.nodes.map(|n| x[n as usize]);
+            let (lo, hi) = (a.inf(&b).inf(&c), a.sup(&b).sup(&c));
+            let (first, last) = (grid_cell(lo, size), grid_cell(hi, size));
             // A degenerate or exploded surface must not make the grid blow
             // up: such a triangle is left out (the solver's checks see it).
-            let span: i64 = (0..3).map(|k| hi[k] - lo[k] + 1).product();
+            let span: i64 = (0..3).map(|k| last[k] - first[k] + 1).product();
             if !(1..=64).contains(&span) {
                 continue;
             }
-            for i in lo[0]..=hi[0] {
-                for j in lo[1]..=hi[1] {
-                    for k in lo[2]..=hi[2] {
-                        keys.push((grid_key([i, j, k]), t as u32));
+            let (lo, hi) = (lo.add_scalar(-grow), hi.add_scalar(grow));
+            for i in first[0]..=last[0] {
+                for j in first[1]..=last[1] {
+                    for k in first[2]..=last[2] {
+                        entries.push(Entry {
+                            key: grid_key([i, j, k]),
+                            triangle: t as u32,
+                            lo,
+                            hi,
+                        });
                     }
                 }
             }
         }
-        keys.sort_unstable();
-        keys
+        Grid::new(entries)
+    }
+
+    /// The points that may touch at `x` (inside another body's box, or of a
+    /// body that touches itself), and the nodes that do, as a mask.
+    fn near_points(&self, x: &[Vec3]) -> (Vec<u32>, Vec<bool>) {
+        let boxes = self.body_boxes(x);
+        let mut near = vec![false; x.len()];
+        let mut points = Vec::new();
+        for (i, (&node, &b)) in self.points.iter().zip(&self.point_body).enumerate() {
+            let p = x[node as usize];
+            if self.may_touch(b as usize, &p, &p, &boxes) {
+                near[node as usize] = true;
+                points.push(i as u32);
+            }
+        }
+        (points, near)
     }
 
     /// The points inside a body at `x`, in point order.
-    fn pairs(&self, x: &[Vec3]) -> Vec<Pair> {
-        self.pairs_within(x, 0.0)
+    fn pairs(&self, x: &[Vec3]) -> std::sync::Arc<Vec<Pair>> {
+        let key = self.positions_key(x);
+        let mut cache = self.cache.0.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((k, pairs)) = cache.as_ref()
+            && *k == key
+        {
+            return pairs.clone();
+        }
+        let pairs = std::sync::Arc::new(self.pairs_within(x, 0.0));
+        *cache = Some((key, pairs.clone()));
+        pairs
+    }
+
+    /// A key of the points' positions' bits (every node of a surface
+    /// triangle is a point): any change of one coordinate changes it.
+    fn positions_key(&self, x: &[Vec3]) -> u64 {
+        let mut h = 0xcbf2_9ce4_8422_2325u64;
+        for &n in &self.points {
+            for c in x[n as usize].iter() {
+                h = (h ^ c.to_bits()).wrapping_mul(0x0000_0100_0000_01b3);
+            }
+        }
+        h ^ x.len() as u64
     }
 
     /// The points deeper than `-margin` cells in a body at `x` (a negative
@@ -377,23 +503,18 @@ impl BodyContact {
         if self.points.is_empty() {
             return Vec::new();
         }
-        let boxes = self.body_boxes(x);
-        let keys = self.broad_phase(x, &boxes);
-        if keys.is_empty() {
+        let (near, near_nodes) = self.near_points(x);
+        let keys = self.broad_phase(x, &near_nodes);
+        if keys.entries.is_empty() {
             return Vec::new();
         }
-        let per_chunk: Vec<Vec<Pair>> = self
-            .points
+        let per_chunk: Vec<Vec<Pair>> = near
             .par_chunks(POINT_CHUNK)
-            .enumerate()
-            .map(|(ci, chunk)| {
+            .map(|chunk| {
                 let mut out = Vec::new();
-                for (k, &node) in chunk.iter().enumerate() {
-                    let i = ci * POINT_CHUNK + k;
-                    let p = x[node as usize];
-                    if !self.may_touch(self.point_body[i] as usize, &p, &p, &boxes) {
-                        continue;
-                    }
+                for &i in chunk {
+                    let i = i as usize;
+                    let p = x[self.points[i] as usize];
                     if let Some(pair) = self.nearest(i, p, x, &keys) {
                         let h = self.body_h[self.triangles[pair.triangle as usize].body as usize];
                         if pair.depth > -margin * h {
@@ -409,41 +530,51 @@ impl BodyContact {
 
     /// The nearest triangle that point `i` at `p` projects onto, within the
     /// depth limit on either side (its depth may be negative: outside).
-    fn nearest(&self, i: usize, p: Vec3, x: &[Vec3], keys: &[(u64, u32)]) -> Option<Pair> {
-        let key = grid_key(grid_cell(p, self.grid_size));
-        let start = keys.partition_point(|&(k, _)| k < key);
+    fn nearest(&self, i: usize, p: Vec3, x: &[Vec3], keys: &Grid) -> Option<Pair> {
+        let reach = DEPTH_LIMIT * self.grid_size / 2.0;
+        let first = grid_cell(p.add_scalar(-reach), self.grid_size);
+        let last = grid_cell(p.add_scalar(reach), self.grid_size);
+        let cells = (first[0]..=last[0]).flat_map(|a| {
+            (first[1]..=last[1]).flat_map(move |b| (first[2]..=last[2]).map(move |c| [a, b, c]))
+        });
         // The nearest triangle by true distance (to its closest point),
         // then by the gap to its plane: continuous as the point moves from
         // one triangle's region to the next, edges and vertices included.
         let mut best: Option<(f64, Pair)> = None;
-        for &(k, t) in &keys[start..] {
-            if k != key {
-                break;
-            }
-            let tri = &self.triangles[t as usize];
-            if self.excluded(i, tri) {
-                continue;
-            }
-            let Some(near) = closest(p, tri.nodes.map(|n| x[n as usize])) else {
-                continue;
-            };
-            if near.distance >= DEPTH_LIMIT * self.body_h[tri.body as usize] {
-                continue;
-            }
-            let better = best.as_ref().is_none_or(|(d, b)| {
-                near.distance < *d || (near.distance == *d && near.gap.abs() < b.depth.abs())
-            });
-            if better {
-                best = Some((
-                    near.distance,
-                    Pair {
-                        point: i as u32,
-                        triangle: t,
-                        beta: near.beta,
-                        normal: near.normal,
-                        depth: -near.gap,
-                    },
-                ));
+        for key in cells.map(grid_key) {
+            for e in keys.bucket(key) {
+                if e.key != key {
+                    continue;
+                }
+                if (0..3).any(|k| p[k] < e.lo[k] || p[k] > e.hi[k]) {
+                    continue;
+                }
+                let t = e.triangle;
+                let tri = &self.triangles[t as usize];
+                if self.excluded(i, tri) {
+                    continue;
+                }
+                let Some(near) = closest(p, tri.nodes.map(|n| x[n as usize])) else {
+                    continue;
+                };
+                if near.distance >= DEPTH_LIMIT * self.body_h[tri.body as usize] {
+                    continue;
+                }
+                let better = best.as_ref().is_none_or(|(d, b)| {
+                    near.distance < *d || (near.distance == *d && near.gap.abs() < b.depth.abs())
+                });
+                if better {
+                    best = Some((
+                        near.distance,
+                        Pair {
+                            point: i as u32,
+                            triangle: t,
+                            beta: near.beta,
+                            normal: near.normal,
+                            depth: -near.gap,
+                        },
+                    ));
+                }
             }
         }
         best.map(|(_, pair)| pair)
@@ -494,9 +625,9 @@ impl BodyContact {
     /// `anchors` are this contact's entries of the state's anchors (empty:
     /// every contact is new).
     pub fn add_forces(&self, x: &[Vec3], v: &[Vec3], anchors: &[Option<Vec3>], f: &mut [Vec3]) {
-        for pair in self.pairs(x) {
-            let touch = self.touch(&pair, x, v, anchors);
-            self.spread(&pair, touch.force, f);
+        for pair in self.pairs(x).iter() {
+            let touch = self.touch(pair, x, v, anchors);
+            self.spread(pair, touch.force, f);
         }
     }
 
@@ -581,7 +712,7 @@ impl BodyContact {
             *anchors = vec![None; self.points.len()];
         }
         let mut next = vec![None; self.points.len()];
-        for pair in self.pairs(x) {
+        for pair in self.pairs(x).iter() {
             let i = pair.point as usize;
             let encode = |t: u32, beta: [f64; 3]| Some(Vec3::new(f64::from(t), beta[1], beta[2]));
             let here = encode(pair.triangle, pair.beta);
@@ -589,7 +720,7 @@ impl BodyContact {
             next[i] = match old {
                 None => here,
                 Some(anchor) => {
-                    let touch = self.touch(&pair, x, v, anchors);
+                    let touch = self.touch(pair, x, v, anchors);
                     if !touch.sliding {
                         anchors[i]
                     } else {
@@ -620,7 +751,7 @@ impl BodyContact {
     /// limit of a surface at `x` is anchored at its projection there (so
     /// that friction holds it where it starts, as for obstacles).
     pub fn static_anchors(&self, x: &[Vec3]) -> Vec<Option<Vec3>> {
-        let keys = self.broad_phase(x, &self.body_boxes(x));
+        let keys = self.broad_phase(x, &self.near_points(x).1);
         (0..self.points.len())
             .map(|i| {
                 let pair = self.nearest(i, x[self.points[i] as usize], x, &keys)?;
@@ -650,8 +781,8 @@ impl BodyContact {
     /// opposite between two bodies (self-contact adds zero to its body).
     pub fn body_forces(&self, x: &[Vec3], v: &[Vec3], anchors: &[Option<Vec3>]) -> Vec<Vec3> {
         let mut out = vec![Vec3::zeros(); self.body_h.len()];
-        for pair in self.pairs(x) {
-            let touch = self.touch(&pair, x, v, anchors);
+        for pair in self.pairs(x).iter() {
+            let touch = self.touch(pair, x, v, anchors);
             let tri = &self.triangles[pair.triangle as usize];
             out[self.point_body[pair.point as usize] as usize] += touch.force;
             out[tri.body as usize] -= touch.force;

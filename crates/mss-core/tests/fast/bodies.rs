@@ -373,3 +373,113 @@ fn a_cube_dropped_on_another_gains_no_energy_without_damping() {
     assert!(touched, "it must have landed");
     assert!(worst < 0.01 * drop, "gained {worst} J of a {drop} J drop");
 }
+
+/// A U of 1 cm cells (base 8 x 2 x 2, arms 2 x 2 x 6, a 4 cm slot between
+/// them) held at its base, the top of the left arm driven 6 cm to the right
+/// in 0.2 s, into the right arm; with or without self-contact.
+fn folded_u(self_contact: bool) -> (Problem, State) {
+    let h = 0.01;
+    let cells =
+        (0..8u32).flat_map(|x| (0..2u32).flat_map(move |y| (0..8u32).map(move |z| [x, y, z])));
+    let cells = cells.filter(|&[x, _, z]| z < 2 || !(2..6).contains(&x));
+    let lattice = Lattice::from_cells([0.0; 3], h, [8, 2, 8], cells).unwrap();
+    let param = HourglassControl::new(Box::new(VolumetricBarrier), 1.0).unwrap();
+    let model = Model::new(&lattice, Material::new(1e5, 0.3, 1000.0).unwrap(), &param).unwrap();
+    let base = ConstraintSpec::fixed(NodeSelector::Box {
+        min: [-1.0, -1.0, -1.0],
+        max: [1.0, 1.0, 1e-6],
+        relative: false,
+    });
+    let drive = ConstraintSpec {
+        select: NodeSelector::Box {
+            min: [-1.0, -1.0, 0.08 - 1e-6],
+            max: [0.02 + 1e-6, 1.0, 1.0],
+            relative: false,
+        },
+        dofs: mss_core::constraints::Dofs::ALL,
+        motion: mss_core::constraints::Motion::Velocity([0.3, 0.0, 0.0]),
+    };
+    let contact = Contact::new(&model, Vec::new()).with_bodies(
+        BodyContact::new(&model, ContactSettings::for_bodies(&model), &[self_contact]).unwrap(),
+    );
+    let p = Problem::from_specs(
+        model,
+        &[base, drive],
+        &[],
+        Damping {
+            alpha: 20.0,
+            beta: 0.0,
+        },
+    )
+    .unwrap()
+    .with_contact(contact);
+    let mut it = Explicit::new(&p, ExplicitOptions::default()).unwrap();
+    let mut s = State::at_rest(p.model());
+    while s.time < 0.2 {
+        it.step(&p, &mut s).unwrap();
+    }
+    (p, s)
+}
+
+#[test]
+fn self_contact_keeps_a_folded_body_from_passing_through_itself() {
+    // Without it the driven arm's tip ends 2 cm inside the other arm.
+    let (p, s) = folded_u(false);
+    let deepest_x =
+        s.x.iter()
+            .zip(p.model().rest_positions())
+            .filter(|(_, r)| r.x < 0.02 + 1e-9 && r.z > 0.07)
+            .map(|(x, _)| x.x)
+            .fold(f64::MIN, f64::max);
+    assert!(
+        deepest_x > 0.075,
+        "without self-contact the arm passes in: {deepest_x}"
+    );
+    // With it, nothing is deeper than a fifth of a cell in the other arm,
+    // which is pushed aside.
+    let (p, s) = folded_u(true);
+    let bodies = p.contact().unwrap().bodies().unwrap();
+    let depth = bodies.max_depth(&s.x);
+    assert!(depth < 0.2 * 0.01, "{depth} m deep");
+    let pushed =
+        s.x.iter()
+            .zip(p.model().rest_positions())
+            .filter(|(_, r)| r.x > 0.07 && r.z > 0.07)
+            .map(|(x, r)| x.x - r.x)
+            .fold(f64::MIN, f64::max);
+    assert!(pushed > 0.005, "the other arm is pushed: {pushed}");
+}
+
+#[test]
+fn bodies_in_contact_step_the_same_bits_on_any_thread_count() {
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let p = stack(-0.0005, 5.0);
+            let mut it = Explicit::new(&p, ExplicitOptions::default()).unwrap();
+            let mut s = State::at_rest(p.model());
+            for _ in 0..100 {
+                it.step(&p, &mut s).unwrap();
+            }
+            let implicit = Implicit::new(
+                &p,
+                ImplicitOptions {
+                    dt: 0.002,
+                    ..ImplicitOptions::default()
+                },
+            );
+            let mut it = implicit.unwrap();
+            for _ in 0..3 {
+                it.step(&p, &mut s).unwrap();
+            }
+            s
+        })
+    };
+    let one = run(1);
+    assert!(one.contact.iter().any(Option::is_some), "in contact");
+    assert_eq!(one, run(2));
+    assert_eq!(one, run(3));
+}
