@@ -810,6 +810,26 @@ impl Contact {
         anchors.extend(tail);
     }
 
+    /// Anchors for an implicit step from positions `x0` at time `t0`: the
+    /// state's `anchors`, and for every point without one, where it is at
+    /// the start. A point that touches during the step then sticks where it
+    /// was (and slides past Coulomb's limit) within the step already, and
+    /// friction's derivative in Newton is that of the force: a contact made
+    /// during the step with its anchor following the point would have none,
+    /// and a Newton tangent that says otherwise converges only linearly.
+    pub fn step_anchors(
+        &self,
+        t0: f64,
+        x0: &[Vec3],
+        anchors: &[Option<Vec3>],
+    ) -> Vec<Option<Vec3>> {
+        let start = self.static_anchors(t0, x0);
+        if anchors.len() != start.len() {
+            return start;
+        }
+        anchors.iter().zip(start).map(|(a, s)| a.or(s)).collect()
+    }
+
     /// Anchors for a static solve started at `x` (time `t`): every point
     /// anchored where it is, so that friction holds what starts in contact.
     pub fn static_anchors(&self, t: f64, x: &[Vec3]) -> Vec<Option<Vec3>> {

@@ -32,7 +32,7 @@ pub const CHECKPOINT_FILE: &str = "checkpoint.mss";
 const MAGIC: &[u8; 8] = b"MSSCKPT\0";
 /// Version 2 added the peak displacement; version 1 files are read with
 /// none recorded.
-const VERSION: u32 = 2;
+const VERSION: u32 = 3;
 
 /// Everything a resumed run needs.
 #[derive(Debug, Clone, PartialEq)]
@@ -55,6 +55,8 @@ pub struct Checkpoint {
     pub peak_displacement: f64,
     /// Its simulated time (s).
     pub peak_time: f64,
+    /// Newton iterations so far (0 for explicit runs).
+    pub newton_iterations: u64,
 }
 
 /// Why a checkpoint cannot be used.
@@ -241,6 +243,7 @@ impl Checkpoint {
         o.u64(self.bytes);
         o.f64(self.peak_displacement);
         o.f64(self.peak_time);
+        o.u64(self.newton_iterations);
         let sum = fnv1a(&o.0);
         o.u64(sum);
         o.0
@@ -291,7 +294,7 @@ impl Checkpoint {
             return Err(corrupt("it does not start with the checkpoint signature"));
         }
         let version = u32::from_le_bytes(bytes[8..12].try_into().unwrap_or([0; 4]));
-        if version != VERSION && version != 1 {
+        if !(1..=VERSION).contains(&version) {
             return Err(corrupt(&format!(
                 "format version {version}, this program reads {VERSION}"
             )));
@@ -325,6 +328,7 @@ impl Checkpoint {
         } else {
             (0.0, 0.0)
         };
+        let newton_iterations = if version >= 3 { r.u64()? } else { 0 };
         if !(peak_displacement.is_finite() && peak_displacement >= 0.0 && peak_time.is_finite()) {
             return Err(r.corrupt("its peak displacement is not a finite length"));
         }
@@ -350,6 +354,7 @@ impl Checkpoint {
             bytes: bytes_written,
             peak_displacement,
             peak_time,
+            newton_iterations,
         })
     }
 }
@@ -383,6 +388,7 @@ mod tests {
             bytes: 123_456,
             peak_displacement: 0.25,
             peak_time: 0.5,
+            newton_iterations: 77,
         }
     }
 

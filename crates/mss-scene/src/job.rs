@@ -251,6 +251,12 @@ pub struct RunSummary {
     /// Whether the run was stopped through its [`Cancel`] flag before the
     /// end (the frames written stop at `simulated_time`).
     pub interrupted: bool,
+    /// Newton iterations of the implicit or static solves (0 for explicit
+    /// runs).
+    pub newton_iterations: u64,
+    /// Newton iterations per step (per time step; of the whole solve for a
+    /// static one).
+    pub newton_iterations_per_step: f64,
     /// Each body's figures (one entry without `[[bodies]]`); the fields
     /// above are the totals, or the first body's for its mesh.
     pub bodies: Vec<BodySummary>,
@@ -553,6 +559,7 @@ impl Job {
         // Largest displacement so far and its time.
         let mut peak = (0.0, 0.0);
         let mut interrupted = false;
+        let mut newton_iterations = 0u64;
         let mut writer;
         match integrator {
             None => {
@@ -582,6 +589,7 @@ impl Job {
                     info.relative_residual
                 );
                 steps_done = 1;
+                newton_iterations = u64::from(info.newton_iterations);
                 peak = (largest_displacement(problem.model(), &state.x), state.time);
                 prepare_output_folder(out_dir)?;
                 remove_previous_run(out_dir, &self.registry.exporters)?;
@@ -615,6 +623,7 @@ impl Job {
                             })?;
                         state = c.state.clone();
                         peak = (c.peak_displacement, c.peak_time);
+                        newton_iterations = c.newton_iterations;
                         steps_done = c.step;
                         log::info!(
                             "{name}: resumed at step {} (t = {:.3e} s) from {}",
@@ -633,12 +642,14 @@ impl Job {
                 let checkpoint = |step: u64,
                                   state: &State,
                                   peak: (f64, f64),
+                                  newton_iterations: u64,
                                   integrator: &dyn Integrator,
                                   writer: &FrameWriter| {
                     let (files, bytes) = writer.files_and_bytes();
                     Checkpoint {
                         peak_displacement: peak.0,
                         peak_time: peak.1,
+                        newton_iterations,
                         fingerprint,
                         step,
                         state: state.clone(),
@@ -655,7 +666,14 @@ impl Job {
                         // frame (written after the checkpoint, which does not
                         // count it: the resumed run writes that frame's index
                         // again when its time comes).
-                        checkpoint(steps_done, &state, peak, integrator.as_ref(), &writer)?;
+                        checkpoint(
+                            steps_done,
+                            &state,
+                            peak,
+                            newton_iterations,
+                            integrator.as_ref(),
+                            &writer,
+                        )?;
                         if steps_done > 0 && !plan.frame_after(steps_done) {
                             writer.write(problem, &state)?;
                         }
@@ -671,7 +689,11 @@ impl Job {
                         // every check.
                         integrator.check_next_step();
                     }
-                    if let Err(source) = integrator.step(problem, &mut state) {
+                    let stepped = integrator.step(problem, &mut state);
+                    if let Ok(info) = &stepped {
+                        newton_iterations += u64::from(info.newton_iterations);
+                    }
+                    if let Err(source) = stepped {
                         progress(Progress::StageDone);
                         // Keep what was simulated: the last good state is a
                         // frame, unless it is the last frame already written
@@ -695,7 +717,14 @@ impl Job {
                         writer.write(problem, &state)?;
                     }
                     if checkpoint_steps.is_some_and(|n| k % n == 0) && k < plan.steps {
-                        checkpoint(k, &state, peak, integrator.as_ref(), &writer)?;
+                        checkpoint(
+                            k,
+                            &state,
+                            peak,
+                            newton_iterations,
+                            integrator.as_ref(),
+                            &writer,
+                        )?;
                     }
                     progress(Progress::Stepping {
                         done: k,
@@ -753,6 +782,12 @@ impl Job {
             peak_memory_bytes: peak_memory_bytes(),
             output_folder: out_dir.display().to_string(),
             interrupted,
+            newton_iterations,
+            newton_iterations_per_step: if steps_done > 0 {
+                newton_iterations as f64 / steps_done as f64
+            } else {
+                0.0
+            },
             bodies: body_summaries,
         })
     }

@@ -159,6 +159,25 @@ fn print_summary(s: &RunSummary) -> Result<(), crate::StdoutError> {
         s.steps,
         s.simulated_time
     );
+    if s.newton_iterations > 0 {
+        crate::outln!(
+            "newton           {} iterations, {:.2} per step",
+            s.newton_iterations,
+            s.newton_iterations_per_step
+        );
+    }
+    if s.bodies.len() > 1 {
+        for b in &s.bodies {
+            let [fx, fy, fz] = b.contact_force_from_bodies;
+            crate::outln!(
+                "body             {}: {} cells, {:.4} kg, max displacement {:.4e} m, force from the other bodies [{fx:.4}, {fy:.4}, {fz:.4}] N",
+                b.name,
+                b.cells,
+                b.mass,
+                b.max_displacement
+            );
+        }
+    }
     crate::outln!(
         "wall time        {:.2} s (voxelize {:.2} s, simulate and write {:.2} s)",
         s.wall_seconds,

@@ -108,11 +108,15 @@ impl Implicit {
                 }
             }
         }
+        let anchors = match problem.contact() {
+            Some(c) => c.step_anchors(state.time, &state.x, &state.contact),
+            None => Vec::new(),
+        };
         let mut sys = BackwardEuler {
             problem,
             x0: &state.x,
             v0: &state.v,
-            anchors: &state.contact,
+            anchors: &anchors,
             t1,
             dt,
             scratch: vec![Vec3::zeros(); model.num_nodes()],
@@ -156,7 +160,7 @@ impl Implicit {
             x,
             v: v1,
             time: t1,
-            contact: state.contact.clone(),
+            contact: anchors,
         };
         problem.update_contact(&mut next);
         Ok((next, its))

@@ -360,6 +360,39 @@ fn implicit_steps_rest_on_the_ground_too() {
 }
 
 #[test]
+fn an_implicit_landing_takes_contact_without_halving_its_steps() {
+    // A 512-cell cube dropped 1 mm onto the ground at dt = 0.01 s, no
+    // material damping: Newton meets the contact at once (its friction
+    // anchored where each node starts the step, so the tangent is the
+    // force's), with a handful of iterations and no step halved.
+    let lattice = Lattice::block([8, 8, 8], 0.0125, [0.0, 0.0, 0.001]).unwrap();
+    let param = HourglassControl::new(Box::new(VolumetricBarrier), 1.0).unwrap();
+    let model = Model::new(&lattice, Material::new(1.0e5, 0.3, 1000.0).unwrap(), &param).unwrap();
+    let down = Vec3::new(0.0, 0.0, -G);
+    let p = problem(model, down, ground(), |s| s, Damping::NONE, &[]);
+    let opts = ImplicitOptions {
+        dt: 0.01,
+        ..ImplicitOptions::default()
+    };
+    let mut it = Implicit::new(&p, opts).unwrap();
+    let mut s = State::at_rest(p.model());
+    let (mut most, mut total) = (0, 0);
+    for _ in 0..30 {
+        let info = it.step(&p, &mut s).unwrap();
+        assert_eq!(info.substeps, 1, "a step halved at t = {}", s.time);
+        most = most.max(info.newton_iterations);
+        total += info.newton_iterations;
+    }
+    assert!(most <= 6 && total <= 60, "{most} at most, {total} in all");
+    let weight = p.model().total_mass() * G;
+    let carried: Vec3 = p.contact_forces(&s).iter().sum();
+    assert!(
+        carried.z > 0.5 * weight,
+        "it stands on the ground: {carried:?}"
+    );
+}
+
+#[test]
 fn bad_obstacles_are_refused() {
     assert!(Plane::new(Vec3::zeros(), Vec3::zeros()).is_err());
     assert!(Sphere::new(Vec3::zeros(), 0.0).is_err());
