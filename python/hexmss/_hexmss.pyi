@@ -382,9 +382,17 @@ class Job:
     """A prepared scene: mesh voxelized, model and problem built."""
 
     @property
-    def mesh(self) -> Mesh: ...
+    def mesh(self) -> Mesh:
+        """The mesh (the first body's in a scene of [[bodies]])."""
     @property
-    def lattice(self) -> Lattice: ...
+    def lattice(self) -> Lattice:
+        """The lattice (the first body's in a scene of [[bodies]])."""
+    @property
+    def body_names(self) -> list[str]:
+        """The bodies' names, in the order of the model's nodes."""
+    @property
+    def body_nodes(self) -> list[tuple[int, int]]:
+        """Each body's first and one-past-last node: positions[start:end]."""
     @property
     def model(self) -> Model: ...
     @property

@@ -260,7 +260,7 @@ impl PyJob {
     }
 
     /// The first and one-past-last node index of each body, in the order
-    /// of `body_names`: `positions()[start:end]` are that body's.
+    /// of `body_names`: `positions[start:end]` are that body's.
     #[getter]
     fn body_nodes(&self) -> Vec<(usize, usize)> {
         self.job
