@@ -82,9 +82,98 @@ struct Triangle {
 #[derive(Debug, Clone, Copy)]
 struct Entry {
     key: u64,
+    /// Index into the grid's triangle geometry.
+    geometry: u32,
+}
+
+/// A candidate triangle at the current positions, with what every point
+/// near it needs: its grown box, its plane, and the vectors whose dot
+/// products with `p - a` are the barycentric coordinates of `p`'s
+/// projection (computed once per search, not once per point).
+#[derive(Debug, Clone, Copy)]
+struct Geometry {
     triangle: u32,
     lo: Vec3,
     hi: Vec3,
+    corners: [Vec3; 3],
+    normal: Vec3,
+    /// `(e2 x n) / |e1 x e2|`: `beta_b = (p - a) . to_b`.
+    to_b: Vec3,
+    /// `(n x e1) / |e1 x e2|`: `beta_c = (p - a) . to_c`.
+    to_c: Vec3,
+}
+
+impl Geometry {
+    fn new(triangle: u32, corners: [Vec3; 3], grow: f64) -> Option<Self> {
+        let [a, b, c] = corners;
+        let (e1, e2) = (b - a, c - a);
+        let cross = e1.cross(&e2);
+        let area2 = cross.norm();
+        if !(area2 > 0.0 && area2.is_finite()) {
+            return None;
+        }
+        let normal = cross / area2;
+        Some(Self {
+            triangle,
+            lo: a.inf(&b).inf(&c).add_scalar(-grow),
+            hi: a.sup(&b).sup(&c).add_scalar(grow),
+            corners,
+            normal,
+            to_b: e2.cross(&normal) / area2,
+            to_c: normal.cross(&e1) / area2,
+        })
+    }
+
+    /// The barycentric coordinates of `p`'s projection onto the plane
+    /// (outside `[0, 1]` where it falls outside the triangle).
+    fn barycentric(&self, p: Vec3) -> [f64; 3] {
+        let w = p - self.corners[0];
+        let (beta_b, beta_c) = (w.dot(&self.to_b), w.dot(&self.to_c));
+        [1.0 - beta_b - beta_c, beta_b, beta_c]
+    }
+
+    /// Where `p` is against the triangle, unless it is certainly no nearer
+    /// than `beyond` (its distance is at least its gap to the plane).
+    fn closest(&self, p: Vec3, beyond: f64) -> Option<Closest> {
+        let gap = self.normal.dot(&(p - self.corners[0]));
+        let beta = self.barycentric(p);
+        if beta.iter().all(|&w| w >= 0.0) {
+            return Some(Closest {
+                distance: gap.abs(),
+                gap,
+                beta,
+                normal: self.normal,
+            });
+        }
+        if gap.abs() >= beyond {
+            return None;
+        }
+        // Outside: the nearest point of the three edges.
+        let t = &self.corners;
+        let mut best = (f64::INFINITY, [0.0; 3]);
+        for (i, j) in [(0, 1), (1, 2), (2, 0)] {
+            let e = t[j] - t[i];
+            let len2 = e.norm_squared();
+            let s = if len2 > 0.0 {
+                ((p - t[i]).dot(&e) / len2).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let d = (p - (t[i] + e * s)).norm();
+            if d < best.0 {
+                let mut w = [0.0; 3];
+                w[i] = 1.0 - s;
+                w[j] = s;
+                best = (d, w);
+            }
+        }
+        Some(Closest {
+            distance: best.0,
+            gap,
+            beta: best.1,
+            normal: self.normal,
+        })
+    }
 }
 
 /// The broad phase's grid: its entries bucketed by a hash of their grid
@@ -94,10 +183,11 @@ struct Grid {
     mask: u64,
     starts: Vec<u32>,
     entries: Vec<Entry>,
+    geometry: Vec<Geometry>,
 }
 
 impl Grid {
-    fn new(unsorted: Vec<Entry>) -> Self {
+    fn new(unsorted: Vec<Entry>, geometry: Vec<Geometry>) -> Self {
         let size = (2 * unsorted.len()).next_power_of_two().max(1);
         let mask = size as u64 - 1;
         let mut starts = vec![0u32; size + 1];
@@ -111,12 +201,10 @@ impl Grid {
         let mut entries = Vec::with_capacity(unsorted.len());
         entries.resize(
             unsorted.len(),
-            unsorted.first().copied().unwrap_or(Entry {
+            Entry {
                 key: 0,
-                triangle: 0,
-                lo: Vec3::zeros(),
-                hi: Vec3::zeros(),
-            }),
+                geometry: 0,
+            },
         );
         for e in unsorted {
             let b = (Self::bucket_of(e.key) & mask) as usize;
@@ -127,6 +215,7 @@ impl Grid {
             mask,
             starts,
             entries,
+            geometry,
         }
     }
 
@@ -424,35 +513,41 @@ impl BodyContact {
     fn broad_phase(&self, x: &[Vec3], near: &[bool]) -> Grid {
         let size = self.grid_size;
         let mut entries = Vec::new();
+        let mut geometry = Vec::new();
         for (t, tri) in self.triangles.iter().enumerate() {
             if !tri.nodes.iter().any(|&n| near[n as usize]) {
                 continue;
             }
-            let grow = DEPTH_LIMIT * self.body_h[tri.body as usize];
-            let [a, b, c] = tri.nodes.map(|n| x[n as usize]);
-            let (lo, hi) = (a.inf(&b).inf(&c), a.sup(&b).sup(&c));
-            let (first, last) = (grid_cell(lo, size), grid_cell(hi, size));
+            let corners = tri.nodes.map(|n| x[n as usize]);
+            let [a, b, c] = corners;
+            let (first, last) = (
+                grid_cell(a.inf(&b).inf(&c), size),
+                grid_cell(a.sup(&b).sup(&c), size),
+            );
             // A degenerate or exploded surface must not make the grid blow
             // up: such a triangle is left out (the solver's checks see it).
             let span: i64 = (0..3).map(|k| last[k] - first[k] + 1).product();
             if !(1..=64).contains(&span) {
                 continue;
             }
-            let (lo, hi) = (lo.add_scalar(-grow), hi.add_scalar(grow));
+            let grow = DEPTH_LIMIT * self.body_h[tri.body as usize];
+            let Some(g) = Geometry::new(t as u32, corners, grow) else {
+                continue;
+            };
+            let index = geometry.len() as u32;
+            geometry.push(g);
             for i in first[0]..=last[0] {
                 for j in first[1]..=last[1] {
                     for k in first[2]..=last[2] {
                         entries.push(Entry {
                             key: grid_key([i, j, k]),
-                            triangle: t as u32,
-                            lo,
-                            hi,
+                            geometry: index,
                         });
                     }
                 }
             }
         }
-        Grid::new(entries)
+        Grid::new(entries, geometry)
     }
 
     /// The points that may touch at `x` (inside another body's box, or of a
@@ -515,7 +610,7 @@ impl BodyContact {
                 for &i in chunk {
                     let i = i as usize;
                     let p = x[self.points[i] as usize];
-                    if let Some(pair) = self.nearest(i, p, x, &keys) {
+                    if let Some(pair) = self.nearest(i, p, &keys) {
                         let h = self.body_h[self.triangles[pair.triangle as usize].body as usize];
                         if pair.depth > -margin * h {
                             out.push(pair);
@@ -530,7 +625,7 @@ impl BodyContact {
 
     /// The nearest triangle that point `i` at `p` projects onto, within the
     /// depth limit on either side (its depth may be negative: outside).
-    fn nearest(&self, i: usize, p: Vec3, x: &[Vec3], keys: &Grid) -> Option<Pair> {
+    fn nearest(&self, i: usize, p: Vec3, keys: &Grid) -> Option<Pair> {
         let reach = DEPTH_LIMIT * self.grid_size / 2.0;
         let first = grid_cell(p.add_scalar(-reach), self.grid_size);
         let last = grid_cell(p.add_scalar(reach), self.grid_size);
@@ -546,15 +641,17 @@ impl BodyContact {
                 if e.key != key {
                     continue;
                 }
-                if (0..3).any(|k| p[k] < e.lo[k] || p[k] > e.hi[k]) {
+                let g = &keys.geometry[e.geometry as usize];
+                if (0..3).any(|k| p[k] < g.lo[k] || p[k] > g.hi[k]) {
                     continue;
                 }
-                let t = e.triangle;
+                let t = g.triangle;
                 let tri = &self.triangles[t as usize];
                 if self.excluded(i, tri) {
                     continue;
                 }
-                let Some(near) = closest(p, tri.nodes.map(|n| x[n as usize])) else {
+                let beyond = best.as_ref().map_or(f64::INFINITY, |(d, _)| *d);
+                let Some(near) = g.closest(p, beyond) else {
                     continue;
                 };
                 if near.distance >= DEPTH_LIMIT * self.body_h[tri.body as usize] {
@@ -736,8 +833,9 @@ impl BodyContact {
                         // The anchor stays a point of its triangle's plane,
                         // outside the triangle if it slid past it.
                         let tri = &self.triangles[anchor.0 as usize];
-                        match barycentric(target, tri.nodes.map(|n| x[n as usize])) {
-                            Some((_, beta, _)) => encode(anchor.0, beta),
+                        let plane = Geometry::new(anchor.0, tri.nodes.map(|n| x[n as usize]), 0.0);
+                        match plane.map(|g| g.barycentric(target)) {
+                            Some(beta) => encode(anchor.0, beta),
                             None => here,
                         }
                     }
@@ -754,7 +852,7 @@ impl BodyContact {
         let keys = self.broad_phase(x, &self.near_points(x).1);
         (0..self.points.len())
             .map(|i| {
-                let pair = self.nearest(i, x[self.points[i] as usize], x, &keys)?;
+                let pair = self.nearest(i, x[self.points[i] as usize], &keys)?;
                 Some(Vec3::new(
                     f64::from(pair.triangle),
                     pair.beta[1],
@@ -807,66 +905,4 @@ struct Closest {
     beta: [f64; 3],
     /// The triangle's unit normal.
     normal: Vec3,
-}
-
-/// The closest point of triangle `tri` to `p` (inside it, or on an edge
-/// or a vertex), with the gap to its plane; `None` for a degenerate
-/// triangle.
-fn closest(p: Vec3, tri: [Vec3; 3]) -> Option<Closest> {
-    let (gap, beta, normal) = barycentric(p, tri)?;
-    if beta.iter().all(|&w| w >= 0.0) {
-        return Some(Closest {
-            distance: gap.abs(),
-            gap,
-            beta,
-            normal,
-        });
-    }
-    // Outside: the nearest point of the three edges.
-    let mut best = (f64::INFINITY, [0.0; 3]);
-    for (i, j) in [(0, 1), (1, 2), (2, 0)] {
-        let e = tri[j] - tri[i];
-        let len2 = e.norm_squared();
-        let s = if len2 > 0.0 {
-            ((p - tri[i]).dot(&e) / len2).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
-        let q = tri[i] + e * s;
-        let d = (p - q).norm();
-        if d < best.0 {
-            let mut w = [0.0; 3];
-            w[i] = 1.0 - s;
-            w[j] = s;
-            best = (d, w);
-        }
-    }
-    Some(Closest {
-        distance: best.0,
-        gap,
-        beta: best.1,
-        normal,
-    })
-}
-
-/// The gap of `p` to the plane of triangle `[a, b, c]` (positive on the
-/// side its counter-clockwise normal points to), the barycentric
-/// coordinates of its projection onto the plane (outside `[0, 1]` where it
-/// falls outside the triangle) and the unit normal; `None` for a degenerate
-/// triangle.
-fn barycentric(p: Vec3, [a, b, c]: [Vec3; 3]) -> Option<(f64, [f64; 3], Vec3)> {
-    let (e1, e2) = (b - a, c - a);
-    let cross = e1.cross(&e2);
-    let area2 = cross.norm();
-    if !(area2 > 0.0 && area2.is_finite()) {
-        return None;
-    }
-    let normal = cross / area2;
-    let w = p - a;
-    let gap = normal.dot(&w);
-    // Barycentric coordinates of the projection, by areas.
-    let beta_b = normal.dot(&w.cross(&e2)) / area2;
-    let beta_c = normal.dot(&e1.cross(&w)) / area2;
-    let beta_a = 1.0 - beta_b - beta_c;
-    Some((gap, [beta_a, beta_b, beta_c], normal))
 }
