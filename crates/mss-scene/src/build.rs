@@ -224,31 +224,28 @@ impl SceneInput {
 
     /// The scene-wide part of a scene of `[[bodies]]` added to the union
     /// of its bodies' problems: the top-level `[loads]` (on every body) and
-    /// the `[[obstacles]]` (touched by every body's boundary nodes).
+    /// the `[[obstacles]]` (touched by every body's boundary nodes, and by
+    /// the vertices of `surface`, the bodies' embedded surfaces over the
+    /// union's nodes, when `[contact] points` asks).
     pub fn scene_wide_problem(
         &self,
         union: Problem,
         registry: &Registry,
+        surface: Option<&hexmesh::Embedding>,
         extra: crate::build::ExtraObstacles,
     ) -> Result<Problem, JobError> {
         let scene = &self.scene;
         let model = union.model();
         let placement = scene.bodies()[0].mesh.placement();
         let mesh_of = |path: &str| self.load_placed_mesh_with(path, &placement, &registry.loaders);
-        if scene.contact.points != mss_core::contact::ContactPoints::Nodes {
-            return Err(self.setting(
-                "[contact] points",
-                "with [[bodies]], the lattices' boundary nodes touch (\"nodes\"); the embedded surfaces' vertices do not yet",
-            ));
-        }
         let contact = crate::obstacles::build_contact_with(
             model,
             &scene.obstacles,
             &registry.shapes,
             extra,
             &mesh_of,
-            mss_core::contact::ContactPoints::Nodes,
-            None,
+            scene.contact.points,
+            surface,
         )
         .map_err(|(index, source)| {
             self.setting(&format!("[[obstacles]] #{}", index + 1), source)

@@ -153,15 +153,7 @@ impl Job {
     /// Every body's input surface embedded in its lattice, as one embedding
     /// over the model's nodes (vertices and triangles in body order).
     pub fn embedding(&self) -> hexmesh::Embedding {
-        let mut all: Option<hexmesh::Embedding> = None;
-        for (b, offset) in self.bodies.iter().zip(self.node_offsets()) {
-            let e = hexmesh::Embedding::new(&b.lattice, &b.mesh);
-            match &mut all {
-                None => all = Some(e),
-                Some(all) => all.append(&e, offset),
-            }
-        }
-        all.unwrap_or_else(|| hexmesh::Embedding::new(self.lattice(), self.mesh()))
+        embedding_of(&self.bodies)
     }
 
     /// Every body's lattice skin, as one skin over the model's nodes.
@@ -1052,6 +1044,18 @@ fn prepare_body(
     })
 }
 
+/// The bodies' input surfaces embedded in their lattices, as one embedding
+/// over the nodes of their union (vertices and triangles in body order).
+fn embedding_of(bodies: &[JobBody]) -> hexmesh::Embedding {
+    let mut all = hexmesh::Embedding::new(&bodies[0].lattice, &bodies[0].mesh);
+    let mut offset = bodies[0].lattice.num_nodes() as u32;
+    for b in &bodies[1..] {
+        all.append(&hexmesh::Embedding::new(&b.lattice, &b.mesh), offset);
+        offset += b.lattice.num_nodes() as u32;
+    }
+    all
+}
+
 /// The model of one prepared body.
 fn body_model(
     input: &SceneInput,
@@ -1100,7 +1104,9 @@ fn build_problem(
             key: "[[bodies]]".into(),
             message: e.to_string(),
         })?;
-        input.scene_wide_problem(union, registry, extra)?
+        let surface = (scene.contact.points != mss_core::contact::ContactPoints::Nodes)
+            .then(|| embedding_of(bodies));
+        input.scene_wide_problem(union, registry, surface.as_ref(), extra)?
     };
     let self_contact: Vec<bool> = views.iter().map(|v| v.self_contact).collect();
     if views.len() < 2 && !self_contact.iter().any(|&s| s) {
