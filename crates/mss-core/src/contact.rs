@@ -53,7 +53,8 @@ use crate::{BlockCsr, Mat3, Model, Vec3};
 
 mod bodies;
 pub use bodies::{
-    BodyContact, BodyContactError, DEFAULT_BODY_FREQUENCY_FRACTION, DEPTH_LIMIT, SELF_EXCLUSION,
+    BodyContact, BodyContactError, DEFAULT_BODY_FREQUENCY_FRACTION, DEPTH_LIMIT, PERSIST_LIMIT,
+    SELF_EXCLUSION,
 };
 
 /// The `velocity` and `offset` of an obstacle that follows its `path`.

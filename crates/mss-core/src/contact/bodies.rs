@@ -65,6 +65,11 @@ pub const DEPTH_LIMIT: f64 = 0.5;
 /// explicit solver, so it shortens the step (by about 15 % here).
 pub const DEFAULT_BODY_FREQUENCY_FRACTION: f64 = 0.25;
 
+/// How deep (in cells of the touched body) a point that touched at the end
+/// of the last step is still pushed back out of the side it came in
+/// through: beyond the search's [`DEPTH_LIMIT`] after a fast impact.
+pub const PERSIST_LIMIT: f64 = 2.0;
+
 /// How close to a surface (in cells) a point counts as touching in a static
 /// solve's tangent (not in its forces).
 pub const STATIC_MARGIN: f64 = 0.1;
@@ -520,14 +525,22 @@ impl BodyContact {
             }
             let corners = tri.nodes.map(|n| x[n as usize]);
             let [a, b, c] = corners;
+            // A degenerate or exploded surface must not make the grid blow
+            // up: such a triangle is left out (the solver's checks see it).
+            if !corners.iter().all(|p| p.iter().all(|v| v.is_finite())) {
+                continue;
+            }
             let (first, last) = (
                 grid_cell(a.inf(&b).inf(&c), size),
                 grid_cell(a.sup(&b).sup(&c), size),
             );
-            // A degenerate or exploded surface must not make the grid blow
-            // up: such a triangle is left out (the solver's checks see it).
-            let span: i64 = (0..3).map(|k| last[k] - first[k] + 1).product();
-            if !(1..=64).contains(&span) {
+            let span = (0..3).try_fold(1i64, |n, k| {
+                last[k]
+                    .checked_sub(first[k])
+                    .and_then(|d| d.checked_add(1))
+                    .and_then(|d| n.checked_mul(d))
+            });
+            if !span.is_some_and(|n| (1..=64).contains(&n)) {
                 continue;
             }
             let grow = DEPTH_LIMIT * self.body_h[tri.body as usize];
@@ -566,18 +579,45 @@ impl BodyContact {
         (points, near)
     }
 
-    /// The points inside a body at `x`, in point order.
-    fn pairs(&self, x: &[Vec3]) -> std::sync::Arc<Vec<Pair>> {
-        let key = self.positions_key(x);
+    /// The points inside a body at `x`, in point order, the points anchored
+    /// in `anchors` (this contact's part of the state's) kept on their side.
+    fn pairs(&self, x: &[Vec3], anchors: &[Option<Vec3>]) -> std::sync::Arc<Vec<Pair>> {
+        let mut key = self.positions_key(x);
+        for a in anchors {
+            let bits = a.map_or(0x5bd1_e995, |a| {
+                a.x.to_bits() ^ a.y.to_bits().rotate_left(21) ^ a.z.to_bits().rotate_left(42)
+            });
+            key = (key ^ bits).wrapping_mul(0x0000_0100_0000_01b3);
+        }
         let mut cache = self.cache.0.lock().unwrap_or_else(|e| e.into_inner());
         if let Some((k, pairs)) = cache.as_ref()
             && *k == key
         {
             return pairs.clone();
         }
-        let pairs = std::sync::Arc::new(self.pairs_within(x, 0.0));
+        let pairs = std::sync::Arc::new(self.pairs_within(x, 0.0, anchors));
         *cache = Some((key, pairs.clone()));
         pairs
+    }
+
+    /// Point `i` at `p` against the plane of the triangle it is anchored to
+    /// (it touched it at the end of the last step), when it is behind it by
+    /// less than [`PERSIST_LIMIT`] of that body's cells: a point driven
+    /// deeper than half a cell in one step (a fast impact) is still pushed
+    /// back out of the side it came in through, not through the body.
+    fn persisting(&self, i: usize, p: Vec3, x: &[Vec3], anchors: &[Option<Vec3>]) -> Option<Pair> {
+        let (t, _, _) = Self::anchor_of(anchors, i)?;
+        let tri = self.triangles.get(t as usize)?;
+        let g = Geometry::new(t, tri.nodes.map(|n| x[n as usize]), 0.0)?;
+        let near = g.closest(p, f64::INFINITY)?;
+        let limit = PERSIST_LIMIT * self.body_h[tri.body as usize];
+        (near.gap < 0.0 && -near.gap < limit).then_some(Pair {
+            point: i as u32,
+            triangle: t,
+            beta: near.beta,
+            normal: near.normal,
+            depth: -near.gap,
+        })
     }
 
     /// A key of the points' positions' bits (every node of a surface
@@ -594,7 +634,7 @@ impl BodyContact {
 
     /// The points deeper than `-margin` cells in a body at `x` (a negative
     /// depth: outside, that close), in point order.
-    fn pairs_within(&self, x: &[Vec3], margin: f64) -> Vec<Pair> {
+    fn pairs_within(&self, x: &[Vec3], margin: f64, anchors: &[Option<Vec3>]) -> Vec<Pair> {
         if self.points.is_empty() {
             return Vec::new();
         }
@@ -610,7 +650,13 @@ impl BodyContact {
                 for &i in chunk {
                     let i = i as usize;
                     let p = x[self.points[i] as usize];
-                    if let Some(pair) = self.nearest(i, p, &keys) {
+                    let found = match (self.nearest(i, p, &keys), self.persisting(i, p, x, anchors))
+                    {
+                        (Some(f), Some(a)) if f.depth <= 0.0 => Some(a),
+                        (None, a) => a,
+                        (f, _) => f,
+                    };
+                    if let Some(pair) = found {
                         let h = self.body_h[self.triangles[pair.triangle as usize].body as usize];
                         if pair.depth > -margin * h {
                             out.push(pair);
@@ -626,6 +672,9 @@ impl BodyContact {
     /// The nearest triangle that point `i` at `p` projects onto, within the
     /// depth limit on either side (its depth may be negative: outside).
     fn nearest(&self, i: usize, p: Vec3, keys: &Grid) -> Option<Pair> {
+        if !p.iter().all(|v| v.is_finite()) {
+            return None;
+        }
         let reach = DEPTH_LIMIT * self.grid_size / 2.0;
         let first = grid_cell(p.add_scalar(-reach), self.grid_size);
         let last = grid_cell(p.add_scalar(reach), self.grid_size);
@@ -722,7 +771,7 @@ impl BodyContact {
     /// `anchors` are this contact's entries of the state's anchors (empty:
     /// every contact is new).
     pub fn add_forces(&self, x: &[Vec3], v: &[Vec3], anchors: &[Option<Vec3>], f: &mut [Vec3]) {
-        for pair in self.pairs(x).iter() {
+        for pair in self.pairs(x, anchors).iter() {
             let touch = self.touch(pair, x, v, anchors);
             self.spread(pair, touch.force, f);
         }
@@ -751,7 +800,7 @@ impl BodyContact {
         // surface as touching in its tangent: a body that only contact holds
         // otherwise has a singular tangent wherever an iterate lifts it off.
         let margin = if dv_dx == 0.0 { STATIC_MARGIN } else { 0.0 };
-        let pairs = self.pairs_within(x, margin);
+        let pairs = self.pairs_within(x, margin, anchors);
         // The point and its triangle's nodes are coupled: grow the pattern.
         let mut extra = Vec::with_capacity(6 * pairs.len());
         for pair in &pairs {
@@ -809,7 +858,7 @@ impl BodyContact {
             *anchors = vec![None; self.points.len()];
         }
         let mut next = vec![None; self.points.len()];
-        for pair in self.pairs(x).iter() {
+        for pair in self.pairs(x, anchors).iter() {
             let i = pair.point as usize;
             let encode = |t: u32, beta: [f64; 3]| Some(Vec3::new(f64::from(t), beta[1], beta[2]));
             let here = encode(pair.triangle, pair.beta);
@@ -864,7 +913,7 @@ impl BodyContact {
 
     /// Penalty energy `k d^2 / 2` over the touching points (J).
     pub fn energy(&self, x: &[Vec3]) -> f64 {
-        self.pairs(x)
+        self.pairs(x, &[])
             .iter()
             .map(|p| {
                 0.5 * self.settings.stiffness
@@ -879,7 +928,7 @@ impl BodyContact {
     /// opposite between two bodies (self-contact adds zero to its body).
     pub fn body_forces(&self, x: &[Vec3], v: &[Vec3], anchors: &[Option<Vec3>]) -> Vec<Vec3> {
         let mut out = vec![Vec3::zeros(); self.body_h.len()];
-        for pair in self.pairs(x).iter() {
+        for pair in self.pairs(x, anchors).iter() {
             let touch = self.touch(pair, x, v, anchors);
             let tri = &self.triangles[pair.triangle as usize];
             out[self.point_body[pair.point as usize] as usize] += touch.force;
@@ -891,7 +940,16 @@ impl BodyContact {
     /// How deep the deepest point is inside another body (or its own
     /// surface) at `x` (m; 0 when none is).
     pub fn max_depth(&self, x: &[Vec3]) -> f64 {
-        self.pairs(x).iter().map(|p| p.depth).fold(0.0, f64::max)
+        self.max_depth_with(x, &[])
+    }
+
+    /// [`BodyContact::max_depth`] with the state's anchors (this contact's
+    /// part): the depth of points kept on their side too.
+    pub fn max_depth_with(&self, x: &[Vec3], anchors: &[Option<Vec3>]) -> f64 {
+        self.pairs(x, anchors)
+            .iter()
+            .map(|p| p.depth)
+            .fold(0.0, f64::max)
     }
 }
 

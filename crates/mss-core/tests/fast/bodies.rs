@@ -483,3 +483,55 @@ fn bodies_in_contact_step_the_same_bits_on_any_thread_count() {
     assert_eq!(one, run(2));
     assert_eq!(one, run(3));
 }
+
+#[test]
+fn a_cube_thrown_fast_onto_another_bounces_off_it_and_does_not_pass_through() {
+    // At 8 m/s the upper cube's base goes more than half a cell into the
+    // lower one in one or two steps: the points that touched are pushed
+    // back out of the side they came in through. (Before, they were taken
+    // for inside the lower cube's far faces: at 8 m/s it passed through.)
+    let lower = cube(8, 0.0125, [0.0; 3], 2e5);
+    let upper = cube(8, 0.0075, [0.01, 0.01, 0.101], 1e5);
+    let model = Model::union(&[lower, upper]).unwrap();
+    let bodies =
+        BodyContact::new(&model, ContactSettings::for_bodies(&model), &[false, false]).unwrap();
+    let contact = Contact::new(&model, Vec::new()).with_bodies(bodies);
+    let base = ConstraintSpec::fixed(NodeSelector::Box {
+        min: [-1.0; 3],
+        max: [1.0, 1.0, 1e-6],
+        relative: false,
+    });
+    let p = Problem::from_specs(model, &[base], &[], Damping::NONE)
+        .unwrap()
+        .with_contact(contact);
+    let mut it = Explicit::new(&p, ExplicitOptions::default()).unwrap();
+    let mut s = State::at_rest(p.model());
+    let (lower, upper) = (
+        p.model().bodies()[0].nodes.clone(),
+        p.model().bodies()[1].nodes.clone(),
+    );
+    for v in &mut s.v[upper.clone()] {
+        v.z = -8.0;
+    }
+    let bodies = p.contact().unwrap().bodies().unwrap();
+    let mut deepest = 0.0f64;
+    while s.time < 0.05 {
+        it.step(&p, &mut s).unwrap();
+        let anchors = &s.contact[s.contact.len() - bodies.num_points()..];
+        deepest = deepest.max(bodies.max_depth_with(&s.x, anchors));
+    }
+    assert!(
+        deepest > 0.5 * 0.0125,
+        "deeper than the search reaches: {deepest}"
+    );
+    let low = |r: std::ops::Range<usize>| s.x[r].iter().map(|x| x.z).fold(f64::MAX, f64::min);
+    let high = |r: std::ops::Range<usize>| s.x[r].iter().map(|x| x.z).fold(f64::MIN, f64::max);
+    assert!(
+        low(upper.clone()) > high(lower.clone()) - 0.001,
+        "it bounced off the top"
+    );
+    assert!(
+        s.v[upper].iter().map(|v| v.z).sum::<f64>() > 0.0,
+        "moving up again"
+    );
+}
