@@ -684,7 +684,11 @@ impl Contact {
         let masses = model.masses();
         let ratio = |m: f64| if mean > 0.0 { m / mean } else { 1.0 };
         let mut points = Vec::new();
-        if which != ContactPoints::Surface || surface.is_none() {
+        // Without obstacles no point touches anything here (contact between
+        // bodies has its own points): the explicit step then visits none.
+        let which_nodes =
+            !obstacles.is_empty() && (which != ContactPoints::Surface || surface.is_none());
+        if which_nodes {
             for &n in &boundary {
                 let mut nodes = [0u32; 8];
                 let mut weights = [0.0; 8];
@@ -700,7 +704,10 @@ impl Contact {
                 });
             }
         }
-        if let (Some(e), true) = (surface, which != ContactPoints::Nodes) {
+        if let (Some(e), true) = (
+            surface,
+            !obstacles.is_empty() && which != ContactPoints::Nodes,
+        ) {
             let count = e.vertex_cells().len();
             let share = boundary.len() as f64 / count.max(1) as f64;
             for i in 0..count {

@@ -866,9 +866,9 @@ impl Model {
                 c[0] += x_start;
             }
             out.extend(coords);
-            // An even start keeps every coarse level's cells within one body.
-            x_start += (width + 4) & !1;
-            x_start = (x_start + 63) & !63;
+            // A gap and a start at a multiple of 64 keep the cells of six
+            // coarse levels within one body.
+            x_start = (x_start + width + 2 + 63) & !63;
         }
         out
     }

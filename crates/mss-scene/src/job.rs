@@ -141,28 +141,20 @@ impl Job {
         self.bodies[0].regions.as_ref()
     }
 
-    /// Where each body's nodes start in the model's node array.
-    fn node_offsets(&self) -> impl Iterator<Item = u32> + '_ {
-        self.bodies.iter().scan(0u32, |start, b| {
-            let at = *start;
-            *start += b.lattice.num_nodes() as u32;
-            Some(at)
-        })
+    /// Each body's lattice and input surface, in the model's node order.
+    pub fn parts(&self) -> Vec<(&hexmesh::Lattice, &hexmesh::TriMesh)> {
+        parts_of(&self.bodies)
     }
 
     /// Every body's input surface embedded in its lattice, as one embedding
     /// over the model's nodes (vertices and triangles in body order).
     pub fn embedding(&self) -> hexmesh::Embedding {
-        embedding_of(&self.bodies)
+        crate::output::joined_embedding(&self.parts())
     }
 
     /// Every body's lattice skin, as one skin over the model's nodes.
     pub fn skin(&self) -> hexmesh::Skin {
-        let mut all = hexmesh::Skin::default();
-        for (b, offset) in self.bodies.iter().zip(self.node_offsets()) {
-            all.append(&hexmesh::boundary_skin(&b.lattice), offset);
-        }
-        all
+        crate::output::joined_skin(&self.parts())
     }
 }
 
@@ -252,6 +244,15 @@ pub struct RunSummary {
     /// Each body's figures (one entry without `[[bodies]]`); the fields
     /// above are the totals, or the first body's for its mesh.
     pub bodies: Vec<BodySummary>,
+}
+
+/// What a run counts as it goes, kept across a resume by its checkpoint.
+#[derive(Debug, Clone, Copy, Default)]
+struct RunTotals {
+    /// Largest node displacement so far (m) and its time (s).
+    peak: (f64, f64),
+    /// Newton iterations so far.
+    newton_iterations: u64,
 }
 
 /// One body's figures in a [`RunSummary`].
@@ -548,10 +549,8 @@ impl Job {
         let mut state = State::at_rest(problem.model());
         problem.apply_constraints(&mut state);
         let mut steps_done = 0;
-        // Largest displacement so far and its time.
-        let mut peak = (0.0, 0.0);
+        let mut totals = RunTotals::default();
         let mut interrupted = false;
-        let mut newton_iterations = 0u64;
         let mut writer;
         match integrator {
             None => {
@@ -581,8 +580,8 @@ impl Job {
                     info.relative_residual
                 );
                 steps_done = 1;
-                newton_iterations = u64::from(info.newton_iterations);
-                peak = (largest_displacement(problem.model(), &state.x), state.time);
+                totals.newton_iterations = u64::from(info.newton_iterations);
+                totals.peak = (largest_displacement(problem.model(), &state.x), state.time);
                 prepare_output_folder(out_dir)?;
                 remove_previous_run(out_dir, &self.registry.exporters)?;
                 writer = self.writer(out_dir)?;
@@ -614,8 +613,10 @@ impl Job {
                                 message: source.to_string(),
                             })?;
                         state = c.state.clone();
-                        peak = (c.peak_displacement, c.peak_time);
-                        newton_iterations = c.newton_iterations;
+                        totals = RunTotals {
+                            peak: (c.peak_displacement, c.peak_time),
+                            newton_iterations: c.newton_iterations,
+                        };
                         steps_done = c.step;
                         log::info!(
                             "{name}: resumed at step {} (t = {:.3e} s) from {}",
@@ -633,15 +634,14 @@ impl Job {
                 let fingerprint = crate::checkpoint::fingerprint(scene);
                 let checkpoint = |step: u64,
                                   state: &State,
-                                  peak: (f64, f64),
-                                  newton_iterations: u64,
+                                  totals: RunTotals,
                                   integrator: &dyn Integrator,
                                   writer: &FrameWriter| {
                     let (files, bytes) = writer.files_and_bytes();
                     Checkpoint {
-                        peak_displacement: peak.0,
-                        peak_time: peak.1,
-                        newton_iterations,
+                        peak_displacement: totals.peak.0,
+                        peak_time: totals.peak.1,
+                        newton_iterations: totals.newton_iterations,
                         fingerprint,
                         step,
                         state: state.clone(),
@@ -658,14 +658,7 @@ impl Job {
                         // frame (written after the checkpoint, which does not
                         // count it: the resumed run writes that frame's index
                         // again when its time comes).
-                        checkpoint(
-                            steps_done,
-                            &state,
-                            peak,
-                            newton_iterations,
-                            integrator.as_ref(),
-                            &writer,
-                        )?;
+                        checkpoint(steps_done, &state, totals, integrator.as_ref(), &writer)?;
                         if steps_done > 0 && !plan.frame_after(steps_done) {
                             writer.write(problem, &state)?;
                         }
@@ -681,42 +674,34 @@ impl Job {
                         // every check.
                         integrator.check_next_step();
                     }
-                    let stepped = integrator.step(problem, &mut state);
-                    if let Ok(info) = &stepped {
-                        newton_iterations += u64::from(info.newton_iterations);
-                    }
-                    if let Err(source) = stepped {
-                        progress(Progress::StageDone);
-                        // Keep what was simulated: the last good state is a
-                        // frame, unless it is the last frame already written
-                        // (time never goes back in the series).
-                        if writer.last_time().is_none_or(|t| state.time > t) {
-                            let _ = writer.write(problem, &state);
+                    match integrator.step(problem, &mut state) {
+                        Ok(info) => totals.newton_iterations += u64::from(info.newton_iterations),
+                        Err(source) => {
+                            progress(Progress::StageDone);
+                            // Keep what was simulated: the last good state is a
+                            // frame, unless it is the last frame already written
+                            // (time never goes back in the series).
+                            if writer.last_time().is_none_or(|t| state.time > t) {
+                                let _ = writer.write(problem, &state);
+                            }
+                            let _ = writer.finish();
+                            return Err(JobError::Solver {
+                                scene: name,
+                                stage: "the simulation failed",
+                                source: Box::new(source),
+                            });
                         }
-                        let _ = writer.finish();
-                        return Err(JobError::Solver {
-                            scene: name,
-                            stage: "the simulation failed",
-                            source: Box::new(source),
-                        });
                     }
                     steps_done = k;
                     let moved = largest_displacement(problem.model(), &state.x);
-                    if moved > peak.0 {
-                        peak = (moved, state.time);
+                    if moved > totals.peak.0 {
+                        totals.peak = (moved, state.time);
                     }
                     if plan.frame_after(k) {
                         writer.write(problem, &state)?;
                     }
                     if checkpoint_steps.is_some_and(|n| k % n == 0) && k < plan.steps {
-                        checkpoint(
-                            k,
-                            &state,
-                            peak,
-                            newton_iterations,
-                            integrator.as_ref(),
-                            &writer,
-                        )?;
+                        checkpoint(k, &state, totals, integrator.as_ref(), &writer)?;
                     }
                     progress(Progress::Stepping {
                         done: k,
@@ -766,17 +751,17 @@ impl Job {
             files,
             bytes_written: bytes,
             max_displacement,
-            peak_displacement: peak.0,
-            peak_displacement_time: peak.1,
+            peak_displacement: totals.peak.0,
+            peak_displacement_time: totals.peak.1,
             voxelize_seconds: self.voxelize_seconds,
             simulate_seconds: start.elapsed().as_secs_f64(),
             wall_seconds: self.voxelize_seconds + start.elapsed().as_secs_f64(),
             peak_memory_bytes: peak_memory_bytes(),
             output_folder: out_dir.display().to_string(),
             interrupted,
-            newton_iterations,
+            newton_iterations: totals.newton_iterations,
             newton_iterations_per_step: if steps_done > 0 {
-                newton_iterations as f64 / steps_done as f64
+                totals.newton_iterations as f64 / steps_done as f64
             } else {
                 0.0
             },
@@ -829,12 +814,7 @@ impl Job {
     /// Estimated bytes of one frame and frames written by [`Job::run`].
     pub fn output_estimate(&self) -> (u64, u64) {
         let model = self.problem.model();
-        let (mut skin_vertices, mut skin_triangles) = (0, 0);
-        for b in &self.bodies {
-            let skin = hexmesh::boundary_skin(&b.lattice);
-            skin_vertices += skin.vertex_nodes.len();
-            skin_triangles += skin.triangles.len();
-        }
+        let skin = self.skin();
         let frame_bytes = crate::output::frame_size_estimate(
             &self.input.scene.output,
             &self.registry.exporters,
@@ -842,8 +822,8 @@ impl Job {
                 nodes: model.num_nodes(),
                 cells: model.num_cells(),
                 springs: model.num_springs(),
-                skin_vertices,
-                skin_triangles,
+                skin_vertices: skin.vertex_nodes.len(),
+                skin_triangles: skin.triangles.len(),
                 surface_vertices: self.bodies.iter().map(|b| b.mesh.vertices.len()).sum(),
                 surface_triangles: self.bodies.iter().map(|b| b.mesh.triangles.len()).sum(),
             },
@@ -897,11 +877,7 @@ impl Job {
             out_dir,
             &self.input.scene.output,
             &self.registry.exporters,
-            &self
-                .bodies
-                .iter()
-                .map(|b| (&b.lattice, &b.mesh))
-                .collect::<Vec<_>>(),
+            &self.parts(),
         )?
         .with_time_decimals(
             self.frame_interval().and_then(|every| {
@@ -1044,16 +1020,8 @@ fn prepare_body(
     })
 }
 
-/// The bodies' input surfaces embedded in their lattices, as one embedding
-/// over the nodes of their union (vertices and triangles in body order).
-fn embedding_of(bodies: &[JobBody]) -> hexmesh::Embedding {
-    let mut all = hexmesh::Embedding::new(&bodies[0].lattice, &bodies[0].mesh);
-    let mut offset = bodies[0].lattice.num_nodes() as u32;
-    for b in &bodies[1..] {
-        all.append(&hexmesh::Embedding::new(&b.lattice, &b.mesh), offset);
-        offset += b.lattice.num_nodes() as u32;
-    }
-    all
+fn parts_of(bodies: &[JobBody]) -> Vec<(&hexmesh::Lattice, &hexmesh::TriMesh)> {
+    bodies.iter().map(|b| (&b.lattice, &b.mesh)).collect()
 }
 
 /// The model of one prepared body.
@@ -1105,7 +1073,7 @@ fn build_problem(
             message: e.to_string(),
         })?;
         let surface = (scene.contact.points != mss_core::contact::ContactPoints::Nodes)
-            .then(|| embedding_of(bodies));
+            .then(|| crate::output::joined_embedding(&parts_of(bodies)));
         input.scene_wide_problem(union, registry, surface.as_ref(), extra)?
     };
     let self_contact: Vec<bool> = views.iter().map(|v| v.self_contact).collect();

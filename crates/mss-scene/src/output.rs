@@ -231,6 +231,52 @@ struct FrameArrays<'a> {
     contact_force: Option<&'a [[f64; 3]]>,
 }
 
+/// Where each body's nodes start among the nodes of the bodies side by side
+/// (`bodies`: each one's lattice and input surface, in the model's node
+/// order, as in [`mss_core::Model::union`]).
+fn node_offsets(bodies: &[(&Lattice, &TriMesh)]) -> Vec<u32> {
+    bodies
+        .iter()
+        .scan(0u32, |start, (l, _)| {
+            let at = *start;
+            *start += l.num_nodes() as u32;
+            Some(at)
+        })
+        .collect()
+}
+
+/// The bodies' lattice skins as one skin over the nodes of their union.
+pub fn joined_skin(bodies: &[(&Lattice, &TriMesh)]) -> Skin {
+    let mut skin = Skin::default();
+    for ((lattice, _), offset) in bodies.iter().zip(node_offsets(bodies)) {
+        skin.append(&hexmesh::boundary_skin(lattice), offset);
+    }
+    skin
+}
+
+/// The bodies' input surfaces embedded in their lattices, as one embedding
+/// over the nodes of their union (vertices and triangles in body order).
+/// Panics without a body.
+pub fn joined_embedding(bodies: &[(&Lattice, &TriMesh)]) -> Embedding {
+    let mut all = Embedding::new(bodies[0].0, bodies[0].1);
+    for ((lattice, surface), offset) in bodies.iter().zip(node_offsets(bodies)).skip(1) {
+        all.append(&Embedding::new(lattice, surface), offset);
+    }
+    all
+}
+
+/// The bodies' input surfaces as one mesh, in body order.
+fn joined_surface(bodies: &[(&Lattice, &TriMesh)]) -> TriMesh {
+    let mut mesh = TriMesh::default();
+    for (_, surface) in bodies {
+        let first = mesh.vertices.len() as u32;
+        mesh.vertices.extend_from_slice(&surface.vertices);
+        mesh.triangles
+            .extend(surface.triangles.iter().map(|t| t.map(|v| v + first)));
+    }
+    mesh
+}
+
 /// Writes the frames of one run into one folder.
 pub struct FrameWriter {
     dir: PathBuf,
@@ -274,21 +320,7 @@ impl FrameWriter {
             .iter()
             .flat_map(|(l, _)| l.nodes().iter().copied())
             .collect();
-        let node_offsets: Vec<u32> = bodies
-            .iter()
-            .scan(0u32, |start, (l, _)| {
-                let at = *start;
-                *start += l.num_nodes() as u32;
-                Some(at)
-            })
-            .collect();
-        let skin = (out.skin_obj || out.skin_stl || out.pc2).then(|| {
-            let mut skin = hexmesh::Skin::default();
-            for ((lattice, _), &offset) in bodies.iter().zip(&node_offsets) {
-                skin.append(&hexmesh::boundary_skin(lattice), offset);
-            }
-            skin
-        });
+        let skin = (out.skin_obj || out.skin_stl || out.pc2).then(|| joined_skin(bodies));
         let mut skin_exporters = Vec::new();
         for name in skin_exporter_names(out) {
             let e = exporters.skins(name, dir, SKIN_PREFIX, SkinFrames::Every)?;
@@ -305,25 +337,10 @@ impl FrameWriter {
             )?),
             _ => None,
         };
-        let mut mesh = TriMesh::default();
-        let mut embedding: Option<Embedding> = None;
-        if out.embedded {
-            for ((lattice, surface), &offset) in bodies.iter().zip(&node_offsets) {
-                let e = Embedding::new(lattice, surface);
-                match &mut embedding {
-                    None => embedding = Some(e),
-                    Some(all) => all.append(&e, offset),
-                }
-                let first = mesh.vertices.len() as u32;
-                mesh.vertices.extend_from_slice(&surface.vertices);
-                mesh.triangles
-                    .extend(surface.triangles.iter().map(|t| t.map(|v| v + first)));
-            }
-        }
-        let mesh = &mesh;
-        let embedded = if let Some(embedding) = embedding {
+        let embedded = if out.embedded {
+            let mesh = &joined_surface(bodies);
             Some(EmbeddedOutput {
-                embedding,
+                embedding: joined_embedding(bodies),
                 triangles: mesh.triangles.clone(),
                 exporter: exporters.skins(
                     crate::scene::obj_exporter(out.surface_normals),

@@ -321,11 +321,11 @@ impl ContactSettings {
     /// [`DEFAULT_BODY_FREQUENCY_FRACTION`] of the lattice's highest
     /// frequency, friction 0.5, damping ratio 0.2.
     pub fn for_bodies(model: &Model) -> Self {
-        let omega = DEFAULT_BODY_FREQUENCY_FRACTION * model.omega_max_bound();
-        let mass = super::mean_boundary_mass(model, &model.boundary_nodes());
+        let obstacles = Self::for_model(model);
+        let ratio = DEFAULT_BODY_FREQUENCY_FRACTION / super::DEFAULT_FREQUENCY_FRACTION;
         Self {
-            stiffness: mass * omega * omega,
-            ..Self::for_model(model)
+            stiffness: obstacles.stiffness * ratio * ratio,
+            ..obstacles
         }
     }
 }
@@ -582,22 +582,59 @@ impl BodyContact {
     /// The points inside a body at `x`, in point order, the points anchored
     /// in `anchors` (this contact's part of the state's) kept on their side.
     fn pairs(&self, x: &[Vec3], anchors: &[Option<Vec3>]) -> std::sync::Arc<Vec<Pair>> {
-        let mut key = self.positions_key(x);
-        for a in anchors {
-            let bits = a.map_or(0x5bd1_e995, |a| {
-                a.x.to_bits() ^ a.y.to_bits().rotate_left(21) ^ a.z.to_bits().rotate_left(42)
-            });
-            key = (key ^ bits).wrapping_mul(0x0000_0100_0000_01b3);
-        }
+        self.with_persisting(self.searched(x), x, anchors)
+    }
+
+    /// The points the search finds inside a body at `x` (cached: a step
+    /// asks two or three times at the same positions).
+    fn searched(&self, x: &[Vec3]) -> std::sync::Arc<Vec<Pair>> {
+        let key = self.positions_key(x);
         let mut cache = self.cache.0.lock().unwrap_or_else(|e| e.into_inner());
         if let Some((k, pairs)) = cache.as_ref()
             && *k == key
         {
             return pairs.clone();
         }
-        let pairs = std::sync::Arc::new(self.pairs_within(x, 0.0, anchors));
+        let pairs = std::sync::Arc::new(self.pairs_within(x, 0.0));
         *cache = Some((key, pairs.clone()));
         pairs
+    }
+
+    /// `found` (in point order) with the anchored points it lacks that are
+    /// still behind their anchor's triangle ([`BodyContact::persisting`]).
+    fn with_persisting(
+        &self,
+        found: std::sync::Arc<Vec<Pair>>,
+        x: &[Vec3],
+        anchors: &[Option<Vec3>],
+    ) -> std::sync::Arc<Vec<Pair>> {
+        // Both in point order: one walk finds the anchored points missing.
+        let mut next = found.iter().map(|p| p.point as usize).peekable();
+        let mut kept = Vec::new();
+        for (i, anchor) in anchors.iter().enumerate().take(self.points.len()) {
+            while next.next_if(|&j| j < i).is_some() {}
+            if anchor.is_some()
+                && next.peek() != Some(&i)
+                && let Some(pair) = self.persisting(i, x[self.points[i] as usize], x, anchors)
+            {
+                kept.push(pair);
+            }
+        }
+        if kept.is_empty() {
+            return found;
+        }
+        let mut all = Vec::with_capacity(found.len() + kept.len());
+        let (mut a, mut b) = (found.iter().peekable(), kept.into_iter().peekable());
+        while let (Some(p), Some(q)) = (a.peek(), b.peek()) {
+            if p.point < q.point {
+                all.extend(a.next());
+            } else {
+                all.extend(b.next());
+            }
+        }
+        all.extend(a.copied());
+        all.extend(b);
+        std::sync::Arc::new(all)
     }
 
     /// Point `i` at `p` against the plane of the triangle it is anchored to
@@ -634,7 +671,7 @@ impl BodyContact {
 
     /// The points deeper than `-margin` cells in a body at `x` (a negative
     /// depth: outside, that close), in point order.
-    fn pairs_within(&self, x: &[Vec3], margin: f64, anchors: &[Option<Vec3>]) -> Vec<Pair> {
+    fn pairs_within(&self, x: &[Vec3], margin: f64) -> Vec<Pair> {
         if self.points.is_empty() {
             return Vec::new();
         }
@@ -650,13 +687,7 @@ impl BodyContact {
                 for &i in chunk {
                     let i = i as usize;
                     let p = x[self.points[i] as usize];
-                    let found = match (self.nearest(i, p, &keys), self.persisting(i, p, x, anchors))
-                    {
-                        (Some(f), Some(a)) if f.depth <= 0.0 => Some(a),
-                        (None, a) => a,
-                        (f, _) => f,
-                    };
-                    if let Some(pair) = found {
+                    if let Some(pair) = self.nearest(i, p, &keys) {
                         let h = self.body_h[self.triangles[pair.triangle as usize].body as usize];
                         if pair.depth > -margin * h {
                             out.push(pair);
@@ -800,10 +831,14 @@ impl BodyContact {
         // surface as touching in its tangent: a body that only contact holds
         // otherwise has a singular tangent wherever an iterate lifts it off.
         let margin = if dv_dx == 0.0 { STATIC_MARGIN } else { 0.0 };
-        let pairs = self.pairs_within(x, margin, anchors);
+        let pairs = self.with_persisting(
+            std::sync::Arc::new(self.pairs_within(x, margin)),
+            x,
+            anchors,
+        );
         // The point and its triangle's nodes are coupled: grow the pattern.
         let mut extra = Vec::with_capacity(6 * pairs.len());
-        for pair in &pairs {
+        for pair in pairs.iter() {
             let p = self.points[pair.point as usize];
             for &n in &self.triangles[pair.triangle as usize].nodes {
                 extra.push((p, n));
@@ -811,8 +846,8 @@ impl BodyContact {
             }
         }
         jac.extend_pattern(&extra);
-        for pair in pairs {
-            let mut touch = self.touch(&pair, x, v, anchors);
+        for pair in pairs.iter() {
+            let mut touch = self.touch(pair, x, v, anchors);
             if pair.depth <= 0.0 {
                 touch.f_n = 0.0;
                 touch.sliding = false;

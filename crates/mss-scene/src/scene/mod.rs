@@ -452,26 +452,42 @@ impl Scene {
                 ));
             }
         } else {
+            // What is given at the top level, and where it goes in a body.
             let per_body = [
-                ("[mesh]", self.mesh.is_some()),
-                ("[material]", self.material.is_some()),
-                ("[voxelize]", self.voxelize != VoxelizeSection::default()),
-                ("[model]", self.model != ModelSection::default()),
-                ("[[fixed]]", !self.fixed.is_empty()),
-                ("[[motions]]", !self.motions.is_empty()),
-                ("[[regions]]", !self.regions.is_empty()),
-                ("[contact] self_contact", self.contact.self_contact),
+                ("[mesh]", self.mesh.is_some(), "[bodies.mesh]"),
+                ("[material]", self.material.is_some(), "[bodies.material]"),
+                (
+                    "[voxelize]",
+                    self.voxelize != VoxelizeSection::default(),
+                    "[bodies.voxelize]",
+                ),
+                (
+                    "[model]",
+                    self.model != ModelSection::default(),
+                    "[bodies.model]",
+                ),
+                ("[[fixed]]", !self.fixed.is_empty(), "[[bodies.fixed]]"),
+                (
+                    "[[motions]]",
+                    !self.motions.is_empty(),
+                    "[[bodies.motions]]",
+                ),
+                (
+                    "[[regions]]",
+                    !self.regions.is_empty(),
+                    "[[bodies.regions]]",
+                ),
+                (
+                    "[contact] self_contact",
+                    self.contact.self_contact,
+                    "self_contact in a [[bodies]] table",
+                ),
             ];
-            if let Some((table, _)) = per_body.iter().find(|(_, given)| *given) {
+            if let Some((table, _, there)) = per_body.iter().find(|(_, given, _)| *given) {
                 return Err(invalid(
                     (*table).into(),
                     format!(
-                        "with [[bodies]], {table} belongs to each body: move it into the [[bodies]] tables (as [bodies.{}])",
-                        table
-                            .trim_matches(['[', ']'])
-                            .split(' ')
-                            .next()
-                            .unwrap_or("")
+                        "with [[bodies]], {table} belongs to each body: move it into the [[bodies]] tables (as {there})"
                     ),
                 ));
             }
