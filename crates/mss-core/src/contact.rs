@@ -818,6 +818,65 @@ impl Contact {
         anchors.extend(tail);
     }
 
+    /// Anchors node point `i`, for every obstacle it has no anchor on, where
+    /// it was at time `t0` (at `x0`): the explicit step's implicit node
+    /// update calls it for a point that may touch during the step, so that a
+    /// contact made within the step has its friction from the step's start
+    /// (as [`Contact::step_anchors`] does for an implicit step). Anchored at
+    /// the step's end instead, a new contact has no friction for its first
+    /// step: a block hopping as it slides then loses a step of friction at
+    /// every landing and slides too fast. Anchors of obstacles it does not
+    /// touch are cleared again by [`Contact::update_anchors_of`].
+    pub fn anchor_at_step_start(&self, i: u32, t0: f64, x0: Vec3, anchors: &mut Vec<Option<Vec3>>) {
+        if anchors.len() != self.num_anchors() {
+            *anchors = vec![None; self.num_anchors()];
+        }
+        let nobs = self.obstacles.len();
+        let i = i as usize;
+        for (j, (obstacle, _)) in self.obstacles.iter().enumerate() {
+            let a = &mut anchors[i * nobs + j];
+            if a.is_none() {
+                *a = Some(x0 - obstacle.offset(t0));
+            }
+        }
+    }
+
+    /// Anchors the explicitly integrated contacts that are new at the end
+    /// of an explicit step (at time `t1`, positions `x`, after a drift by
+    /// `dt v`) where their points were at its start (see
+    /// [`Contact::anchor_at_step_start`]): the surface vertices' with the
+    /// obstacles and the body contact's.
+    pub fn anchor_explicit_at_step_start(
+        &self,
+        t1: f64,
+        x: &[Vec3],
+        v: &[Vec3],
+        dt: f64,
+        anchors: &mut Vec<Option<Vec3>>,
+    ) {
+        if anchors.len() != self.num_anchors() {
+            *anchors = vec![None; self.num_anchors()];
+        }
+        let nobs = self.obstacles.len();
+        let t0 = t1 - dt;
+        for &i in &self.surface_points {
+            let point = &self.points[i as usize];
+            let p1 = point.position(x);
+            for (j, (obstacle, _)) in self.obstacles.iter().enumerate() {
+                let k = i as usize * nobs + j;
+                if anchors[k].is_none() && obstacle.penetration(t1, p1).is_some() {
+                    let p0 = p1 - point.position(v) * dt;
+                    anchors[k] = Some(p0 - obstacle.offset(t0));
+                }
+            }
+        }
+        if let Some(b) = &self.bodies {
+            let mut tail = anchors.split_off(self.num_obstacle_anchors());
+            b.anchor_at_step_start(x, v, dt, &mut tail);
+            anchors.extend(tail);
+        }
+    }
+
     /// Anchors for an implicit step from positions `x0` at time `t0`: the
     /// state's `anchors`, and for every point without one, where it is at
     /// the start. A point that touches during the step then sticks where it

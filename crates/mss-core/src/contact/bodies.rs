@@ -11,6 +11,10 @@
 //! a thin body is not taken for inside the face behind it, and a point
 //! pressed into a vertex or an edge of the other surface (where it projects
 //! onto no triangle) still touches: its force goes to the closest point.
+//! Triangles that face the point (their outward normals opposed within
+//! [`FACING_COSINE`]) are preferred to nearer ones that do not: surfaces
+//! in contact face each other, and a point that a sinking edge passes over
+//! is not pushed out through the side face behind that edge.
 //!
 //! **Broad phase.** The triangles' boxes, grown by the depth limit, go into
 //! a uniform grid of the largest cell size, as sorted `(grid cell,
@@ -28,7 +32,11 @@
 //! stick-slip law, the anchor being a material point of the touched body: a
 //! triangle and barycentric coordinates, stored in
 //! [`State::contact`](crate::solver::State) as `(triangle, beta_b, beta_c)`
-//! after the obstacles' anchors.
+//! after the obstacles' anchors. The anchor moves to the triangle its point
+//! touches now (a point of that triangle's plane), so that it stays within
+//! the friction's reach of the point as the point slides over many
+//! triangles; a contact made during an explicit step is anchored where its
+//! point was at the step's start ([`BodyContact::anchor_at_step_start`]).
 //!
 //! **Derivatives.** With `J = -k n n^T` (and the friction and damping
 //! terms, as for obstacles) the derivative of the force on the point, the
@@ -74,6 +82,15 @@ pub const PERSIST_LIMIT: f64 = 2.0;
 /// solve's tangent (not in its forces).
 pub const STATIC_MARGIN: f64 = 0.1;
 
+/// A triangle faces a point when their outward normals make a cosine below
+/// minus this: surfaces in contact face each other. Where a body's edge
+/// sinks into another's surface (by the penalty's depth), that surface's
+/// points just past the edge lie inside the body behind its side face too,
+/// and the side face, at right angles to them, may be the nearer: pushed out
+/// through it, they hold the edge back like a ridge, and a block sliding on
+/// another slowed as if friction were 10 % higher.
+pub const FACING_COSINE: f64 = 0.25;
+
 /// Points per parallel task of the narrow phase.
 const POINT_CHUNK: usize = 256;
 
@@ -102,6 +119,8 @@ struct Geometry {
     hi: Vec3,
     corners: [Vec3; 3],
     normal: Vec3,
+    /// Twice the area (m^2).
+    area: f64,
     /// `(e2 x n) / |e1 x e2|`: `beta_b = (p - a) . to_b`.
     to_b: Vec3,
     /// `(n x e1) / |e1 x e2|`: `beta_c = (p - a) . to_c`.
@@ -124,6 +143,7 @@ impl Geometry {
             hi: a.sup(&b).sup(&c).add_scalar(grow),
             corners,
             normal,
+            area: area2,
             to_b: e2.cross(&normal) / area2,
             to_c: normal.cross(&e1) / area2,
         })
@@ -189,10 +209,13 @@ struct Grid {
     starts: Vec<u32>,
     entries: Vec<Entry>,
     geometry: Vec<Geometry>,
+    /// Per point, the sum of its own triangles' area-weighted normals at
+    /// the positions searched (zero for points far from other bodies).
+    point_normals: Vec<Vec3>,
 }
 
 impl Grid {
-    fn new(unsorted: Vec<Entry>, geometry: Vec<Geometry>) -> Self {
+    fn new(unsorted: Vec<Entry>, geometry: Vec<Geometry>, point_normals: Vec<Vec3>) -> Self {
         let size = (2 * unsorted.len()).next_power_of_two().max(1);
         let mask = size as u64 - 1;
         let mut starts = vec![0u32; size + 1];
@@ -221,6 +244,7 @@ impl Grid {
             starts,
             entries,
             geometry,
+            point_normals,
         }
     }
 
@@ -285,6 +309,8 @@ pub struct BodyContact {
     triangles: Vec<Triangle>,
     /// Boundary nodes that can touch.
     points: Vec<u32>,
+    /// Per node, its index in `points` (`u32::MAX` for none).
+    point_of_node: Vec<u32>,
     point_body: Vec<u32>,
     /// Each point's stiffness over the settings' (its mass over the mean).
     stiffness_ratio: Vec<f64>,
@@ -406,6 +432,10 @@ impl BodyContact {
             .into_iter()
             .filter(|&n| takes_part(model.body_of_node(n as usize)))
             .collect();
+        let mut point_of_node = vec![u32::MAX; model.num_nodes()];
+        for (i, &n) in points.iter().enumerate() {
+            point_of_node[n as usize] = i as u32;
+        }
         let point_body = points
             .iter()
             .map(|&n| model.body_of_node(n as usize) as u32)
@@ -432,6 +462,7 @@ impl BodyContact {
             settings,
             triangles,
             points,
+            point_of_node,
             point_body,
             stiffness_ratio,
             point_mass,
@@ -519,6 +550,7 @@ impl BodyContact {
         let size = self.grid_size;
         let mut entries = Vec::new();
         let mut geometry = Vec::new();
+        let mut point_normals = vec![Vec3::zeros(); self.points.len()];
         for (t, tri) in self.triangles.iter().enumerate() {
             if !tri.nodes.iter().any(|&n| near[n as usize]) {
                 continue;
@@ -547,6 +579,12 @@ impl BodyContact {
             let Some(g) = Geometry::new(t as u32, corners, grow) else {
                 continue;
             };
+            // Every triangle of a near point is here: its normal is whole.
+            for &n in &tri.nodes {
+                if let Some(sum) = point_normals.get_mut(self.point_of_node[n as usize] as usize) {
+                    *sum += g.normal * g.area;
+                }
+            }
             let index = geometry.len() as u32;
             geometry.push(g);
             for i in first[0]..=last[0] {
@@ -560,7 +598,7 @@ impl BodyContact {
                 }
             }
         }
-        Grid::new(entries, geometry)
+        Grid::new(entries, geometry, point_normals)
     }
 
     /// The points that may touch at `x` (inside another body's box, or of a
@@ -715,7 +753,17 @@ impl BodyContact {
         // The nearest triangle by true distance (to its closest point),
         // then by the gap to its plane: continuous as the point moves from
         // one triangle's region to the next, edges and vertices included.
-        let mut best: Option<(f64, Pair)> = None;
+        // Triangles that face the point come first (FACING_COSINE); the
+        // nearest of the others only when none faces it, so that nothing
+        // passes through where surfaces meet at an angle.
+        let sum = keys.point_normals.get(i).copied().unwrap_or_default();
+        let outward = if sum.norm() > 0.0 && sum.norm().is_finite() {
+            sum / sum.norm()
+        } else {
+            Vec3::zeros()
+        };
+        let mut facing: Option<(f64, Pair)> = None;
+        let mut other: Option<(f64, Pair)> = None;
         for key in cells.map(grid_key) {
             for e in keys.bucket(key) {
                 if e.key != key {
@@ -730,6 +778,8 @@ impl BodyContact {
                 if self.excluded(i, tri) {
                     continue;
                 }
+                let faces = outward == Vec3::zeros() || outward.dot(&g.normal) < -FACING_COSINE;
+                let best = if faces { &mut facing } else { &mut other };
                 let beyond = best.as_ref().map_or(f64::INFINITY, |(d, _)| *d);
                 let Some(near) = g.closest(p, beyond) else {
                     continue;
@@ -741,7 +791,7 @@ impl BodyContact {
                     near.distance < *d || (near.distance == *d && near.gap.abs() < b.depth.abs())
                 });
                 if better {
-                    best = Some((
+                    *best = Some((
                         near.distance,
                         Pair {
                             point: i as u32,
@@ -754,7 +804,7 @@ impl BodyContact {
                 }
             }
         }
-        best.map(|(_, pair)| pair)
+        facing.or(other).map(|(_, pair)| pair)
     }
 
     fn anchor_of(anchors: &[Option<Vec3>], i: usize) -> Option<(u32, f64, f64)> {
@@ -885,6 +935,38 @@ impl BodyContact {
         }
     }
 
+    /// Anchors every point that touches at `x` and has no anchor where it
+    /// was on its triangle at the start of the step, the positions then
+    /// being `x - dt v` (as after a drift by `v`): the explicit step calls
+    /// it before the forces at a step's end, so that a contact made during
+    /// the step has its friction at once. Anchored where it touched (by
+    /// [`BodyContact::update_anchors`]), a new contact's first forces have
+    /// no friction, and a body that hops as it slides loses a step of
+    /// friction at every landing.
+    pub fn anchor_at_step_start(
+        &self,
+        x: &[Vec3],
+        v: &[Vec3],
+        dt: f64,
+        anchors: &mut Vec<Option<Vec3>>,
+    ) {
+        if anchors.len() != self.points.len() {
+            *anchors = vec![None; self.points.len()];
+        }
+        let start = |n: u32| x[n as usize] - v[n as usize] * dt;
+        for pair in self.pairs(x, anchors).iter() {
+            let i = pair.point as usize;
+            if anchors[i].is_some() {
+                continue;
+            }
+            let tri = &self.triangles[pair.triangle as usize];
+            if let Some(g) = Geometry::new(pair.triangle, tri.nodes.map(start), 0.0) {
+                let beta = g.barycentric(start(self.points[i]));
+                anchors[i] = Some(Vec3::new(f64::from(pair.triangle), beta[1], beta[2]));
+            }
+        }
+    }
+
     /// After a step: anchors new contacts where they touched, lets sliding
     /// ones follow to the kinetic limit, clears those that left. `anchors`
     /// holds one entry per point (resized if needed).
@@ -902,8 +984,12 @@ impl BodyContact {
                 None => here,
                 Some(anchor) => {
                     let touch = self.touch(pair, x, v, anchors);
-                    if !touch.sliding {
-                        anchors[i]
+                    let target = if !touch.sliding {
+                        if anchor.0 == pair.triangle {
+                            next[i] = anchors[i];
+                            continue;
+                        }
+                        self.anchor_position(x, anchor)
                     } else {
                         let len = touch.delta.norm();
                         let back = if len > 0.0 {
@@ -913,15 +999,20 @@ impl BodyContact {
                         } else {
                             Vec3::zeros()
                         };
-                        let target = x[self.points[i] as usize] - back;
-                        // The anchor stays a point of its triangle's plane,
-                        // outside the triangle if it slid past it.
-                        let tri = &self.triangles[anchor.0 as usize];
-                        let plane = Geometry::new(anchor.0, tri.nodes.map(|n| x[n as usize]), 0.0);
-                        match plane.map(|g| g.barycentric(target)) {
-                            Some(beta) => encode(anchor.0, beta),
-                            None => here,
-                        }
+                        Some(x[self.points[i] as usize] - back)
+                    };
+                    // The anchor moves to the triangle the point touches now
+                    // (a point of its plane, outside it if need be). Kept on
+                    // the triangle first touched, it would be extrapolated
+                    // ever farther as the point slides on, and the small
+                    // turns of that triangle swung it about: a block
+                    // sliding over another's many triangles then had
+                    // friction forces several times mu f_n.
+                    let tri = &self.triangles[pair.triangle as usize];
+                    let plane = Geometry::new(pair.triangle, tri.nodes.map(|n| x[n as usize]), 0.0);
+                    match (plane, target) {
+                        (Some(g), Some(target)) => encode(pair.triangle, g.barycentric(target)),
+                        _ => here,
                     }
                 }
             };

@@ -741,6 +741,7 @@ impl Explicit {
             };
             let x_star = state.x[n];
             let x_prev = x_star - state.v[n] * dt;
+            contact.anchor_at_step_start(i, t0, x_prev, &mut state.contact);
             let target = x_star - free(g0) * c;
             let mut x = target;
             let mut g = Vec3::zeros();
@@ -790,9 +791,12 @@ impl Explicit {
                 state.v[n] += free(g) * (dt / masses[n]);
             }
         }
-        if verlet && contact.has_explicit_part() {
-            let f = &mut self.f_contact;
-            contact.add_explicit_forces(t1, &state.x, &state.v, &state.contact, f);
+        if contact.has_explicit_part() {
+            contact.anchor_explicit_at_step_start(t1, &state.x, &state.v, dt, &mut state.contact);
+            if verlet {
+                let f = &mut self.f_contact;
+                contact.add_explicit_forces(t1, &state.x, &state.v, &state.contact, f);
+            }
         }
         ok
     }

@@ -129,14 +129,19 @@ fn a_block_sticks_below_the_friction_angle_and_slides_above() {
     };
     let (y1, y2) = (at(&mut s, 0.2), at(&mut s, 0.5));
     assert!((y2 - y1).abs() < 2e-5, "crept by {} m in 0.3 s", y2 - y1);
-    // Above it: the acceleration g (sin - mu cos) along the slope, once the
-    // first bounces of the landing are over. Stiffness damping calms the
-    // block's own vibrations (which make it hop) and leaves its sliding alone.
-    let calm = Damping {
-        alpha: 0.0,
-        beta: 1e-3,
-    };
-    let p = problem(block(0.0), incline(0.7), ground(), friction, calm, &[]);
+    // Above it: the acceleration g (sin - mu cos) along the slope within
+    // 3 %, with no damping at all, though the block hops as it slides (its
+    // normal force swings from 0 to 2.7 times its weight). A contact made
+    // within a step has its friction from the step's start: anchored where
+    // it touched, each landing lost a step of friction (18 % too fast).
+    let p = problem(
+        block(0.0),
+        incline(0.8),
+        ground(),
+        friction,
+        Damping::NONE,
+        &[],
+    );
     let mut it = Explicit::new(&p, ExplicitOptions::default()).unwrap();
     let mut s = State::at_rest(p.model());
     let masses = p.model().masses();
@@ -146,12 +151,12 @@ fn a_block_sticks_below_the_friction_angle_and_slides_above() {
         }
         s.momentum(masses).y / p.model().total_mass()
     };
-    let (v1, v2) = (speed_at(&mut s, 0.1), speed_at(&mut s, 0.3));
-    let a = 0.7f64.atan();
+    let (v1, v2) = (speed_at(&mut s, 0.1), speed_at(&mut s, 0.4));
+    let a = 0.8f64.atan();
     let expected = G * (a.sin() - mu * a.cos());
-    let got = (v2 - v1) / 0.2;
+    let got = (v2 - v1) / 0.3;
     assert!(
-        (got - expected).abs() < 0.05 * expected,
+        (got - expected).abs() < 0.03 * expected,
         "{got} vs {expected} m/s^2"
     );
 }
