@@ -877,7 +877,15 @@ impl Job {
             out_dir,
             &self.input.scene.output,
             &self.registry.exporters,
-            &self.parts(),
+            &self
+                .bodies
+                .iter()
+                .map(|b| crate::output::OutputBody {
+                    name: &b.name,
+                    lattice: &b.lattice,
+                    surface: &b.mesh,
+                })
+                .collect::<Vec<_>>(),
         )?
         .with_time_decimals(
             self.frame_interval().and_then(|every| {

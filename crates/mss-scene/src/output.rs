@@ -91,19 +91,39 @@ impl RunFileNames {
             let Some(rest) = name.strip_prefix(s.stem) else {
                 return false;
             };
-            if let Some(ext) = rest.strip_prefix('.') {
-                return s.index_extensions.contains(&ext) || (s.point_cache && ext == "pc2");
-            }
-            if rest == "_rest.obj" {
-                return s.point_cache;
-            }
-            let Some((digits, ext)) = rest.strip_prefix('_').and_then(|r| r.split_once('.')) else {
-                return false;
-            };
-            digits.len() >= 4
-                && digits.bytes().all(|b| b.is_ascii_digit())
-                && s.extensions.contains(&ext)
+            // A body's series has its name after the stem (`lattice_a_0001.vtu`).
+            s.matches_tail(rest)
+                || rest.strip_prefix('_').is_some_and(|named| {
+                    named.char_indices().any(|(i, c)| {
+                        (c == '_' || c == '.')
+                            && i > 0
+                            && named[..i]
+                                .chars()
+                                .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+                            && s.matches_tail(&named[i..])
+                    })
+                })
         })
+    }
+}
+
+impl Series {
+    /// Whether `rest`, what follows the stem of a file name (and its body's
+    /// name), is one of this series' files: `.EXT` of an index file,
+    /// `.pc2` and `_rest.obj` of a point cache, `_NNNN.EXT` of a frame.
+    fn matches_tail(&self, rest: &str) -> bool {
+        if let Some(ext) = rest.strip_prefix('.') {
+            return self.index_extensions.contains(&ext) || (self.point_cache && ext == "pc2");
+        }
+        if rest == "_rest.obj" {
+            return self.point_cache;
+        }
+        let Some((digits, ext)) = rest.strip_prefix('_').and_then(|r| r.split_once('.')) else {
+            return false;
+        };
+        digits.len() >= 4
+            && digits.bytes().all(|b| b.is_ascii_digit())
+            && self.extensions.contains(&ext)
     }
 }
 
@@ -206,8 +226,6 @@ struct FrameScratch {
     /// Constant over a run: filled at the first frame.
     fixed: Vec<bool>,
     material: Vec<u32>,
-    /// Body of each cell (empty for one body).
-    body: Vec<u32>,
     diag: Vec<mss_core::CellDiagnostics>,
     vol: Vec<f64>,
     shear: Vec<f64>,
@@ -227,7 +245,6 @@ struct FrameArrays<'a> {
     shear: &'a [f64],
     corr: &'a [f64],
     material: &'a [u32],
-    body: &'a [u32],
     contact_force: Option<&'a [[f64; 3]]>,
 }
 
@@ -265,30 +282,130 @@ pub fn joined_embedding(bodies: &[(&Lattice, &TriMesh)]) -> Embedding {
     all
 }
 
-/// The bodies' input surfaces as one mesh, in body order.
-fn joined_surface(bodies: &[(&Lattice, &TriMesh)]) -> TriMesh {
-    let mut mesh = TriMesh::default();
-    for (_, surface) in bodies {
-        let first = mesh.vertices.len() as u32;
-        mesh.vertices.extend_from_slice(&surface.vertices);
-        mesh.triangles
-            .extend(surface.triangles.iter().map(|t| t.map(|v| v + first)));
+/// One body of a run, for its output.
+#[derive(Clone, Copy)]
+pub struct OutputBody<'a> {
+    /// Its name: in the names of its files when a run has several bodies.
+    pub name: &'a str,
+    /// Its lattice.
+    pub lattice: &'a Lattice,
+    /// Its input surface, placed.
+    pub surface: &'a TriMesh,
+}
+
+/// One body's files: its lattice frames, skin and surface.
+struct PartWriter {
+    /// The body's name, `None` for the one body of a scene without
+    /// `[[bodies]]` (its files keep the plain stems: `lattice_0000.vtu`).
+    name: Option<String>,
+    /// Its nodes and cells among the model's.
+    nodes: std::ops::Range<usize>,
+    cells: std::ops::Range<usize>,
+    /// Its cells over its own nodes.
+    local_cells: Vec<[u32; 8]>,
+    /// Lattice frame exporters with the extension of the files they write
+    /// (`None` for custom exporters, whose files are not counted).
+    lattice: Vec<(Box<dyn FrameExporter>, Option<&'static str>)>,
+    skin: Option<Skin>,
+    skin_exporters: Vec<(Box<dyn SkinExporter>, &'static str)>,
+    skin_cache: Option<Pc2Writer>,
+    embedded: Option<EmbeddedOutput>,
+}
+
+impl PartWriter {
+    /// The stem of this body's files of the series `prefix`.
+    fn stem(&self, prefix: &str) -> String {
+        match &self.name {
+            Some(name) => format!("{prefix}_{name}"),
+            None => prefix.to_owned(),
+        }
     }
-    mesh
+
+    fn new(
+        dir: &Path,
+        out: &OutputSection,
+        exporters: &Exporters,
+        body: &OutputBody<'_>,
+        name: Option<String>,
+        nodes: std::ops::Range<usize>,
+        cells: std::ops::Range<usize>,
+    ) -> Result<Self, JobError> {
+        let mut part = PartWriter {
+            name,
+            nodes,
+            cells,
+            local_cells: body.lattice.cells().to_vec(),
+            lattice: Vec::new(),
+            skin: None,
+            skin_exporters: Vec::new(),
+            skin_cache: None,
+            embedded: None,
+        };
+        let lattice_stem = part.stem(LATTICE_PREFIX);
+        for name in frame_exporter_names(out) {
+            let extension = exporters.frame_facts(name).map(|f| f.extension);
+            part.lattice
+                .push((exporters.frames(name, dir, &lattice_stem)?, extension));
+        }
+        let rest = body.lattice.nodes();
+        let skin_stem = part.stem(SKIN_PREFIX);
+        let skin =
+            (out.skin_obj || out.skin_stl || out.pc2).then(|| hexmesh::boundary_skin(body.lattice));
+        for name in skin_exporter_names(out) {
+            let e = exporters.skins(name, dir, &skin_stem, SkinFrames::Every)?;
+            let extension = exporters.skin_facts(name).map_or("", |f| f.extension);
+            part.skin_exporters.push((e, extension));
+        }
+        if let (Some(skin), true) = (&skin, out.pc2) {
+            part.skin_cache = Some(start_cache(
+                dir,
+                &skin_stem,
+                &skin.positions(rest),
+                &skin.triangles,
+                out.skin_normals,
+            )?);
+        }
+        part.skin = skin;
+        if out.embedded {
+            let surface_stem = part.stem(SURFACE_PREFIX);
+            let mesh = body.surface;
+            part.embedded = Some(EmbeddedOutput {
+                embedding: Embedding::new(body.lattice, mesh),
+                triangles: mesh.triangles.clone(),
+                exporter: exporters.skins(
+                    crate::scene::obj_exporter(out.surface_normals),
+                    dir,
+                    &surface_stem,
+                    SkinFrames::Every,
+                )?,
+                cache: if out.pc2 {
+                    Some(start_cache(
+                        dir,
+                        &surface_stem,
+                        &mesh.vertices,
+                        &mesh.triangles,
+                        out.surface_normals,
+                    )?)
+                } else {
+                    None
+                },
+            });
+        }
+        Ok(part)
+    }
 }
 
 /// Writes the frames of one run into one folder.
 pub struct FrameWriter {
     dir: PathBuf,
-    /// Lattice frame exporters with the extension of the files they write
-    /// (`None` for custom exporters, whose files are not counted).
-    lattice: Vec<(Box<dyn FrameExporter>, Option<&'static str>)>,
-    /// Whether the `.vtu` series keeps `lattice.pvd` (`[output] pvd`).
+    /// Each body's files (one part for a scene without `[[bodies]]`).
+    parts: Vec<PartWriter>,
+    /// Whether the `.vtu` series keeps `.pvd` files (`[output] pvd`).
     lattice_pvd: bool,
-    skin: Option<Skin>,
-    skin_exporters: Vec<(Box<dyn SkinExporter>, &'static str)>,
-    skin_cache: Option<Pc2Writer>,
-    embedded: Option<EmbeddedOutput>,
+    /// With several bodies, `lattice.pvd` listing every body's `.vtu` of
+    /// each frame as a part (ParaView opens it as one multiblock series);
+    /// each body's `lattice_NAME.pvd` lists its own.
+    parts_pvd: Option<PvdWriter>,
     springs: Option<SpringsOutput>,
     /// Times of the frames written, in order (a checkpoint keeps them).
     times: Vec<f64>,
@@ -300,69 +417,30 @@ pub struct FrameWriter {
 
 impl FrameWriter {
     /// Prepares the writers the `[output]` table asks for, from `exporters`
-    /// (the folder must exist), for the bodies `bodies` (each one's lattice
-    /// and input surface, in the model's node order: see
-    /// [`mss_core::Model::union`]). Several bodies share each file: one
-    /// lattice (with a `body` cell field), one skin and one surface per
-    /// frame, each body an object of its own in the OBJ files.
+    /// (the folder must exist), for the bodies `bodies`, in the model's
+    /// node order (see [`mss_core::Model::union`]). One body's files have
+    /// the plain stems (`lattice_0000.vtu`, `skin_0000.obj`); with several,
+    /// each body has its own, its name after the stem (`lattice_ball_0000.vtu`,
+    /// `skin_ball_0000.obj`, `surface_ball.pc2`), and `lattice.pvd` lists
+    /// them all, a part per body.
     pub fn new(
         dir: &Path,
         out: &OutputSection,
         exporters: &Exporters,
-        bodies: &[(&Lattice, &TriMesh)],
+        bodies: &[OutputBody<'_>],
     ) -> Result<Self, JobError> {
-        let mut lattice_exporters = Vec::new();
-        for name in frame_exporter_names(out) {
-            let extension = exporters.frame_facts(name).map(|f| f.extension);
-            lattice_exporters.push((exporters.frames(name, dir, LATTICE_PREFIX)?, extension));
+        let several = bodies.len() > 1;
+        let mut parts = Vec::with_capacity(bodies.len());
+        let (mut node, mut cell) = (0, 0);
+        for body in bodies {
+            let nodes = node..node + body.lattice.num_nodes();
+            let cells = cell..cell + body.lattice.num_cells();
+            (node, cell) = (nodes.end, cells.end);
+            let name = several.then(|| body.name.to_owned());
+            parts.push(PartWriter::new(
+                dir, out, exporters, body, name, nodes, cells,
+            )?);
         }
-        let rest: Vec<[f64; 3]> = bodies
-            .iter()
-            .flat_map(|(l, _)| l.nodes().iter().copied())
-            .collect();
-        let skin = (out.skin_obj || out.skin_stl || out.pc2).then(|| joined_skin(bodies));
-        let mut skin_exporters = Vec::new();
-        for name in skin_exporter_names(out) {
-            let e = exporters.skins(name, dir, SKIN_PREFIX, SkinFrames::Every)?;
-            let extension = exporters.skin_facts(name).map_or("", |f| f.extension);
-            skin_exporters.push((e, extension));
-        }
-        let skin_cache = match (&skin, out.pc2) {
-            (Some(skin), true) => Some(start_cache(
-                dir,
-                SKIN_PREFIX,
-                &skin.positions(&rest),
-                &skin.triangles,
-                out.skin_normals,
-            )?),
-            _ => None,
-        };
-        let embedded = if out.embedded {
-            let mesh = &joined_surface(bodies);
-            Some(EmbeddedOutput {
-                embedding: joined_embedding(bodies),
-                triangles: mesh.triangles.clone(),
-                exporter: exporters.skins(
-                    crate::scene::obj_exporter(out.surface_normals),
-                    dir,
-                    SURFACE_PREFIX,
-                    SkinFrames::Every,
-                )?,
-                cache: if out.pc2 {
-                    Some(start_cache(
-                        dir,
-                        SURFACE_PREFIX,
-                        &mesh.vertices,
-                        &mesh.triangles,
-                        out.surface_normals,
-                    )?)
-                } else {
-                    None
-                },
-            })
-        } else {
-            None
-        };
         // One frame is not a series: a .pvd would only repeat the file name.
         let springs = out.springs.then(|| SpringsOutput {
             set: None,
@@ -370,14 +448,13 @@ impl FrameWriter {
                 .then(|| PvdWriter::new(dir.join(format!("{SPRINGS_PREFIX}.pvd")))),
             encoding: out.compression.encoding(),
         });
+        let lattice_pvd = out.vtu && out.pvd && !out.last_only;
         Ok(Self {
             dir: dir.to_path_buf(),
-            lattice: lattice_exporters,
+            parts,
             lattice_pvd: out.vtu && out.pvd,
-            skin,
-            skin_exporters,
-            skin_cache,
-            embedded,
+            parts_pvd: (several && lattice_pvd)
+                .then(|| PvdWriter::new(dir.join(format!("{LATTICE_PREFIX}.pvd")))),
             springs,
             times: Vec::new(),
             scratch: FrameScratch::default(),
@@ -393,8 +470,13 @@ impl FrameWriter {
         let Some(decimals) = decimals else {
             return self;
         };
-        for (exporter, _) in &mut self.lattice {
-            exporter.set_time_decimals(decimals);
+        for part in &mut self.parts {
+            for (exporter, _) in &mut part.lattice {
+                exporter.set_time_decimals(decimals);
+            }
+        }
+        if let Some(pvd) = &mut self.parts_pvd {
+            pvd.set_time_decimals(Some(decimals));
         }
         if let Some(pvd) = self.springs.as_mut().and_then(|s| s.pvd.as_mut()) {
             pvd.set_time_decimals(Some(decimals));
@@ -417,6 +499,19 @@ impl FrameWriter {
         &self.times
     }
 
+    /// The `.vtu` of each body for frame `index`, with the body's name.
+    fn part_files(&self, index: usize) -> Vec<(String, String)> {
+        self.parts
+            .iter()
+            .map(|p| {
+                (
+                    p.name.clone().unwrap_or_default(),
+                    format!("{}_{index:04}.vtu", p.stem(LATTICE_PREFIX)),
+                )
+            })
+            .collect()
+    }
+
     /// Continues the series of a run resumed from a checkpoint: frames at
     /// `frame_times` are on disk, and `files` files of `bytes` bytes were
     /// written. Every exporter resumes after them; point caches keep their
@@ -428,26 +523,44 @@ impl FrameWriter {
         files: usize,
         bytes: u64,
     ) -> Result<(), JobError> {
-        for (exporter, _) in &mut self.lattice {
-            exporter.resume(frame_times)?;
-        }
-        for (exporter, _) in &mut self.skin_exporters {
-            exporter.resume(frame_times)?;
-        }
         let samples = u32::try_from(frame_times.len())
             .map_err(|_| IoError::invalid(&self.dir, "too many frames for a point cache"))?;
-        if let Some(cache) = &mut self.skin_cache {
-            *cache = Pc2Writer::resume(
-                cache.path(),
-                self.skin.as_ref().map_or(0, |s| s.vertex_nodes.len()),
-                samples,
-            )?;
+        for part in &mut self.parts {
+            for (exporter, _) in &mut part.lattice {
+                exporter.resume(frame_times)?;
+            }
+            for (exporter, _) in &mut part.skin_exporters {
+                exporter.resume(frame_times)?;
+            }
+            if let Some(cache) = &mut part.skin_cache {
+                *cache = Pc2Writer::resume(
+                    cache.path(),
+                    part.skin.as_ref().map_or(0, |s| s.vertex_nodes.len()),
+                    samples,
+                )?;
+            }
+            if let Some(e) = &mut part.embedded {
+                e.exporter.resume(frame_times)?;
+                if let Some(cache) = &mut e.cache {
+                    let points = e.embedding.vertex_coords().len();
+                    *cache = Pc2Writer::resume(cache.path(), points, samples)?;
+                }
+            }
         }
-        if let Some(e) = &mut self.embedded {
-            e.exporter.resume(frame_times)?;
-            if let Some(cache) = &mut e.cache {
-                let points = e.embedding.vertex_coords().len();
-                *cache = Pc2Writer::resume(cache.path(), points, samples)?;
+        if self.parts_pvd.is_some() {
+            let mut entries = Vec::new();
+            for (i, &time) in frame_times.iter().enumerate() {
+                for (k, (name, file)) in self.part_files(i).into_iter().enumerate() {
+                    entries.push(mss_io::vtk::PvdEntry {
+                        time,
+                        part: k as u32,
+                        name: Some(name),
+                        file,
+                    });
+                }
+            }
+            if let Some(pvd) = &mut self.parts_pvd {
+                pvd.set_entries(entries)?;
             }
         }
         if let Some(pvd) = self.springs.as_mut().and_then(|s| s.pvd.as_mut()) {
@@ -512,16 +625,6 @@ impl FrameWriter {
             } else {
                 Vec::new()
             };
-            sc.body = if model.bodies().len() > 1 {
-                model
-                    .bodies()
-                    .iter()
-                    .enumerate()
-                    .flat_map(|(b, span)| std::iter::repeat_n(b as u32, span.cells.len()))
-                    .collect()
-            } else {
-                Vec::new()
-            };
         }
         model.cell_diagnostics_into(&state.x, &mut sc.diag);
         sc.vol.clear();
@@ -533,8 +636,7 @@ impl FrameWriter {
         let contact_force = problem.contact().map(|_| problem.contact_forces(state));
         let f_int = mss_core::as_arrays(&sc.f_int);
         let f_ext = mss_core::as_arrays(&sc.f_ext);
-        let (displacement, fixed, material, body) =
-            (&sc.displacement, &sc.fixed, &sc.material, &sc.body);
+        let (displacement, fixed, material) = (&sc.displacement, &sc.fixed, &sc.material);
         let (vol, shear, corr) = (&sc.vol, &sc.shear, &sc.corr);
         let result = self.write_frame(
             problem,
@@ -551,7 +653,6 @@ impl FrameWriter {
                 shear,
                 corr,
                 material,
-                body,
                 contact_force: contact_force.as_deref().map(mss_core::as_arrays),
             },
         );
@@ -566,65 +667,86 @@ impl FrameWriter {
         index: usize,
         a: FrameArrays<'_>,
     ) -> Result<(), JobError> {
-        let (points, velocity) = (a.points, a.velocity);
-        if !self.lattice.is_empty() {
-            let mut frame = LatticeFrame::new(points, problem.model().cells())
-                .with_point_field(Field::vectors("displacement", a.displacement))
-                .with_point_field(Field::vectors("velocity", velocity))
-                .with_point_field(Field::vectors("internal_force", a.f_int))
-                .with_point_field(Field::vectors("external_force", a.f_ext))
-                .with_point_field(Field::flags("fixed", a.fixed))
-                .with_cell_field(Field::scalars("volumetric_strain", a.vol))
-                .with_cell_field(Field::scalars("shear_strain", a.shear))
-                .with_cell_field(Field::scalars("correction_force", a.corr));
-            if !a.material.is_empty() {
-                frame = frame.with_cell_field(Field::ids("material", a.material));
-            }
-            if !a.body.is_empty() {
-                frame = frame.with_cell_field(Field::ids("body", a.body));
-            }
-            if let Some(f) = a.contact_force {
-                frame = frame.with_point_field(Field::vectors("contact_force", f));
-            }
-            let mut written = Vec::new();
-            for (exporter, ext) in &mut self.lattice {
-                exporter.write_frame(index, state.time, &frame)?;
-                if let Some(ext) = ext {
-                    written.push(self.dir.join(format!("{LATTICE_PREFIX}_{index:04}.{ext}")));
-                }
-            }
-            for p in written {
-                self.count(&p);
+        let mut written = Vec::new();
+        for part in &mut self.parts {
+            Self::write_part(&self.dir, part, state.time, index, &a, &mut written)?;
+        }
+        if self.parts_pvd.is_some() {
+            let files = self.part_files(index);
+            let refs: Vec<(&str, &str)> = files
+                .iter()
+                .map(|(n, f)| (n.as_str(), f.as_str()))
+                .collect();
+            if let Some(pvd) = &mut self.parts_pvd {
+                pvd.add_parts(state.time, &refs)?;
             }
         }
-        if let Some(skin) = &self.skin {
-            let pos = skin.positions(points);
-            let mut written = Vec::new();
-            for (exporter, ext) in &mut self.skin_exporters {
-                exporter.write_skin(index, state.time, &pos, &skin.triangles)?;
-                written.push(self.dir.join(format!("{SKIN_PREFIX}_{index:04}.{ext}")));
-            }
-            if let Some(cache) = &mut self.skin_cache {
-                cache.append(&pos)?;
-            }
-            for p in written {
-                self.count(&p);
-            }
-        }
-        if let Some(e) = &mut self.embedded {
-            let pos = e.embedding.deform(points);
-            e.exporter
-                .write_skin(index, state.time, &pos, &e.triangles)?;
-            if let Some(cache) = &mut e.cache {
-                cache.append(&pos)?;
-            }
-            let p = self.dir.join(format!("{SURFACE_PREFIX}_{index:04}.obj"));
+        for p in written {
             self.count(&p);
         }
         if self.springs.is_some() {
-            self.write_springs(index, problem, state, points)?;
+            self.write_springs(index, problem, state, a.points)?;
         }
         self.times.push(state.time);
+        Ok(())
+    }
+
+    /// Writes one body's files of frame `index`, noting their paths in
+    /// `written`.
+    fn write_part(
+        dir: &Path,
+        part: &mut PartWriter,
+        time: f64,
+        index: usize,
+        a: &FrameArrays<'_>,
+        written: &mut Vec<PathBuf>,
+    ) -> Result<(), JobError> {
+        let (n, c) = (part.nodes.clone(), part.cells.clone());
+        let points = &a.points[n.clone()];
+        if !part.lattice.is_empty() {
+            let mut frame = LatticeFrame::new(points, &part.local_cells)
+                .with_point_field(Field::vectors("displacement", &a.displacement[n.clone()]))
+                .with_point_field(Field::vectors("velocity", &a.velocity[n.clone()]))
+                .with_point_field(Field::vectors("internal_force", &a.f_int[n.clone()]))
+                .with_point_field(Field::vectors("external_force", &a.f_ext[n.clone()]))
+                .with_point_field(Field::flags("fixed", &a.fixed[n.clone()]))
+                .with_cell_field(Field::scalars("volumetric_strain", &a.vol[c.clone()]))
+                .with_cell_field(Field::scalars("shear_strain", &a.shear[c.clone()]))
+                .with_cell_field(Field::scalars("correction_force", &a.corr[c.clone()]));
+            if !a.material.is_empty() {
+                frame = frame.with_cell_field(Field::ids("material", &a.material[c.clone()]));
+            }
+            if let Some(f) = a.contact_force {
+                frame = frame.with_point_field(Field::vectors("contact_force", &f[n.clone()]));
+            }
+            let stem = part.stem(LATTICE_PREFIX);
+            for (exporter, ext) in &mut part.lattice {
+                exporter.write_frame(index, time, &frame)?;
+                if let Some(ext) = ext {
+                    written.push(dir.join(format!("{stem}_{index:04}.{ext}")));
+                }
+            }
+        }
+        if let Some(skin) = &part.skin {
+            let pos = skin.positions(points);
+            let stem = part.stem(SKIN_PREFIX);
+            for (exporter, ext) in &mut part.skin_exporters {
+                exporter.write_skin(index, time, &pos, &skin.triangles)?;
+                written.push(dir.join(format!("{stem}_{index:04}.{ext}")));
+            }
+            if let Some(cache) = &mut part.skin_cache {
+                cache.append(&pos)?;
+            }
+        }
+        let surface_stem = part.stem(SURFACE_PREFIX);
+        if let Some(e) = &mut part.embedded {
+            let pos = e.embedding.deform(points);
+            e.exporter.write_skin(index, time, &pos, &e.triangles)?;
+            if let Some(cache) = &mut e.cache {
+                cache.append(&pos)?;
+            }
+            written.push(dir.join(format!("{surface_stem}_{index:04}.obj")));
+        }
         Ok(())
     }
 
@@ -670,42 +792,48 @@ impl FrameWriter {
 
     /// Completes the series (final `.pvd`).
     pub fn finish(&mut self) -> Result<(), JobError> {
-        for (exporter, _) in &mut self.lattice {
-            exporter.finish()?;
-        }
-        for (exporter, _) in &mut self.skin_exporters {
-            exporter.finish()?;
-        }
-        if let Some(e) = &mut self.embedded {
-            e.exporter.finish()?;
-        }
-        let caches = [
-            self.skin_cache.as_mut(),
-            self.embedded.as_mut().and_then(|e| e.cache.as_mut()),
-        ];
-        // Each cache and its rest shape are counted when the cache is published.
         let mut finished = Vec::new();
-        for cache in caches.into_iter().flatten() {
-            if cache.is_finished() {
-                continue;
+        for part in &mut self.parts {
+            for (exporter, _) in &mut part.lattice {
+                exporter.finish()?;
             }
-            cache.finish()?;
-            let path = cache.path().to_path_buf();
-            let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("");
-            finished.push(path.with_file_name(format!("{stem}_rest.obj")));
-            finished.push(path);
+            for (exporter, _) in &mut part.skin_exporters {
+                exporter.finish()?;
+            }
+            if let Some(e) = &mut part.embedded {
+                e.exporter.finish()?;
+            }
+            let caches = [
+                part.skin_cache.as_mut(),
+                part.embedded.as_mut().and_then(|e| e.cache.as_mut()),
+            ];
+            // Each cache and its rest shape are counted when the cache is published.
+            for cache in caches.into_iter().flatten() {
+                if cache.is_finished() {
+                    continue;
+                }
+                cache.finish()?;
+                let path = cache.path().to_path_buf();
+                let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("");
+                finished.push(path.with_file_name(format!("{stem}_rest.obj")));
+                finished.push(path);
+            }
+            let p = self.dir.join(format!("{}.pvd", part.stem(LATTICE_PREFIX)));
+            if self.lattice_pvd && p.exists() {
+                finished.push(p);
+            }
         }
-        for p in finished {
-            self.count(&p);
-        }
-        let p = self.dir.join(format!("{LATTICE_PREFIX}.pvd"));
-        if self.lattice_pvd && p.exists() {
-            self.count(&p);
+        if let Some(pvd) = &self.parts_pvd
+            && !pvd.entries().is_empty()
+        {
+            finished.push(pvd.path().to_path_buf());
         }
         if let Some(pvd) = self.springs.as_ref().and_then(|s| s.pvd.as_ref())
             && !pvd.entries().is_empty()
         {
-            let p = pvd.path().to_path_buf();
+            finished.push(pvd.path().to_path_buf());
+        }
+        for p in finished {
             self.count(&p);
         }
         Ok(())

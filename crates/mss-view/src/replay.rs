@@ -1,7 +1,9 @@
 //! The replay source: the frames of a folder written by `mss run`, played
 //! at their simulated times (times the page's scale), with seeking.
 //!
-//! The lattice frames listed by `lattice.pvd` are the source of truth: the
+//! The lattice frames listed by `lattice.pvd` are the source of truth (a
+//! run of several bodies lists each body's file as a part of its frame:
+//! they are shown together): the
 //! skin is the boundary of their hexahedra (faces that belong to one cell),
 //! coloured by the `displacement` point field and by J = 1 +
 //! `volumetric_strain` averaged from the cells to the nodes. When every
@@ -28,8 +30,9 @@ const MAX_FRAME_BYTES: u64 = 2 << 30;
 #[derive(Debug)]
 pub struct RunFolder {
     dir: PathBuf,
-    frames: Vec<(f64, String)>,
-    surface_files: Option<Vec<String>>,
+    /// Each frame's time and files (one per body).
+    frames: Vec<(f64, Vec<String>)>,
+    surface_files: Option<Vec<Vec<String>>>,
 }
 
 fn not_a_run(dir: &Path, reason: impl Into<String>) -> ViewError {
@@ -50,13 +53,34 @@ impl RunFolder {
             ));
         }
         let entries = read_pvd(&pvd).map_err(|e| not_a_run(dir, e.to_string()))?;
-        let frames: Vec<(f64, String)> = entries.into_iter().map(|e| (e.time, e.file)).collect();
-        let surface_files: Option<Vec<String>> = frames
+        // A frame's parts follow each other, numbered from 0.
+        let mut frames: Vec<(f64, Vec<String>)> = Vec::new();
+        for e in entries {
+            match frames.last_mut() {
+                Some((time, files)) if e.part > 0 && *time == e.time => files.push(e.file),
+                _ => frames.push((e.time, vec![e.file])),
+            }
+        }
+        if frames
             .iter()
-            .map(|(_, f)| {
-                let s = f.strip_prefix("lattice_")?.strip_suffix(".vtu")?;
-                let name = format!("surface_{s}.obj");
-                dir.join(&name).is_file().then_some(name)
+            .any(|(_, files)| files.len() != frames[0].1.len())
+        {
+            return Err(not_a_run(
+                dir,
+                "lattice.pvd: the frames do not all have the same parts",
+            ));
+        }
+        let surface_files: Option<Vec<Vec<String>>> = frames
+            .iter()
+            .map(|(_, files)| {
+                files
+                    .iter()
+                    .map(|f| {
+                        let s = f.strip_prefix("lattice_")?.strip_suffix(".vtu")?;
+                        let name = format!("surface_{s}.obj");
+                        dir.join(&name).is_file().then_some(name)
+                    })
+                    .collect()
             })
             .collect();
         Ok(RunFolder {
@@ -154,6 +178,58 @@ fn boundary(cells: &[[u32; 8]]) -> (Vec<u32>, Vec<[u32; 3]>) {
     (nodes, triangles)
 }
 
+/// Frame `k`'s lattice: its parts' files side by side (nodes and cells
+/// in part order).
+fn read_frame(run: &RunFolder, k: usize) -> Result<LatticeFrameData, String> {
+    let mut joined: Option<LatticeFrameData> = None;
+    for file in &run.frames[k].1 {
+        let data =
+            read_lattice_vtu(&run.dir.join(file), MAX_FRAME_BYTES).map_err(|e| e.to_string())?;
+        match &mut joined {
+            None => joined = Some(data),
+            Some(all) => append_frame(all, data).map_err(|e| format!("{file}: {e}"))?,
+        }
+    }
+    joined.ok_or_else(|| format!("frame {k} lists no file"))
+}
+
+/// Appends `part` to `all`: its nodes after `all`'s, its cells renumbered,
+/// the fields both have joined (the others dropped).
+fn append_frame(all: &mut LatticeFrameData, part: LatticeFrameData) -> Result<(), String> {
+    let first = u32::try_from(all.points.len()).map_err(|_| "too many points".to_string())?;
+    let (points, cells) = (all.points.len(), all.cells.len());
+    all.points.extend(part.points);
+    all.cells
+        .extend(part.cells.into_iter().map(|c| c.map(|i| i + first)));
+    let join = |fields: &mut HashMap<String, (Vec<f64>, usize)>,
+                mut more: HashMap<String, (Vec<f64>, usize)>,
+                had: usize| {
+        fields.retain(|name, (values, components)| match more.remove(name) {
+            Some((extra, c)) if c == *components && values.len() == had * c => {
+                values.extend(extra);
+                true
+            }
+            _ => false,
+        });
+    };
+    join(&mut all.point_fields, part.point_fields, points);
+    join(&mut all.cell_fields, part.cell_fields, cells);
+    Ok(())
+}
+
+/// Frame `k`'s embedded surfaces, side by side.
+fn read_surface(run: &RunFolder, files: &[String]) -> Result<SurfaceMesh, String> {
+    let mut positions = Vec::new();
+    let mut triangles = Vec::new();
+    for file in files {
+        let (p, t) = read_obj(&run.dir.join(file))?;
+        let first = positions.len() as u32;
+        positions.extend(p);
+        triangles.extend(t.into_iter().map(|t| t.map(|v| v + first)));
+    }
+    Ok((positions, triangles))
+}
+
 struct Loaded {
     skin_nodes: Vec<u32>,
     node_cell_count: Vec<u32>,
@@ -211,8 +287,7 @@ fn surface_frame(positions: &[[f64; 3]], rest: &[[f64; 3]]) -> SurfaceFrame {
 }
 
 fn load_first(run: &RunFolder) -> Result<(Loaded, SceneInfo, Vec<u8>), String> {
-    let first = run.dir.join(&run.frames[0].1);
-    let data = read_lattice_vtu(&first, MAX_FRAME_BYTES).map_err(|e| e.to_string())?;
+    let data = read_frame(run, 0)?;
     let (skin_nodes, skin_tris) = boundary(&data.cells);
     let mut node_cell_count = vec![0u32; data.points.len()];
     for cell in &data.cells {
@@ -243,7 +318,7 @@ fn load_first(run: &RunFolder) -> Result<(Loaded, SceneInfo, Vec<u8>), String> {
     let mut topology: Vec<Vec<[u32; 3]>> = Vec::new();
     let mut surface_rest = None;
     if let Some(files) = &run.surface_files {
-        match read_obj(&run.dir.join(&files[0])) {
+        match read_surface(run, &files[0]) {
             Ok((positions, triangles)) => {
                 surfaces.push(SurfaceInfo {
                     name: "surface".into(),
@@ -293,12 +368,11 @@ fn load_first(run: &RunFolder) -> Result<(Loaded, SceneInfo, Vec<u8>), String> {
 
 /// Reads frame `k` and encodes it; an error names the file.
 fn encode(run: &RunFolder, loaded: &Loaded, k: usize, seq: u64) -> Result<(Vec<u8>, f64), String> {
-    let data = read_lattice_vtu(&run.dir.join(&run.frames[k].1), MAX_FRAME_BYTES)
-        .map_err(|e| e.to_string())?;
+    let data = read_frame(run, k)?;
     if data.points.len() != loaded.node_cell_count.len() {
         return Err(format!(
             "{}: {} points where the first frame has {}",
-            run.frames[k].1,
+            run.frames[k].1.join(", "),
             data.points.len(),
             loaded.node_cell_count.len()
         ));
@@ -310,11 +384,11 @@ fn encode(run: &RunFolder, loaded: &Loaded, k: usize, seq: u64) -> Result<(Vec<u
     });
     let mut surfaces = Vec::new();
     if let (Some(rest), Some(files)) = (&loaded.surface_rest, &run.surface_files) {
-        let (positions, _) = read_obj(&run.dir.join(&files[k]))?;
+        let (positions, _) = read_surface(run, &files[k])?;
         if positions.len() != rest.len() {
             return Err(format!(
                 "{}: {} vertices where the first frame has {}",
-                files[k],
+                files[k].join(", "),
                 positions.len(),
                 rest.len()
             ));

@@ -8,13 +8,31 @@ use crate::atomic::write_atomic;
 
 use std::path::{Path, PathBuf};
 
-/// One frame of a `.pvd` collection.
+/// One file of a `.pvd` collection: a frame, or one part of a frame.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PvdEntry {
     /// Simulated time of the frame.
     pub time: f64,
+    /// Which part of the frame the file is (0 for a frame of one part):
+    /// ParaView opens a collection whose frames have several parts as one
+    /// multiblock data set, a block per part.
+    pub part: u32,
+    /// The part's name (ParaView names its block so), if any.
+    pub name: Option<String>,
     /// File name relative to the folder of the `.pvd`.
     pub file: String,
+}
+
+impl PvdEntry {
+    /// A frame of one part.
+    pub fn frame(time: f64, file: impl Into<String>) -> Self {
+        Self {
+            time,
+            part: 0,
+            name: None,
+            file: file.into(),
+        }
+    }
 }
 
 /// Records the frames of a time series and keeps a `.pvd` file listing them.
@@ -109,13 +127,43 @@ impl PvdWriter {
                 format!("frame time {time} is not finite"),
             ));
         }
-        self.entries.push(PvdEntry {
-            time,
-            file: file.to_string(),
-        });
+        self.entries.push(PvdEntry::frame(time, file));
         if let Err(e) = self.write() {
             // Keep the in-memory list equal to what is on disk.
             self.entries.pop();
+            return Err(e);
+        }
+        Ok(())
+    }
+
+    /// Records a frame of several parts, `(name, file)` each, the parts
+    /// numbered in order, and rewrites the `.pvd`. A non-finite time is
+    /// refused.
+    ///
+    /// ```
+    /// let dir = tempfile::tempdir().unwrap();
+    /// let mut pvd = mss_io::vtk::PvdWriter::new(dir.path().join("all.pvd"));
+    /// pvd.add_parts(0.5, &[("a", "a_0001.vtu"), ("b", "b_0001.vtu")]).unwrap();
+    /// let text = std::fs::read_to_string(dir.path().join("all.pvd")).unwrap();
+    /// assert!(text.contains(r#"timestep="0.5" group="" part="1" name="b" file="b_0001.vtu""#));
+    /// ```
+    pub fn add_parts(&mut self, time: f64, parts: &[(&str, &str)]) -> Result<(), IoError> {
+        if !time.is_finite() {
+            return Err(IoError::invalid(
+                &self.path,
+                format!("frame time {time} is not finite"),
+            ));
+        }
+        let before = self.entries.len();
+        self.entries
+            .extend(parts.iter().enumerate().map(|(k, (name, file))| PvdEntry {
+                time,
+                part: k as u32,
+                name: Some(name.to_string()),
+                file: file.to_string(),
+            }));
+        if let Err(e) = self.write() {
+            self.entries.truncate(before);
             return Err(e);
         }
         Ok(())
@@ -131,10 +179,25 @@ impl PvdWriter {
                 format!("frame time {t} is not finite"),
             ));
         }
-        self.entries = frames
-            .into_iter()
-            .map(|(time, file)| PvdEntry { time, file })
-            .collect();
+        self.set_entries(
+            frames
+                .into_iter()
+                .map(|(time, file)| PvdEntry::frame(time, file))
+                .collect(),
+        )
+    }
+
+    /// Replaces the files recorded by `entries` and rewrites the `.pvd` (a
+    /// collection of parts resumed from a checkpoint). A non-finite time is
+    /// refused.
+    pub fn set_entries(&mut self, entries: Vec<PvdEntry>) -> Result<(), IoError> {
+        if let Some(e) = entries.iter().find(|e| !e.time.is_finite()) {
+            return Err(IoError::invalid(
+                &self.path,
+                format!("frame time {} is not finite", e.time),
+            ));
+        }
+        self.entries = entries;
         self.write()
     }
 
@@ -151,9 +214,14 @@ impl PvdWriter {
                     Some(d) => time_text(e.time, d),
                     None => e.time.to_string(),
                 };
+                let name = e
+                    .name
+                    .as_deref()
+                    .map_or(String::new(), |n| format!(" name=\"{}\"", xml_escape(n)));
                 writeln!(
                     w,
-                    "    <DataSet timestep=\"{time}\" group=\"\" part=\"0\" file=\"{}\"/>",
+                    "    <DataSet timestep=\"{time}\" group=\"\" part=\"{}\"{name} file=\"{}\"/>",
+                    e.part,
                     xml_escape(&e.file)
                 )?;
             }
@@ -194,5 +262,24 @@ mod tests {
         );
         assert!(pvd.add_frame(f64::NAN, "x.vtu").is_err());
         assert_eq!(pvd.entries().len(), 1);
+    }
+
+    #[test]
+    fn parts_read_back_with_their_numbers_and_names() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut pvd = PvdWriter::new(dir.path().join("all.pvd"));
+        pvd.add_parts(0.0, &[("a", "a_0000.vtu"), ("b&c", "b_0000.vtu")])
+            .unwrap();
+        pvd.add_parts(0.5, &[("a", "a_0001.vtu"), ("b&c", "b_0001.vtu")])
+            .unwrap();
+        assert!(pvd.add_parts(f64::INFINITY, &[("a", "x.vtu")]).is_err());
+        let back = crate::vtk::read::read_pvd(pvd.path()).unwrap();
+        assert_eq!(back, pvd.entries());
+        assert_eq!(back.len(), 4);
+        assert_eq!((back[3].part, back[3].name.as_deref()), (1, Some("b&c")));
+        // A plain frame is part 0 without a name, and reads back so.
+        pvd.set_frames(vec![(1.0, "x.vtu".into())]).unwrap();
+        let back = crate::vtk::read::read_pvd(pvd.path()).unwrap();
+        assert_eq!(back, vec![PvdEntry::frame(1.0, "x.vtu")]);
     }
 }

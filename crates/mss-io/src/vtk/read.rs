@@ -43,7 +43,8 @@ fn invalid(path: &Path, reason: impl Into<String>) -> ReadError {
     }
 }
 
-/// The frames a `.pvd` collection lists, in file order. A file name must be
+/// The files a `.pvd` collection lists, in file order (a frame of several
+/// parts has one entry per part, `part` 0 first). A file name must be
 /// a plain name in the `.pvd`'s own folder (no separators, no `..`), so that
 /// reading a collection never reaches outside that folder; times must be
 /// finite.
@@ -65,6 +66,8 @@ pub fn read_pvd(path: &Path) -> Result<Vec<PvdEntry>, ReadError> {
             {
                 let mut time = None;
                 let mut file = None;
+                let mut part = None;
+                let mut name = None;
                 for attr in tag.attributes() {
                     let attr = attr.map_err(|e| invalid(path, format!("bad attribute: {e}")))?;
                     let value = attr
@@ -73,6 +76,8 @@ pub fn read_pvd(path: &Path) -> Result<Vec<PvdEntry>, ReadError> {
                     match attr.key.as_ref() {
                         b"timestep" => time = Some(value.trim().parse::<f64>().ok()),
                         b"file" => file = Some(value.into_owned()),
+                        b"part" => part = Some(value.trim().parse::<u32>().ok()),
+                        b"name" => name = Some(value.into_owned()),
                         _ => {}
                     }
                 }
@@ -99,7 +104,22 @@ pub fn read_pvd(path: &Path) -> Result<Vec<PvdEntry>, ReadError> {
                         ),
                     ));
                 }
-                entries.push(PvdEntry { time, file });
+                let part = match part {
+                    None => 0,
+                    Some(Some(p)) => p,
+                    Some(None) => {
+                        return Err(invalid(
+                            path,
+                            format!("DataSet #{n}: part is not a whole number"),
+                        ));
+                    }
+                };
+                entries.push(PvdEntry {
+                    time,
+                    part,
+                    name,
+                    file,
+                });
             }
             _ => {}
         }

@@ -89,17 +89,37 @@ fn a_squeezed_ball_and_the_block_push_each_other_equally_and_the_outputs_hold_bo
         a[2] < -1.0 && (a[2] + b[2]).abs() < 1e-9 * a[2].abs(),
         "{a:?} {b:?}"
     );
-    let vtu = std::fs::read_to_string(out.path().join("lattice_0006.vtu")).unwrap();
-    assert!(
-        vtu.contains("Name=\"body\""),
-        "the lattice frame has a body field"
-    );
-    let skin = std::fs::read_to_string(out.path().join("skin_0006.obj")).unwrap_or_default();
-    let surface = std::fs::read_to_string(out.path().join("surface_0006.obj")).unwrap_or_default();
-    assert!(
-        !(skin.is_empty() && surface.is_empty()),
-        "a skin or surface per frame"
-    );
+    // Each body has its own files, its name after the stem, and
+    // lattice.pvd lists both as the parts of each frame.
+    let pvd = mss_io::vtk::read::read_pvd(&out.path().join("lattice.pvd")).unwrap();
+    assert_eq!(pvd.len(), 2 * 7, "7 frames of 2 parts");
+    for (k, body) in job.bodies.iter().enumerate() {
+        let entry = &pvd[2 * 6 + k];
+        assert_eq!(entry.part, k as u32);
+        assert_eq!(entry.name.as_deref(), Some(body.name.as_str()));
+        assert_eq!(entry.file, format!("lattice_{}_0006.vtu", body.name));
+        let frame =
+            mss_io::vtk::read::read_lattice_vtu(&out.path().join(&entry.file), 1 << 30).unwrap();
+        assert_eq!(frame.points.len(), body.lattice.num_nodes());
+        assert_eq!(frame.cells.len(), summary.bodies[k].cells);
+        let own_pvd = out.path().join(format!("lattice_{}.pvd", body.name));
+        assert_eq!(mss_io::vtk::read::read_pvd(&own_pvd).unwrap().len(), 7);
+        let skin = out.path().join(format!("skin_{}_0006.obj", body.name));
+        let surface = out.path().join(format!("surface_{}_0006.obj", body.name));
+        assert!(
+            skin.is_file() || surface.is_file(),
+            "a skin or surface per body and frame"
+        );
+    }
+    // Every file of the run is recognised as one (a new run there removes
+    // them), and counted in the summary.
+    let written: Vec<_> = std::fs::read_dir(out.path())
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    let exporters = mss_scene::Registry::default().exporters;
+    let recognised = mss_scene::output::previous_run_files(out.path(), &exporters);
+    assert_eq!(recognised.len(), written.len(), "{written:?}");
 }
 
 #[test]
@@ -251,4 +271,65 @@ fn bad_bodies_are_typed_errors_naming_the_key() {
         "[[bodies.fixed]]\nkind = \"box\"\nmin = [5.0, 5.0, 5.0]\nmax = [6.0, 6.0, 6.0]\n",
     ));
     assert!(e.contains("[[bodies]] #1 (a) [[fixed]] #1"), "{e}");
+}
+
+#[test]
+fn a_run_of_several_bodies_interrupted_and_resumed_writes_the_uninterrupted_files() {
+    // Every per-body output on: lattice (.vtu and .vtk), skins with point
+    // caches, embedded surfaces, springs.
+    let text = STACK
+        .replace("duration = 1.0", "duration = 0.06")
+        .replace(
+            "every_time = 0.02     # s",
+            "every_time = 0.01\npc2 = true\nvtk = true\nembedded = true\nsprings = true",
+        )
+        .replace("cells = 8", "cells = 4");
+    let job = job(&text);
+    let whole = tempfile::tempdir().unwrap();
+    let reference = job
+        .run(whole.path(), &no_progress, &mss_scene::Cancel::new())
+        .unwrap();
+    let cut = tempfile::tempdir().unwrap();
+    let cancel = mss_scene::Cancel::new();
+    let stop_at = job.plan.steps / 2 + 1;
+    let progress = |p: mss_scene::Progress| {
+        if let mss_scene::Progress::Stepping { done, .. } = p
+            && done == stop_at
+        {
+            cancel.cancel();
+        }
+    };
+    assert!(job.run(cut.path(), &progress, &cancel).unwrap().interrupted);
+    let resumed = job
+        .resume(cut.path(), &no_progress, &mss_scene::Cancel::new())
+        .unwrap();
+    assert_eq!(resumed.bytes_written, reference.bytes_written);
+    let contents = |dir: &std::path::Path| {
+        let mut files: Vec<(String, Vec<u8>)> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .map(|p| {
+                (
+                    p.file_name().unwrap().to_string_lossy().into_owned(),
+                    std::fs::read(&p).unwrap(),
+                )
+            })
+            .collect();
+        files.sort();
+        files
+    };
+    let (a, b) = (contents(cut.path()), contents(whole.path()));
+    assert_eq!(
+        a.iter().map(|f| &f.0).collect::<Vec<_>>(),
+        b.iter().map(|f| &f.0).collect::<Vec<_>>()
+    );
+    assert!(a == b, "the resumed files differ");
+    for name in [
+        "lattice_upper_0006.vtu",
+        "skin_lower.pc2",
+        "surface_upper_rest.obj",
+        "springs_0006.vtu",
+    ] {
+        assert!(b.iter().any(|f| f.0 == name), "{name} written");
+    }
 }

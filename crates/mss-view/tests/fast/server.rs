@@ -354,11 +354,9 @@ fn paths_that_are_neither_scene_nor_run_are_refused() {
     assert!(matches!(err, ViewError::Bind { .. }), "{err}");
 }
 
-#[tokio::test(flavor = "current_thread")]
-async fn replay_plays_the_frames_of_a_run_and_seeks() {
-    let run = finished_run(common::SMALL_SCENE);
-    let dir = run.path().to_path_buf();
-    let d = dir.clone();
+/// A paused replay of the run folder `dir`, and a page connected to it.
+async fn paused_replay(dir: &std::path::Path) -> (Viewer, Page) {
+    let d = dir.to_path_buf();
     let v = tokio::task::spawn_blocking(move || {
         Viewer::start(
             Source::for_path(Some(&d)).unwrap(),
@@ -371,7 +369,15 @@ async fn replay_plays_the_frames_of_a_run_and_seeks() {
     })
     .await
     .unwrap();
-    let mut page = Page::connect(v.addr(), v.token()).await;
+    let page = Page::connect(v.addr(), v.token()).await;
+    (v, page)
+}
+
+#[tokio::test(flavor = "current_thread")]
+async fn replay_plays_the_frames_of_a_run_and_seeks() {
+    let run = finished_run(common::SMALL_SCENE);
+    let dir = run.path().to_path_buf();
+    let (v, mut page) = paused_replay(&dir).await;
     assert!(page.next_frame(WAIT).await);
     let scene = page.scene.clone().unwrap();
     assert_eq!(scene.mode, "replay");
@@ -408,5 +414,58 @@ async fn replay_plays_the_frames_of_a_run_and_seeks() {
         s.frame as usize == last && !s.playing
     })
     .await;
+    tokio::task::spawn_blocking(move || v.stop()).await.unwrap();
+}
+
+#[tokio::test(flavor = "current_thread")]
+async fn replay_shows_every_body_of_a_run_of_several() {
+    let two = r#"
+[loads]
+gravity = [0.0, 0.0, -9.81]
+[[obstacles]]
+shape = { kind = "ground" }
+[solver]
+damping = 20.0
+duration = 0.05
+[output]
+every_time = 0.025
+[[bodies]]
+name = "lower"
+[bodies.mesh]
+path = "builtin:cube"
+scale = 0.1
+translate = [0.0, 0.0, 0.05]
+[bodies.voxelize]
+cells = 3
+[bodies.material]
+young = 1.0e5
+poisson = 0.3
+density = 1000.0
+[[bodies]]
+name = "upper"
+[bodies.mesh]
+path = "builtin:cube"
+scale = 0.05
+translate = [0.0, 0.0, 0.13]
+[bodies.voxelize]
+cells = 4
+[bodies.material]
+young = 1.0e5
+poisson = 0.3
+density = 1000.0
+"#;
+    let run = finished_run(two);
+    let dir = run.path().to_path_buf();
+    let (v, mut page) = paused_replay(&dir).await;
+    assert!(page.next_frame(WAIT).await);
+    let scene = page.scene.clone().unwrap();
+    // Three frames, each of two parts; the skin is both cubes' boundaries
+    // (3^3 and 4^3 cells: 6 * 9 + 2 and 6 * 16 + 2 boundary nodes).
+    assert_eq!(scene.frame_times, vec![0.0, 0.025, 0.05]);
+    assert_eq!(scene.nodes, 64 + 125);
+    assert_eq!(scene.cells, 27 + 64);
+    let skin = scene.surfaces.last().unwrap();
+    assert_eq!(skin.vertices, (6 * 9 + 2) + (6 * 16 + 2));
+    assert_eq!(scene.surfaces[0].name, "surface");
     tokio::task::spawn_blocking(move || v.stop()).await.unwrap();
 }
