@@ -294,12 +294,16 @@ def solve_static(
     linear: bool = False,
     accept_unstable: bool = False,
     linear_solver: Literal["auto", "direct", "iterative"] = "auto",
+    obstacles_from: Optional[float] = None,
 ) -> tuple[State, dict[str, Any]]:
     """Static equilibrium: (state, info) with newton_iterations, load_steps,
     rejected_iterations, relative_residual, krylov_iterations and stable
     (True, False or None: not tested). ``linear`` solves the small-strain
-    problem once. Raises MechanismError for zero-energy motions and for an
-    unstable equilibrium unless ``accept_unstable``."""
+    problem once. ``obstacles_from``: the time at which ``state`` was in
+    equilibrium with the obstacles (0.0 for a body at rest); they are moved
+    along their paths from then, as a slow press would. Raises
+    MechanismError for zero-energy motions and for an unstable equilibrium
+    unless ``accept_unstable``."""
 
 class Integrator:
     """A time integrator bound to a problem."""

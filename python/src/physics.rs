@@ -740,8 +740,12 @@ fn linear_kind(name: &str) -> PyResult<LinearSolverKind> {
 /// `krylov_iterations` and `stable` (True, False, or None when the
 /// stability test was skipped). Raises `MechanismError` for zero-energy
 /// motions and for an unstable equilibrium unless `accept_unstable`.
+/// `obstacles_from`: the time at which `state` was in equilibrium with the
+/// obstacles (0.0 for a body at rest): they are then moved along their
+/// paths from there, as a slow press would (default: where they are at
+/// `state.time`, at once).
 #[pyfunction(name = "solve_static")]
-#[pyo3(signature = (problem, state = None, *, rtol = None, max_newton = None, linear = false, accept_unstable = false, linear_solver = "auto"))]
+#[pyo3(signature = (problem, state = None, *, rtol = None, max_newton = None, linear = false, accept_unstable = false, linear_solver = "auto", obstacles_from = None))]
 #[allow(clippy::too_many_arguments)]
 fn py_solve_static<'py>(
     py: Python<'py>,
@@ -752,7 +756,15 @@ fn py_solve_static<'py>(
     linear: bool,
     accept_unstable: bool,
     linear_solver: &str,
+    obstacles_from: Option<f64>,
 ) -> PyResult<(PyState, Bound<'py, PyDict>)> {
+    if let Some(t) = obstacles_from
+        && !t.is_finite()
+    {
+        return Err(pyo3::exceptions::PyValueError::new_err(format!(
+            "obstacles_from = {t}: give a finite time (s)"
+        )));
+    }
     let defaults = StaticOptions::default();
     let opts = StaticOptions {
         rtol: rtol.unwrap_or(defaults.rtol),
@@ -760,6 +772,7 @@ fn py_solve_static<'py>(
         small_strain: linear,
         accept_unstable,
         linear_solver: linear_kind(linear_solver)?,
+        obstacles_from,
         ..defaults
     };
     let p = Arc::clone(&problem.problem);

@@ -165,3 +165,26 @@ def test_custom_loads_by_kind_are_the_builtin_tables():
     assert np.abs(by_kind.external_forces(x)).max() > 0
     with pytest.raises(hexmss.SceneError, match=r"custom_loads\[0\].*known: gravity"):
         hexmss.Problem(model, custom_loads=[{"kind": "wind"}])
+
+
+def test_static_solve_follows_a_pressing_obstacle_from_rest():
+    # A box moving 1.5 cm (1.2 cells) down into a held block by t = 0.2 s:
+    # followed from rest, the static solve gives the press's force; placed
+    # there at once, it pushes the nodes near its edges out sideways.
+    lattice = hexmss.Lattice.block((8, 8, 4), 0.0125)
+    model = hexmss.Model(lattice, hexmss.Material(1e5, 0.3, 1000.0), "volumetric-barrier+hg")
+    box = {
+        "shape": {"kind": "box", "min": [0.03, 0.03, 0.05], "max": [0.07, 0.07, 0.09]},
+        "motion": [[0.0, 0.0, 0.0, 0.0], [0.2, 0.0, 0.0, -0.015]],
+        "friction": 0.5,
+    }
+    problem = hexmss.Problem(model, fixed=[{"kind": "lowest_layer"}], obstacles=[box])
+    start = hexmss.State(problem)
+    start.time = 0.4
+    followed, info = hexmss.solve_static(problem, start, obstacles_from=0.0, accept_unstable=True)
+    at_once, _ = hexmss.solve_static(problem, start, accept_unstable=True)
+    push = lambda s: problem.contact_forces(s)[:, 2].sum()
+    assert info["load_steps"] >= 5
+    assert push(followed) < 4 * push(at_once) < 0
+    with pytest.raises(ValueError, match="obstacles_from"):
+        hexmss.solve_static(problem, start, obstacles_from=float("nan"))

@@ -59,7 +59,7 @@ impl SceneInput {
 
     /// The static solver's options from `[solver]` (`load_steps`,
     /// `tolerance`, `max_iterations`, `linear_solver`, `linear`,
-    /// `accept_unstable`).
+    /// `accept_unstable`), obstacles followed along their paths from time 0.
     pub fn static_options(&self) -> mss_core::solver::StaticOptions {
         let s = &self.scene.solver;
         let first = 1.0 / f64::from(s.load_steps);
@@ -73,6 +73,9 @@ impl SceneInput {
             linear_solver: s.linear_solver,
             small_strain: s.linear,
             accept_unstable: s.accept_unstable,
+            // A scene's static solve starts at rest at time 0: its obstacles
+            // come along their paths from there.
+            obstacles_from: Some(0.0),
         }
     }
 

@@ -43,6 +43,35 @@ pub struct StaticOptions {
     /// Keep an equilibrium whose stiffness is not positive definite instead
     /// of returning [`SolverError::UnstableEquilibrium`] (default false).
     pub accept_unstable: bool,
+    /// The time at which the starting state was in equilibrium with the
+    /// obstacles (a body at rest at time 0: `Some(0.0)`): the solve then
+    /// moves the obstacles along their paths from that time to the state's,
+    /// at most [`OBSTACLE_INCREMENT`] of a cell per load increment, as a
+    /// slow press would, friction anchors following. `None` (the default):
+    /// the obstacles are where they are at the state's time from the start,
+    /// and an obstacle that has moved deep into the body pushes its nodes
+    /// out through its nearest faces (a box pressed 1.2 cells into a block
+    /// gave a fifth of the force).
+    pub obstacles_from: Option<f64>,
+}
+
+/// How far an obstacle moves along its path per load increment of a static
+/// solve that follows it (in cells of the model).
+pub const OBSTACLE_INCREMENT: f64 = 0.25;
+
+/// The length of the longest obstacle path of `contact` from `t0` to `t1`
+/// (m), sampled at 256 times.
+fn obstacle_travel(contact: &crate::contact::Contact, t0: f64, t1: f64) -> f64 {
+    const SAMPLES: usize = 256;
+    contact
+        .obstacles()
+        .map(|(o, _)| {
+            let at = |k: usize| o.offset(t0 + (t1 - t0) * k as f64 / SAMPLES as f64);
+            (1..=SAMPLES)
+                .map(|k| (at(k) - at(k - 1)).norm())
+                .sum::<f64>()
+        })
+        .fold(0.0, f64::max)
 }
 
 impl Default for StaticOptions {
@@ -55,6 +84,7 @@ impl Default for StaticOptions {
             linear_solver: LinearSolverKind::Auto,
             small_strain: false,
             accept_unstable: false,
+            obstacles_from: None,
         }
     }
 }
@@ -87,6 +117,8 @@ pub struct StaticInfo {
 struct StaticSystem<'a> {
     problem: &'a Problem,
     t: f64,
+    /// The time the obstacles are at (`t`, or on their way to it).
+    t_contact: f64,
     lambda: f64,
     scratch: Vec<Vec3>,
     free: &'a [bool],
@@ -109,7 +141,13 @@ impl NonlinearSystem for StaticSystem<'_> {
         p.model().internal_forces(x, r);
         p.external_forces(self.t, x, self.lambda, &mut self.scratch);
         if let Some(c) = p.contact() {
-            c.add_forces(self.t, x, &self.still, &self.anchors, &mut self.scratch);
+            c.add_forces(
+                self.t_contact,
+                x,
+                &self.still,
+                &self.anchors,
+                &mut self.scratch,
+            );
         }
         let mut s = 0.0;
         for i in 0..x.len() {
@@ -133,7 +171,7 @@ impl NonlinearSystem for StaticSystem<'_> {
             l.add_jacobian(p.model(), self.t, x, self.lambda, &mut j);
         }
         if let Some(c) = p.contact() {
-            c.add_jacobian(self.t, x, &self.still, &self.anchors, 0.0, &mut j);
+            c.add_jacobian(self.t_contact, x, &self.still, &self.anchors, 0.0, &mut j);
         }
         j
     }
@@ -220,13 +258,45 @@ fn solve_static_here(
             &mut scratch_v[i],
         );
     }
+    // Obstacles that move far enough are followed along their paths.
+    let t_end = state.time;
+    let follow_from = match (problem.contact(), opts.obstacles_from) {
+        (Some(c), Some(t0))
+            if t0 < t_end && obstacle_travel(c, t0, t_end) > OBSTACLE_INCREMENT * model.h() =>
+        {
+            Some((t0, obstacle_travel(c, t0, t_end)))
+        }
+        _ => None,
+    };
+    let contact_time = |lambda: f64| match follow_from {
+        Some((t0, _)) if lambda < 1.0 => t0 + lambda * (t_end - t0),
+        _ => t_end,
+    };
+    // The obstacles move at most OBSTACLE_INCREMENT cells per increment
+    // (their paths need not be uniform in time: each increment is fitted).
+    let step_limit = OBSTACLE_INCREMENT * model.h();
+    let fit = |lambda: f64, mut dl: f64| {
+        if let (Some(c), Some(_)) = (problem.contact(), follow_from) {
+            let end = |dl: f64| (lambda + dl).min(1.0);
+            while dl > 1e-9
+                && obstacle_travel(c, contact_time(lambda), contact_time(end(dl))) > step_limit
+            {
+                dl *= 0.5;
+            }
+        }
+        dl
+    };
+    let min_increment = follow_from.map_or(opts.min_load_increment, |(_, travel)| {
+        opts.min_load_increment.min(step_limit / travel / 64.0)
+    });
     let anchors = match problem.contact() {
-        Some(c) => c.static_anchors(state.time, &state.x),
+        Some(c) => c.static_anchors(contact_time(0.0), &state.x),
         None => Vec::new(),
     };
     let mut sys = StaticSystem {
         problem,
         t: state.time,
+        t_contact: contact_time(0.0),
         lambda: 0.0,
         scratch: vec![Vec3::zeros(); n],
         free: &free,
@@ -263,6 +333,7 @@ fn solve_static_here(
                 load_factor: lambda,
             });
         }
+        dl = fit(lambda, dl);
         let lt = if lambda + dl >= 1.0 - 1e-12 {
             1.0
         } else {
@@ -285,6 +356,7 @@ fn solve_static_here(
             }
         }
         sys.lambda = lt;
+        sys.t_contact = contact_time(lt);
         if load_steps == 0 && trial == x_init {
             // The first tangent is the one at the start: its hierarchy is
             // the stability test's preconditioner.
@@ -311,6 +383,13 @@ fn solve_static_here(
                 previous = Some((lambda, std::mem::replace(&mut x, trial)));
                 lambda = lt;
                 dl = (2.0 * dl).min(1.0);
+                if let (Some(c), Some(_)) = (problem.contact(), follow_from) {
+                    // The contacts made on the way stick where they were
+                    // made; sliding ones keep their kinetic offset.
+                    c.update_anchors(sys.t_contact, &x, &sys.still, &mut sys.anchors);
+                    // Those it makes next stick where they start it.
+                    sys.anchors = c.step_anchors(sys.t_contact, &x, &sys.anchors);
+                }
                 match cap {
                     Some((failed, _)) if lambda >= failed => cap = None,
                     Some((_, most)) => dl = dl.min(most),
@@ -349,7 +428,7 @@ fn solve_static_here(
                 dl = 0.5 * (lt - lambda);
                 cap = Some((lt, dl));
                 failed_increments += 1;
-                if dl < opts.min_load_increment || failed_increments > MAX_FAILED_INCREMENTS {
+                if dl < min_increment || failed_increments > MAX_FAILED_INCREMENTS {
                     // Some load carried and no more: a limit point, most likely.
                     if lambda > 0.0 {
                         return Err(SolverError::LoadLimit {
@@ -389,6 +468,14 @@ fn solve_static_here(
     }
     let scale = sys.residual(&x, &mut r);
     let res = free_norm(&r, &free);
+    if let Some(c) = problem.contact() {
+        // The state keeps the anchors of the contacts that hold it, so that
+        // its contact forces (an output's, or a run continued in time) are
+        // the equilibrium's, friction included.
+        let mut anchors = std::mem::take(&mut sys.anchors);
+        c.update_anchors(t_end, &x, &sys.still, &mut anchors);
+        state.contact = anchors;
+    }
     state.x = x;
     state.v.iter_mut().for_each(|v| *v = Vec3::zeros());
     Ok(StaticInfo {

@@ -4,7 +4,7 @@
 //! gain energy; the same in the implicit and static solvers.
 
 use hexmesh::Lattice;
-use mss_core::contact::{Contact, ContactSettings, Obstacle, Path, Plane, Sphere};
+use mss_core::contact::{Contact, ContactSettings, Cuboid, Obstacle, Path, Plane, Sphere};
 use mss_core::loads::{Damping, LoadSpec};
 use mss_core::model::{HourglassControl, VolumetricBarrier};
 use mss_core::solver::{
@@ -585,5 +585,86 @@ fn the_contact_jacobian_matches_finite_differences() {
             }
         }
         assert!(worst < 1e-5 * scale, "obstacle {which}: {worst} vs {scale}");
+    }
+}
+
+/// A held 8 x 8 x 4 block (1.25 cm cells) that `obstacle`, moving down by
+/// `press` over 0.2 s, presses into, mu = 0.5, mass damping for the
+/// dynamic runs.
+fn deep_press(obstacle: impl Fn(Path) -> Box<dyn Obstacle>, press: f64) -> Problem {
+    let lattice = Lattice::block([8, 8, 4], 0.0125, [0.0; 3]).unwrap();
+    let param = HourglassControl::new(Box::new(VolumetricBarrier), 1.0).unwrap();
+    let model = Model::new(&lattice, Material::new(1e5, 0.3, 1000.0).unwrap(), &param).unwrap();
+    let path = Path::new(vec![
+        (0.0, Vec3::zeros()),
+        (0.2, Vec3::new(0.0, 0.0, -press)),
+    ])
+    .unwrap();
+    let base = [ConstraintSpec::fixed(NodeSelector::LowestLayer)];
+    problem(
+        model,
+        Vec3::zeros(),
+        obstacle(path),
+        |s| s,
+        mass_damping(60.0),
+        &base,
+    )
+}
+
+#[test]
+fn a_static_solve_follows_an_obstacle_pressed_deep_and_keeps_its_friction() {
+    // A box 1.2 cells and a sphere 2 cells into the block: solved statically
+    // at the end of the press, each must give what the slow press gives in
+    // time (implicit, at rest), friction included. Placed there at once, the
+    // box pushed the nodes near its edges out through its side faces (a fifth
+    // of the force), and the state lost its friction anchors (the sphere's
+    // force 25 % low).
+    type Placed = Box<dyn Fn(Path) -> Box<dyn Obstacle>>;
+    let cases: [(&str, Placed, f64); 2] = [
+        (
+            "box",
+            Box::new(|path| {
+                let b = Cuboid::new(Vec3::new(0.03, 0.03, 0.05), Vec3::new(0.07, 0.07, 0.09));
+                Box::new(b.unwrap().moving(path))
+            }),
+            0.015,
+        ),
+        (
+            "sphere",
+            Box::new(|path| {
+                let s = Sphere::new(Vec3::new(0.05, 0.05, 0.08), 0.03).unwrap();
+                Box::new(s.moving(path))
+            }),
+            0.025,
+        ),
+    ];
+    for (name, obstacle, press) in cases {
+        let p = deep_press(obstacle, press);
+        let push = |s: &State| p.contact_forces(s).iter().map(|f| f.z).sum::<f64>();
+        let opts = ImplicitOptions {
+            dt: 0.05,
+            ..ImplicitOptions::default()
+        };
+        let mut it = Implicit::new(&p, opts).unwrap();
+        let mut pressed = State::at_rest(p.model());
+        while pressed.time < 0.8 - 1e-9 {
+            it.step(&p, &mut pressed).unwrap();
+        }
+        let mut st = State::at_rest(p.model());
+        st.time = 0.8;
+        let opts = StaticOptions {
+            obstacles_from: Some(0.0),
+            accept_unstable: true,
+            ..StaticOptions::default()
+        };
+        let info = solve_static(&p, &mut st, &opts).unwrap();
+        assert!(info.load_steps >= 5, "{name}: followed in increments");
+        let (dynamic, statics) = (push(&pressed), push(&st));
+        assert!(
+            (statics - dynamic).abs() < 0.02 * dynamic.abs(),
+            "{name}: static {statics} N vs pressed in time {dynamic} N"
+        );
+        // Friction holds the surface: the anchors came with the state.
+        assert!(st.contact.iter().any(Option::is_some), "{name}");
     }
 }
