@@ -76,6 +76,7 @@ impl SceneInput {
             // A scene's static solve starts at rest at time 0: its obstacles
             // come along their paths from there.
             obstacles_from: Some(0.0),
+            accept_mechanisms: false,
         }
     }
 

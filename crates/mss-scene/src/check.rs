@@ -141,7 +141,7 @@ impl CheckReport {
     pub fn time_is_lower_bound(&self) -> bool {
         matches!(
             self.load_check,
-            LoadCheck::LoadLimit { .. } | LoadCheck::Failed { .. }
+            LoadCheck::LoadLimit { .. } | LoadCheck::Failed { .. } | LoadCheck::Mechanism { .. }
         )
     }
 

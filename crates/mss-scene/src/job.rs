@@ -510,6 +510,10 @@ impl Job {
                 "under the scene's load the static equilibrium of model {name:?} is unstable (a \
                  mechanism of the lattice appears under load): a dynamic run leaves it and folds"
             ),
+            LoadCheck::Mechanism { .. } => format!(
+                "the held nodes leave zero-energy modes of model {name:?} (mechanisms of the \
+                 lattice at rest): a dynamic run under load folds along them"
+            ),
             LoadCheck::LoadLimit { load_factor } if !barrier => format!(
                 "the body carries only {:.0} % of the scene's load statically (it buckles or \
                  collapses), and model {name:?} does not resist collapse (its volumetric law \

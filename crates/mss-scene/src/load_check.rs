@@ -59,6 +59,13 @@ pub enum LoadCheck {
         /// Fraction of the load carried.
         load_factor: f64,
     },
+    /// The held nodes leave zero-energy modes of the lattice (rigid
+    /// motions or hourglass mechanisms): there is no unique equilibrium,
+    /// and a dynamic run under load folds along them.
+    Mechanism {
+        /// The solver's message.
+        reason: String,
+    },
     /// The static solve failed for another reason.
     Failed {
         /// The solver's message.
@@ -151,6 +158,9 @@ impl LoadCheck {
             }
             Err(SolverError::LoadLimit { load_factor, .. }) => LoadCheck::LoadLimit { load_factor },
             Err(SolverError::Cancelled { .. }) => skipped("stopped"),
+            Err(e @ SolverError::Mechanism { .. }) => LoadCheck::Mechanism {
+                reason: e.to_string(),
+            },
             Err(e) => LoadCheck::Failed {
                 reason: e.to_string(),
             },
@@ -178,6 +188,9 @@ impl LoadCheck {
             )),
             LoadCheck::Failed { reason } => Some(format!(
                 "the static solve of the scene's load failed: {reason}"
+            )),
+            LoadCheck::Mechanism { reason } => Some(format!(
+                "the static solve of the scene's load is refused: {reason}"
             )),
             _ => None,
         }
@@ -209,6 +222,7 @@ impl LoadCheck {
                 100.0 * load_factor
             ),
             LoadCheck::Failed { reason } => format!("static solve failed: {reason}"),
+            LoadCheck::Mechanism { reason } => format!("no unique static equilibrium: {reason}"),
             LoadCheck::Skipped { reason } => format!("not solved: {reason}"),
         }
     }

@@ -53,6 +53,13 @@ pub struct StaticOptions {
     /// out through its nearest faces (a box pressed 1.2 cells into a block
     /// gave a fifth of the force).
     pub obstacles_from: Option<f64>,
+    /// Solve even when the held nodes leave zero-energy modes (default
+    /// false: [`SolverError::Mechanism`]). The answer is then one of many:
+    /// the one the LU's round-off pivots pick, which a load that does not
+    /// excite the modes leaves meaningful. For studies of the lattice
+    /// itself (the validation experiments' 4 x 1 x 1 beams), not for
+    /// scenes.
+    pub accept_mechanisms: bool,
 }
 
 /// How far an obstacle moves along its path per load increment of a static
@@ -85,6 +92,7 @@ impl Default for StaticOptions {
             small_strain: false,
             accept_unstable: false,
             obstacles_from: None,
+            accept_mechanisms: false,
         }
     }
 }
@@ -240,6 +248,12 @@ fn solve_static_here(
             message,
             nodes: Vec::new(),
         });
+    }
+    if cancel.load(Ordering::Relaxed) {
+        return Err(SolverError::Cancelled { load_factor: 0.0 });
+    }
+    if problem.contact().is_none() && !problem.has_restraining_load() && !opts.accept_mechanisms {
+        refuse_mechanisms(problem)?;
     }
     let free = problem.free_mask();
     let rest = model.rest_positions();
@@ -486,6 +500,58 @@ fn solve_static_here(
         linear: linear.stats(),
         stability,
     })
+}
+
+/// Refuses a problem whose held nodes leave zero-energy modes of the rest
+/// stiffness ([`crate::modes`], as `mss check` counts them): its equilibrium
+/// is not unique, whatever the load. Newton's LU factors such a matrix with
+/// round-off pivots and returned an answer, silently, for most models and
+/// loads. Obstacles and restraining loads may hold the modes: the caller
+/// skips the count then.
+///
+/// The count must stay cheap beside the solve: with hourglass control it is
+/// the rigid-cell count (exact, linear in the cells); without, the dense
+/// eigenvalues up to [`crate::modes::DENSE_LIMIT`] free dofs (exact), and
+/// beyond that the modes that move every cell rigidly (a lower bound, linear:
+/// the subspace count factors the stiffness, which tripled the time and
+/// quintupled the memory of a 64 x 16 x 16 `paper` solve), Newton's own
+/// singularity checks catching the rest.
+fn refuse_mechanisms(problem: &Problem) -> Result<(), SolverError> {
+    use crate::modes;
+    let model = problem.model();
+    let mask: Vec<[bool; 3]> = (0..model.num_nodes())
+        .map(|n| problem.constraints().mask(n))
+        .collect();
+    let rigid = modes::cells_are_rigid(model);
+    let free = mask.iter().flatten().filter(|&&held| !held).count();
+    let count = if free <= modes::DENSE_LIMIT {
+        modes::zero_energy_modes_dense(model, &mask).ok()
+    } else {
+        // Rigid motions of the cells have no energy in any model.
+        modes::zero_energy_modes_rigid_cells(model, &mask)
+    };
+    match count {
+        Some(z) if z.count > 0 => Err(SolverError::Mechanism {
+            message: format!(
+                "the held nodes leave {}{} zero-energy mode(s) (rigid motions, or hourglass \
+                 mechanisms of the lattice): the static problem has no unique solution; hold a \
+                 larger region (a whole face){}",
+                z.count,
+                if z.exact && (rigid || z.method == "dense") {
+                    ""
+                } else {
+                    " or more"
+                },
+                if rigid {
+                    ""
+                } else {
+                    ", or add hourglass control (parts one cell thick keep hourglass mechanisms however they are held)"
+                }
+            ),
+            nodes: Vec::new(),
+        }),
+        _ => Ok(()),
+    }
 }
 
 /// Largest Cholesky factor (bytes) that the stability test of a static
