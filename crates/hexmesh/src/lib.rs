@@ -75,7 +75,7 @@ pub mod voxelize;
 #[cfg(feature = "vtk")]
 pub mod vtk;
 #[cfg(feature = "vtk")]
-mod vtk_bounds;
+pub mod vtk_bounds;
 pub mod winding;
 
 pub use embed::Embedding;

@@ -70,7 +70,7 @@ thread_local! {
 /// catching its panic without the panic hook printing it: the caller turns
 /// it into one error line. Other threads' panics print as before (the
 /// previous hook runs for them).
-fn catch_quietly<R>(f: impl FnOnce() -> R + std::panic::UnwindSafe) -> std::thread::Result<R> {
+pub fn catch_quietly<R>(f: impl FnOnce() -> R + std::panic::UnwindSafe) -> std::thread::Result<R> {
     static HOOK: std::sync::Once = std::sync::Once::new();
     HOOK.call_once(|| {
         let previous = std::panic::take_hook();

@@ -119,7 +119,7 @@ fn array_bytes(text: &[u8], layout: &Layout) -> Result<u64, String> {
 /// decompresses it: its header agrees with its text, what it will allocate
 /// fits what its piece declares, and the file's total fits `budget` bytes.
 /// The error is the line of the array and what is wrong.
-pub(crate) fn check_compressed_arrays(bytes: &[u8], budget: u64) -> Result<(), (usize, String)> {
+pub fn check_compressed_arrays(bytes: &[u8], budget: u64) -> Result<(), (usize, String)> {
     let mut reader = quick_xml::Reader::from_reader(bytes);
     let line_at = |pos: u64| {
         let pos = (pos as usize).min(bytes.len());

@@ -193,7 +193,9 @@ fn fields(
 
 /// Reads a lattice frame written by [`super::write_vtu`] (any encoding):
 /// hexahedra only, every index in range, fields of the right lengths. Files
-/// larger than `max_bytes` are refused before they are read.
+/// larger than `max_bytes` are refused before they are read, and compressed
+/// arrays whose headers declare more than their piece holds, or more than
+/// `max_bytes` in all, before they are decompressed.
 pub fn read_lattice_vtu(path: &Path, max_bytes: u64) -> Result<LatticeFrameData, ReadError> {
     let size = std::fs::metadata(path)
         .map_err(|source| ReadError::Io {
@@ -207,14 +209,27 @@ pub fn read_lattice_vtu(path: &Path, max_bytes: u64) -> Result<LatticeFrameData,
             format!("{size} bytes, more than the {max_bytes} a frame may have here"),
         ));
     }
-    let imported = std::panic::catch_unwind(|| vtkio::Vtk::import(path))
-        .map_err(|_| {
-            invalid(
-                path,
-                "the VTK reader failed on this file (malformed XML VTK)",
-            )
-        })?
-        .map_err(|e| invalid(path, format!("not a readable VTK file: {e}")))?;
+    let bytes = std::fs::read(path).map_err(|source| ReadError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    // vtkio allocates what a compressed array's header declares and slices
+    // its blocks by the header's sizes: a forged frame of a megabyte asked
+    // for gigabytes, or panicked. The headers are checked first, against
+    // what the frame's pieces declare and `max_bytes` for the whole frame.
+    if let Err((line, why)) = hexmesh::vtk_bounds::check_compressed_arrays(&bytes, max_bytes) {
+        return Err(invalid(path, format!("line {line}: {why}")));
+    }
+    let imported = hexmesh::vtk::catch_quietly(|| {
+        vtkio::Vtk::parse_xml(std::io::Cursor::new(bytes.as_slice()))
+    })
+    .map_err(|_| {
+        invalid(
+            path,
+            "the VTK reader failed on this file (malformed XML VTK)",
+        )
+    })?
+    .map_err(|e| invalid(path, format!("not a readable VTK file: {e}")))?;
     let vtkio::model::DataSet::UnstructuredGrid { mut pieces, .. } = imported.data else {
         return Err(invalid(path, "not an unstructured grid (.vtu)"));
     };

@@ -479,3 +479,40 @@ fn skin_exporters_write_every_frame_or_the_last() {
     assert_eq!(top, 3.0);
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 4);
 }
+
+#[test]
+fn a_frame_whose_compressed_header_lies_is_refused_before_it_is_unpacked() {
+    use base64::Engine as _;
+    let s = sample();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("frame.vtu");
+    write_vtu(&path, &frame(&s), VtuEncoding::Base64Zlib).unwrap();
+    let read = |p: &Path| mss_io::vtk::read::read_lattice_vtu(p, 1 << 30);
+    assert_eq!(read(&path).unwrap().points.len(), s.points.len());
+    // The points' header (UInt64 fields: blocks, block size, last block,
+    // then each block's compressed size) rewritten to declare a gigabyte.
+    let text = std::fs::read_to_string(&path).unwrap();
+    assert!(text.contains("header_type=\"UInt64\""), "{text}");
+    let start = text.find("<Points>").unwrap();
+    let array = start + text[start..].find("format=\"binary\">").unwrap() + 16;
+    let array = array + text[array..].find(|c: char| !c.is_whitespace()).unwrap();
+    let engine = base64::engine::general_purpose::STANDARD;
+    let honest_len = engine.encode([0u8; 32]).len();
+    let mut lie = Vec::new();
+    for v in [1024u64, 1 << 20, 1 << 20].into_iter().chain([1u64; 1024]) {
+        lie.extend_from_slice(&v.to_le_bytes());
+    }
+    let forged = format!(
+        "{}{}{}",
+        &text[..array],
+        engine.encode(lie),
+        &text[array + honest_len..]
+    );
+    let bad = dir.path().join("forged.vtu");
+    std::fs::write(&bad, forged).unwrap();
+    let err = read(&bad).unwrap_err().to_string();
+    assert!(
+        err.contains("forged.vtu") && err.contains("line 25") && err.contains("compression header"),
+        "{err}"
+    );
+}
