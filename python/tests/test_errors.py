@@ -142,3 +142,62 @@ def test_messages_speak_python():
         model.internal_forces(lattice.nodes, out=out)
     sim = hexmss.Simulation(problem)
     assert repr(sim).startswith(f"Simulation({model.num_nodes} nodes, t = 0")
+
+
+def _diverging_run():
+    # Every node flung apart at 100 m/s: cells invert within a sub-step,
+    # whatever the step control halves.
+    lattice = hexmss.Lattice.block((3, 3, 3), 0.05)
+    model = hexmss.Model(lattice, hexmss.Material(1e5, 0.3, 1000.0))
+    problem = hexmss.Problem(model)
+    state = hexmss.State(problem)
+    rng = np.random.default_rng(3)
+    state.v = rng.normal(scale=100.0, size=state.x.shape)
+    hexmss.Integrator(problem, "explicit").step(state, n=50)
+
+
+def _too_long_a_step():
+    lattice = hexmss.Lattice.block((3, 3, 3), 0.05)
+    model = hexmss.Model(lattice, hexmss.Material(1e5, 0.3, 1000.0))
+    hexmss.Integrator(hexmss.Problem(model), "explicit", dt=1.0)
+
+
+def _mechanism():
+    lattice = hexmss.Lattice.block((4, 1, 1), 0.05)
+    model = hexmss.Model(lattice, hexmss.Material(1e5, 0.3, 1000.0), "springs")
+    problem = hexmss.Problem(
+        model, fixed=[{"kind": "face", "face": "x-"}], gravity=[0, 0, -9.81]
+    )
+    hexmss.solve_static(problem)
+
+
+def _subclasses(cls):
+    for sub in cls.__subclasses__():
+        yield sub
+        yield from _subclasses(sub)
+
+
+def test_every_error_class_is_raised_as_itself_with_one_plain_sentence(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    cases = {
+        hexmss.SceneError: lambda: hexmss.Scene.from_toml("[mesh]\npath = 3\n"),
+        hexmss.MeshError: lambda: hexmss.load_mesh(str(tmp_path / "missing.obj")),
+        hexmss.VoxelizeError: lambda: hexmss.voxelize(hexmss.load_mesh("builtin:critter"), cells=0),
+        hexmss.ModelError: lambda: hexmss.Material(1e5, 0.5, 1000.0),
+        hexmss.SolverError: _too_long_a_step,
+        hexmss.DivergedError: _diverging_run,
+        hexmss.MechanismError: _mechanism,
+        hexmss.OutputError: lambda: hexmss.run(small_scene(), out=blocker / "out"),
+        hexmss.ResourceError: lambda: hexmss.prepare(small_scene(), max_memory="1KiB"),
+    }
+    # A class added without a case here fails this test.
+    assert set(cases) == set(_subclasses(hexmss.HexmssError))
+    for kind, call in cases.items():
+        with pytest.raises(hexmss.HexmssError) as e:
+            call()
+        assert type(e.value) is kind, (kind, type(e.value), str(e.value))
+        text = str(e.value)
+        assert text and "\n" not in text, text
+        for raw in ["Some(", "None)", "Error {", "Error(", "::", " { ", "{:?}"]:
+            assert raw not in text, (kind, text)
