@@ -106,6 +106,9 @@ struct Entry {
     key: u64,
     /// Index into the grid's triangle geometry.
     geometry: u32,
+    /// The triangle's body: a point skips its own body's triangles (unless
+    /// it touches itself) before their geometry is read.
+    body: u32,
 }
 
 /// A candidate triangle at the current positions, with what every point
@@ -232,6 +235,7 @@ impl Grid {
             Entry {
                 key: 0,
                 geometry: 0,
+                body: 0,
             },
         );
         for e in unsorted {
@@ -593,6 +597,7 @@ impl BodyContact {
                         entries.push(Entry {
                             key: grid_key([i, j, k]),
                             geometry: index,
+                            body: tri.body,
                         });
                     }
                 }
@@ -764,9 +769,11 @@ impl BodyContact {
         };
         let mut facing: Option<(f64, Pair)> = None;
         let mut other: Option<(f64, Pair)> = None;
+        let own = self.point_body[i];
+        let touches_itself = self.self_contact[own as usize];
         for key in cells.map(grid_key) {
             for e in keys.bucket(key) {
-                if e.key != key {
+                if e.key != key || (e.body == own && !touches_itself) {
                     continue;
                 }
                 let g = &keys.geometry[e.geometry as usize];
