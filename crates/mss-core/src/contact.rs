@@ -789,7 +789,8 @@ impl Contact {
     }
 
     /// Adds the forces the explicit solver integrates explicitly: the
-    /// surface vertices' and those between bodies.
+    /// surface vertices' and those between bodies; notes in `touched` every
+    /// node whose entry of `f` it changed.
     pub fn add_explicit_forces(
         &self,
         t: f64,
@@ -797,10 +798,16 @@ impl Contact {
         v: &[Vec3],
         anchors: &[Option<Vec3>],
         f: &mut [Vec3],
+        touched: &mut Vec<u32>,
     ) {
-        self.add_forces_of(&self.surface_points, t, x, v, anchors, f);
+        for &i in &self.surface_points {
+            if self.add_point_forces(i as usize, t, x, v, anchors, f) {
+                let point = &self.points[i as usize];
+                touched.extend_from_slice(&point.nodes[..point.len]);
+            }
+        }
         if let Some(b) = &self.bodies {
-            b.add_forces(x, v, self.body_anchors(anchors), f);
+            b.add_forces_noting(x, v, self.body_anchors(anchors), f, touched);
         }
     }
 
@@ -813,9 +820,8 @@ impl Contact {
         if anchors.len() != self.num_anchors() {
             *anchors = vec![None; self.num_anchors()];
         }
-        let mut tail = anchors.split_off(self.num_obstacle_anchors());
-        b.update_anchors(x, v, &mut tail);
-        anchors.extend(tail);
+        let start = self.num_obstacle_anchors();
+        b.update_anchors(x, v, &mut anchors[start..]);
     }
 
     /// Anchors node point `i`, for every obstacle it has no anchor on, where
@@ -871,9 +877,8 @@ impl Contact {
             }
         }
         if let Some(b) = &self.bodies {
-            let mut tail = anchors.split_off(self.num_obstacle_anchors());
-            b.anchor_at_step_start(x, v, dt, &mut tail);
-            anchors.extend(tail);
+            let start = self.num_obstacle_anchors();
+            b.anchor_at_step_start(x, v, dt, &mut anchors[start..]);
         }
     }
 
@@ -1133,6 +1138,7 @@ impl Contact {
         }
     }
 
+    /// Adds point `i`'s contact forces to `f`; whether it touched anything.
     fn add_point_forces(
         &self,
         i: usize,
@@ -1141,18 +1147,21 @@ impl Contact {
         v: &[Vec3],
         anchors: &[Option<Vec3>],
         f: &mut [Vec3],
-    ) {
+    ) -> bool {
         let nobs = self.obstacles.len();
         let point = &self.points[i];
         let (xp, vp) = (point.position(x), point.position(v));
+        let mut touched = false;
         for j in 0..nobs {
             let k = i * nobs + j;
             if let Some((touch, _)) = self.touch(i, j, t, xp, vp, Self::anchor_of(anchors, k)) {
                 for (n, w) in point.bound() {
                     f[n] += touch.force * w;
                 }
+                touched = true;
             }
         }
+        touched
     }
 
     /// Adds `d(contact force)/dx` to `jac` (pattern of the model, diagonal

@@ -703,13 +703,22 @@ impl BodyContact {
     /// A key of the points' positions' bits (every node of a surface
     /// triangle is a point): any change of one coordinate changes it.
     fn positions_key(&self, x: &[Vec3]) -> u64 {
-        let mut h = 0xcbf2_9ce4_8422_2325u64;
+        // Three independent chains (one per coordinate), not one: a step
+        // asks three or four times, and one chain of multiplications over
+        // every point's coordinates waited on each product in turn.
+        const PRIME: u64 = 0x0000_0100_0000_01b3;
+        let mut h = [0xcbf2_9ce4_8422_2325u64; 3];
         for &n in &self.points {
-            for c in x[n as usize].iter() {
-                h = (h ^ c.to_bits()).wrapping_mul(0x0000_0100_0000_01b3);
+            let p = x[n as usize];
+            for (h, c) in h.iter_mut().zip(p.iter()) {
+                *h = (*h ^ c.to_bits()).wrapping_mul(PRIME);
             }
         }
-        h ^ x.len() as u64
+        let mut key = x.len() as u64;
+        for part in h {
+            key = (key ^ part).wrapping_mul(PRIME);
+        }
+        key
     }
 
     /// The points deeper than `-margin` cells in a body at `x` (a negative
@@ -865,6 +874,25 @@ impl BodyContact {
         }
     }
 
+    /// [`BodyContact::add_forces`], noting in `touched` every node whose
+    /// entry of `f` it changed (the explicit step then clears those only,
+    /// not every node's).
+    pub fn add_forces_noting(
+        &self,
+        x: &[Vec3],
+        v: &[Vec3],
+        anchors: &[Option<Vec3>],
+        f: &mut [Vec3],
+        touched: &mut Vec<u32>,
+    ) {
+        for pair in self.pairs(x, anchors).iter() {
+            let touch = self.touch(pair, x, v, anchors);
+            self.spread(pair, touch.force, f);
+            touched.push(self.points[pair.point as usize]);
+            touched.extend(self.triangles[pair.triangle as usize].nodes);
+        }
+    }
+
     /// The force on the point and minus it on the triangle, by its weights.
     fn spread(&self, pair: &Pair, force: Vec3, f: &mut [Vec3]) {
         let tri = &self.triangles[pair.triangle as usize];
@@ -950,15 +978,18 @@ impl BodyContact {
     /// [`BodyContact::update_anchors`]), a new contact's first forces have
     /// no friction, and a body that hops as it slides loses a step of
     /// friction at every landing.
+    ///
+    /// `anchors` holds one entry per point ([`BodyContact::num_points`]);
+    /// of another length it is left alone.
     pub fn anchor_at_step_start(
         &self,
         x: &[Vec3],
         v: &[Vec3],
         dt: f64,
-        anchors: &mut Vec<Option<Vec3>>,
+        anchors: &mut [Option<Vec3>],
     ) {
         if anchors.len() != self.points.len() {
-            *anchors = vec![None; self.points.len()];
+            return;
         }
         let start = |n: u32| x[n as usize] - v[n as usize] * dt;
         for pair in self.pairs(x, anchors).iter() {
@@ -976,24 +1007,38 @@ impl BodyContact {
 
     /// After a step: anchors new contacts where they touched, lets sliding
     /// ones follow to the kinetic limit, clears those that left. `anchors`
-    /// holds one entry per point (resized if needed).
-    pub fn update_anchors(&self, x: &[Vec3], v: &[Vec3], anchors: &mut Vec<Option<Vec3>>) {
+    /// holds one entry per point ([`BodyContact::num_points`]; of another
+    /// length it is refilled with `None`s first).
+    ///
+    /// In place: a pair's new anchor depends on its own point's old one
+    /// only, and the pairs are found before any changes.
+    pub fn update_anchors(&self, x: &[Vec3], v: &[Vec3], anchors: &mut [Option<Vec3>]) {
         if anchors.len() != self.points.len() {
-            *anchors = vec![None; self.points.len()];
+            anchors.fill(None);
+            if anchors.len() != self.points.len() {
+                return;
+            }
         }
-        let mut next = vec![None; self.points.len()];
-        for pair in self.pairs(x, anchors).iter() {
+        let pairs = self.pairs(x, anchors);
+        // The points that touch no more (pairs are in point order).
+        let mut next_pair = pairs.iter().map(|p| p.point as usize).peekable();
+        for (i, a) in anchors.iter_mut().enumerate() {
+            while next_pair.next_if(|&p| p < i).is_some() {}
+            if next_pair.peek() != Some(&i) {
+                *a = None;
+            }
+        }
+        for pair in pairs.iter() {
             let i = pair.point as usize;
             let encode = |t: u32, beta: [f64; 3]| Some(Vec3::new(f64::from(t), beta[1], beta[2]));
             let here = encode(pair.triangle, pair.beta);
             let old = Self::anchor_of(anchors, i);
-            next[i] = match old {
+            anchors[i] = match old {
                 None => here,
                 Some(anchor) => {
                     let touch = self.touch(pair, x, v, anchors);
                     let target = if !touch.sliding {
                         if anchor.0 == pair.triangle {
-                            next[i] = anchors[i];
                             continue;
                         }
                         self.anchor_position(x, anchor)
@@ -1024,7 +1069,6 @@ impl BodyContact {
                 }
             };
         }
-        *anchors = next;
     }
 
     /// Anchors for a static solve: every point that lies within the depth

@@ -619,14 +619,11 @@ impl Explicit {
         }
     }
 
-    /// Zeroes the contact forces of the kicks.
-    fn clear_contact_forces(&mut self, contact: &Contact) {
-        if !contact.has_explicit_part() {
-            for &n in &self.contact_touched {
-                self.f_contact[n as usize] = Vec3::zeros();
-            }
-        } else {
-            self.f_contact.fill(Vec3::zeros());
+    /// Zeroes the contact forces of the kicks (the entries written since
+    /// the last clearing: every contact force notes its nodes).
+    fn clear_contact_forces(&mut self) {
+        for &n in &self.contact_touched {
+            self.f_contact[n as usize] = Vec3::zeros();
         }
         self.contact_touched.clear();
     }
@@ -639,7 +636,7 @@ impl Explicit {
         let Some(contact) = problem.contact() else {
             return;
         };
-        self.clear_contact_forces(contact);
+        self.clear_contact_forces();
         self.stamp = self.stamp.wrapping_add(1);
         if self.stamp == 0 {
             self.mark.fill(0);
@@ -682,8 +679,8 @@ impl Explicit {
             }
         }
         if contact.has_explicit_part() {
-            let f = &mut self.f_contact;
-            contact.add_explicit_forces(state.time, &state.x, &state.v, &state.contact, f);
+            let (f, touched) = (&mut self.f_contact, &mut self.contact_touched);
+            contact.add_explicit_forces(state.time, &state.x, &state.v, &state.contact, f, touched);
         }
     }
 
@@ -722,7 +719,7 @@ impl Explicit {
         let cons = problem.constraints();
         let tolerance = 1e-12 * model.h();
         if verlet {
-            self.clear_contact_forces(contact);
+            self.clear_contact_forces();
         }
         let mut ok = true;
         for k in 0..self.candidates.len() {
@@ -794,8 +791,8 @@ impl Explicit {
         if contact.has_explicit_part() {
             contact.anchor_explicit_at_step_start(t1, &state.x, &state.v, dt, &mut state.contact);
             if verlet {
-                let f = &mut self.f_contact;
-                contact.add_explicit_forces(t1, &state.x, &state.v, &state.contact, f);
+                let (f, touched) = (&mut self.f_contact, &mut self.contact_touched);
+                contact.add_explicit_forces(t1, &state.x, &state.v, &state.contact, f, touched);
             }
         }
         ok
