@@ -49,8 +49,8 @@ pub use explicit::{
 pub use implicit::{Implicit, ImplicitOptions};
 pub use linear::{DIRECT_MAX_FREE_DOFS, LinearSolver, LinearSolverKind, LinearStats};
 pub use statics::{
-    MAX_FAILED_INCREMENTS, OBSTACLE_INCREMENT, STABILITY_TEST_MAX_FACTOR_BYTES, Stability,
-    StaticInfo, StaticOptions, solve_static, solve_static_cancellable,
+    FOLLOW_DEPTH, MAX_FAILED_INCREMENTS, OBSTACLE_INCREMENT, STABILITY_TEST_MAX_FACTOR_BYTES,
+    Stability, StaticInfo, StaticOptions, solve_static, solve_static_cancellable,
 };
 
 use crate::constraints::{ConstraintError, ConstraintSpec, Constraints};

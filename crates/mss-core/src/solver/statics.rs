@@ -44,10 +44,11 @@ pub struct StaticOptions {
     /// of returning [`SolverError::UnstableEquilibrium`] (default false).
     pub accept_unstable: bool,
     /// The time at which the starting state was in equilibrium with the
-    /// obstacles (a body at rest at time 0: `Some(0.0)`): the solve then
-    /// moves the obstacles along their paths from that time to the state's,
-    /// at most [`OBSTACLE_INCREMENT`] of a cell per load increment, as a
-    /// slow press would, friction anchors following. `None` (the default):
+    /// obstacles (a body at rest at time 0: `Some(0.0)`): when an obstacle
+    /// ends more than [`FOLLOW_DEPTH`] cells inside the starting state, the
+    /// solve moves the obstacles along their paths from that time to the
+    /// state's, at most [`OBSTACLE_INCREMENT`] of a cell per load increment,
+    /// as a slow press would, friction anchors following. `None` (the default):
     /// the obstacles are where they are at the state's time from the start,
     /// and an obstacle that has moved deep into the body pushes its nodes
     /// out through its nearest faces (a box pressed 1.2 cells into a block
@@ -65,6 +66,21 @@ pub struct StaticOptions {
 /// How far an obstacle moves along its path per load increment of a static
 /// solve that follows it (in cells of the model).
 pub const OBSTACLE_INCREMENT: f64 = 0.25;
+
+/// How deep (in cells) an obstacle must end inside the starting state for a
+/// static solve to follow it along its path.
+pub const FOLLOW_DEPTH: f64 = 0.5;
+
+/// The deepest that any point of `contact` at `x` lies inside an obstacle
+/// at time `t` (m; 0 when none does).
+fn deepest_overlap(contact: &crate::contact::Contact, t: f64, x: &[Vec3]) -> f64 {
+    let points = contact.point_positions(x);
+    contact
+        .obstacles()
+        .flat_map(|(o, _)| points.iter().filter_map(move |&p| o.penetration(t, p)))
+        .map(|pen| pen.depth)
+        .fold(0.0, f64::max)
+}
 
 /// The length of the longest obstacle path of `contact` from `t0` to `t1`
 /// (m), sampled at 256 times.
@@ -274,9 +290,15 @@ fn solve_static_here(
     }
     // Obstacles that move far enough are followed along their paths.
     let t_end = state.time;
+    // Only when they end deep in the body as it starts: an obstacle that
+    // ends outside it, or barely in, is where a slow press leaves it too
+    // (a press and release ends touching nothing), and following costs an
+    // increment per quarter cell of its path.
     let follow_from = match (problem.contact(), opts.obstacles_from) {
         (Some(c), Some(t0))
-            if t0 < t_end && obstacle_travel(c, t0, t_end) > OBSTACLE_INCREMENT * model.h() =>
+            if t0 < t_end
+                && deepest_overlap(c, t_end, &state.x) > FOLLOW_DEPTH * model.h()
+                && obstacle_travel(c, t0, t_end) > OBSTACLE_INCREMENT * model.h() =>
         {
             Some((t0, obstacle_travel(c, t0, t_end)))
         }
