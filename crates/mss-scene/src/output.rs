@@ -448,12 +448,12 @@ impl FrameWriter {
                 .then(|| PvdWriter::new(dir.join(format!("{SPRINGS_PREFIX}.pvd")))),
             encoding: out.compression.encoding(),
         });
-        let lattice_pvd = out.vtu && out.pvd && !out.last_only;
+        let series = out.vtu && out.pvd && !out.last_only;
         Ok(Self {
             dir: dir.to_path_buf(),
             parts,
             lattice_pvd: out.vtu && out.pvd,
-            parts_pvd: (several && lattice_pvd)
+            parts_pvd: (several && series)
                 .then(|| PvdWriter::new(dir.join(format!("{LATTICE_PREFIX}.pvd")))),
             springs,
             times: Vec::new(),

@@ -296,11 +296,10 @@ fn solve_static_here(
     // increment per quarter cell of its path.
     let follow_from = match (problem.contact(), opts.obstacles_from) {
         (Some(c), Some(t0))
-            if t0 < t_end
-                && deepest_overlap(c, t_end, &state.x) > FOLLOW_DEPTH * model.h()
-                && obstacle_travel(c, t0, t_end) > OBSTACLE_INCREMENT * model.h() =>
+            if t0 < t_end && deepest_overlap(c, t_end, &state.x) > FOLLOW_DEPTH * model.h() =>
         {
-            Some((t0, obstacle_travel(c, t0, t_end)))
+            let travel = obstacle_travel(c, t0, t_end);
+            (travel > OBSTACLE_INCREMENT * model.h()).then_some((t0, travel))
         }
         _ => None,
     };

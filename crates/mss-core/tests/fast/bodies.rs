@@ -200,12 +200,8 @@ fn contact_between_bodies_keeps_momentum_and_does_not_depend_on_threads() {
     let largest = f.iter().map(|v| v.norm()).fold(0.0, f64::max);
     assert!(largest > 0.0, "they overlap: contact forces");
     assert!(total.norm() < 1e-12 * largest * f.len() as f64, "{total:?}");
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(1)
-        .build()
-        .unwrap();
     let mut f1 = vec![Vec3::zeros(); p.model().num_nodes()];
-    pool.install(|| bodies.add_forces(&s.x, &s.v, &[], &mut f1));
+    crate::on_threads(1, || bodies.add_forces(&s.x, &s.v, &[], &mut f1));
     assert_eq!(f, f1);
 }
 
@@ -453,11 +449,7 @@ fn self_contact_keeps_a_folded_body_from_passing_through_itself() {
 #[test]
 fn bodies_in_contact_step_the_same_bits_on_any_thread_count() {
     let run = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| {
+        crate::on_threads(threads, || {
             let p = stack(-0.0005, 5.0);
             let mut it = Explicit::new(&p, ExplicitOptions::default()).unwrap();
             let mut s = State::at_rest(p.model());

@@ -434,11 +434,7 @@ fn a_simulation_drags_and_pushes_the_same_for_any_thread_count() {
     use mss_core::contact::Steered;
     use mss_core::simulation::Simulation;
     let run = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| {
+        crate::on_threads(threads, || {
             let model = block(0.0);
             let settings = ContactSettings::for_model(&model);
             let (ball, handle) = Steered::new(Box::new(

@@ -11,11 +11,7 @@ use mss_core::solver::{
 use mss_core::{Material, Model, Vec3};
 
 fn run(threads: usize) -> State {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .unwrap();
-    pool.install(|| {
+    crate::on_threads(threads, || {
         // 25 x 20 x 20 = 10^4 cells.
         let lattice = Lattice::block([25, 20, 20], 0.01, [0.0; 3]).unwrap();
         let model = Model::new(
@@ -81,11 +77,7 @@ fn bits(s: &State) -> Vec<u64> {
 /// A 12x3x3 cantilever under a large gravity load: a static solve and 5
 /// implicit steps at 20 times the explicit limit, in a pool of `threads`.
 fn implicit_and_static(threads: usize) -> (State, State) {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .unwrap();
-    pool.install(|| {
+    crate::on_threads(threads, || {
         let lattice = Lattice::block([12, 3, 3], 0.025, [0.0; 3]).unwrap();
         let model = Model::new(
             &lattice,

@@ -11,3 +11,13 @@ mod model_facts;
 mod rigid_cell_modes;
 mod solvers;
 mod step_control;
+
+/// Runs `f` in a rayon pool of `threads` threads: the determinism tests
+/// compare runs on several thread counts.
+pub fn on_threads<R: Send>(threads: usize, f: impl FnOnce() -> R + Send) -> R {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap()
+        .install(f)
+}

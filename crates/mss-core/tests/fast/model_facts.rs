@@ -403,11 +403,7 @@ fn forces_are_bitwise_identical_for_any_thread_count() {
         let model = Model::new(&l, mat(100.0, 0.3, 1.0), param).unwrap();
         let x = deformed(&model, 5);
         let run = |threads: usize| {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap();
-            pool.install(|| {
+            crate::on_threads(threads, || {
                 let mut ws = model.workspace();
                 let mut f = vec![Vec3::zeros(); x.len()];
                 model.internal_forces_with(&x, &mut ws, &mut f);
@@ -519,15 +515,11 @@ fn the_frequency_estimate_is_the_true_one_on_rough_lattices() {
 fn the_frequency_estimate_does_not_depend_on_the_thread_count() {
     let l = Lattice::block([9, 7, 5], 0.01, [0.0; 3]).unwrap();
     let estimate = |threads: usize| {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap()
-            .install(|| {
-                Model::new(&l, mat(1e4, 0.3, 1000.0), &PaperModel)
-                    .unwrap()
-                    .omega_max()
-            })
+        crate::on_threads(threads, || {
+            Model::new(&l, mat(1e4, 0.3, 1000.0), &PaperModel)
+                .unwrap()
+                .omega_max()
+        })
     };
     let one = estimate(1);
     assert_eq!(one.to_bits(), estimate(2).to_bits());

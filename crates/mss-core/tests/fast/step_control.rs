@@ -33,11 +33,7 @@ fn compressed_block() -> (Problem, State) {
 
 /// Runs 0.3 s; the final state and the sub-step counts of every step.
 fn release(threads: usize) -> (State, Vec<u32>) {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .unwrap();
-    pool.install(|| {
+    crate::on_threads(threads, || {
         let (problem, mut state) = compressed_block();
         let mut integ = Explicit::new(&problem, ExplicitOptions::default()).unwrap();
         let steps = (0.3 / integ.dt()).ceil() as usize;
