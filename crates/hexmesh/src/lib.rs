@@ -62,6 +62,8 @@
 
 pub mod embed;
 pub mod generate;
+#[cfg(feature = "image")]
+pub mod image;
 pub mod lattice;
 pub mod load;
 pub mod loader;

@@ -382,12 +382,31 @@ pub fn plan_grid(mesh: &TriMesh, opts: &VoxelizeOptions) -> Result<Grid, Voxeliz
     {
         return Err(VoxelizeError::NonFinite(i));
     }
+    grid_around(
+        lo,
+        hi,
+        opts.resolution,
+        opts.padding_cells,
+        opts.max_grid_cells,
+    )
+}
+
+/// The grid of cubes covering the box `lo`..`hi` (m) at `resolution`, with
+/// `padding` empty cells on every side, centred on the box; refused past
+/// `max_grid_cells` before anything is allocated.
+pub(crate) fn grid_around(
+    lo: [f64; 3],
+    hi: [f64; 3],
+    resolution: Resolution,
+    padding: u32,
+    max_grid_cells: u64,
+) -> Result<Grid, VoxelizeError> {
     let ext: [f64; 3] = std::array::from_fn(|k| hi[k] - lo[k]);
     let longest = ext[0].max(ext[1]).max(ext[2]);
     if longest <= 0.0 {
         return Err(VoxelizeError::ZeroExtent);
     }
-    let h = match opts.resolution {
+    let h = match resolution {
         Resolution::CellsAlongLongestAxis(n) if n >= 1 => longest / n as f64,
         Resolution::CellSize(h) if h.is_finite() && h > 0.0 => h,
         r => return Err(VoxelizeError::BadResolution(format!("{r:?}"))),
@@ -395,7 +414,7 @@ pub fn plan_grid(mesh: &TriMesh, opts: &VoxelizeOptions) -> Result<Grid, Voxeliz
     if h > longest {
         return Err(VoxelizeError::MeshSmallerThanCell { longest, h });
     }
-    let pad = opts.padding_cells as u64;
+    let pad = padding as u64;
     let mut dims64 = [0u64; 3];
     for k in 0..3 {
         // Tolerance so that an extent of exactly n cells gives n, not n + 1.
@@ -404,7 +423,7 @@ pub fn plan_grid(mesh: &TriMesh, opts: &VoxelizeOptions) -> Result<Grid, Voxeliz
             return Err(VoxelizeError::GridTooLarge {
                 dims: [u64::MAX; 3],
                 cells: u64::MAX,
-                max_grid_cells: opts.max_grid_cells,
+                max_grid_cells,
             });
         }
         dims64[k] = n as u64 + 2 * pad;
@@ -413,11 +432,11 @@ pub fn plan_grid(mesh: &TriMesh, opts: &VoxelizeOptions) -> Result<Grid, Voxeliz
         .iter()
         .try_fold(1u64, |a, &d| a.checked_mul(d))
         .unwrap_or(u64::MAX);
-    if cells > opts.max_grid_cells || dims64.iter().any(|&d| d > u32::MAX as u64 / 2) {
+    if cells > max_grid_cells || dims64.iter().any(|&d| d > u32::MAX as u64 / 2) {
         return Err(VoxelizeError::GridTooLarge {
             dims: dims64,
             cells,
-            max_grid_cells: opts.max_grid_cells,
+            max_grid_cells,
         });
     }
     let dims = dims64.map(|d| d as u32);
@@ -779,7 +798,7 @@ pub fn tri_box_overlap(centre: [f64; 3], half: f64, tri: [[f64; 3]; 3]) -> bool 
 /// Works on runs of occupied cells along x: runs in neighbouring rows (y - 1
 /// or z - 1) that overlap are joined by union-find, so the cost is in runs,
 /// not cells.
-fn filter_components(
+pub(crate) fn filter_components(
     grid: &Grid,
     occ: Vec<bool>,
     policy: ComponentPolicy,
@@ -894,7 +913,7 @@ fn filter_components(
 /// Distinct cell edges: a grid edge exists if any of the 4 cells around it
 /// is occupied. Rows of cells are packed into bits so that "any of the cells
 /// around" is an OR of shifted words.
-fn count_edges(grid: &Grid, occ: &[bool]) -> usize {
+pub(crate) fn count_edges(grid: &Grid, occ: &[bool]) -> usize {
     let [nx, ny, nz] = grid.dims.map(|d| d as usize);
     // Bit i + 1 of a packed row is cell i; bits 0 and nx + 1 stay empty.
     let words = (nx + 2).div_ceil(64);

@@ -9,6 +9,7 @@ mod convergence;
 mod critter;
 mod formats;
 mod fuzz_replay;
+mod image;
 mod load_errors;
 mod skin_embed;
 mod voxelize;
