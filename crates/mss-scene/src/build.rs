@@ -142,7 +142,7 @@ impl SceneInput {
         path: &str,
         loaders: &Loaders,
     ) -> Result<hexmesh::TriMesh, String> {
-        let placement = self.scene.bodies()[0].mesh.placement();
+        let placement = self.scene.bodies()[0].source.placement();
         self.load_placed_mesh_with(path, &placement, loaders)
     }
 
@@ -240,7 +240,7 @@ impl SceneInput {
     ) -> Result<Problem, JobError> {
         let scene = &self.scene;
         let model = union.model();
-        let placement = scene.bodies()[0].mesh.placement();
+        let placement = scene.bodies()[0].source.placement();
         let mesh_of = |path: &str| self.load_placed_mesh_with(path, &placement, &registry.loaders);
         let contact = crate::obstacles::build_contact_with(
             model,
@@ -287,7 +287,7 @@ impl SceneInput {
         extra: crate::build::ExtraObstacles,
     ) -> Result<Problem, JobError> {
         let n_fixed = body.fixed.len();
-        let placement = body.mesh.placement();
+        let placement = body.source.placement();
         let mesh_of = |path: &str| self.load_placed_mesh_with(path, &placement, &registry.loaders);
         let loads_key = |list: &str| match body.index {
             None => list.to_owned(),

@@ -8,6 +8,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
+use hexmesh::image::ImageLattice;
 use mss_core::Model;
 use mss_core::solver::{Integrator, Problem, State, solve_static_cancellable};
 use serde::Serialize;
@@ -19,7 +20,7 @@ use crate::limits::Limits;
 use crate::load_check::LoadCheck;
 use crate::output::{FrameWriter, remove_previous_run};
 use crate::registry::Registry;
-use crate::scene::{BodyView, Scene};
+use crate::scene::{BodySource, BodyView, Scene};
 use crate::stages::{PlacedMesh, RunNeeds, StageError, lattice_within, load_placed};
 
 /// What a running job reports, through the callback given to
@@ -104,9 +105,10 @@ pub struct Job {
 pub struct JobBody {
     /// Its name (`[[bodies]] name`, or `"body"`).
     pub name: String,
-    /// Display name of its mesh.
+    /// Display name of its mesh (or image).
     pub mesh_name: String,
-    /// The cleaned input surface, placed.
+    /// The cleaned input surface, placed (for an image: its labels'
+    /// boundary).
     pub mesh: hexmesh::TriMesh,
     /// How the mesh was placed (`[mesh]` units, scale, ...), described.
     pub placement: String,
@@ -117,6 +119,8 @@ pub struct JobBody {
     /// The materials of its `[[regions]]` and the cells they hold (`None`
     /// without regions).
     pub regions: Option<crate::regions::RegionAssignment>,
+    /// The image label of each cell, for a body made from an `[image]`.
+    pub cell_labels: Option<Vec<i32>>,
 }
 
 impl Job {
@@ -888,6 +892,7 @@ impl Job {
                     name: &b.name,
                     lattice: &b.lattice,
                     surface: &b.mesh,
+                    cell_labels: b.cell_labels.as_deref(),
                 })
                 .collect::<Vec<_>>(),
         )?
@@ -934,6 +939,7 @@ fn prepare_body(
             source,
         },
         StageError::Source(other) => setting(view.key("[mesh] path"), other.to_string()),
+        StageError::Image(e) => setting(view.key("[image] path"), e.to_string()),
         e @ StageError::Placement { .. } => setting(view.key("[mesh]"), e.to_string()),
         StageError::Memory {
             what,
@@ -961,43 +967,90 @@ fn prepare_body(
         .voxelize
         .options(&registry.occupancy)
         .map_err(|e| setting(view.key(&e.scene_key("[voxelize]")), e.message))?;
-    let placement = view.mesh.placement();
-    let source = Scene::source_of(&view.mesh.path, &input.origin);
-    let placed = load_placed(&source, &placement, &registry.loaders).map_err(stage_error)?;
+    let placement = view.source.placement();
     let needs = RunNeeds {
         solver: &scene.solver.kind,
         needs_matrix: !scene.solver.is_explicit(&registry.integrators),
     };
-    let hook = |done: u64, total: u64| progress(Progress::Voxelizing { done, total });
-    let vox = lattice_within(
-        &placed.mesh,
-        &placed.name,
-        &voxelize_options,
-        limits,
-        needs,
-        &hook,
-    );
-    progress(Progress::StageDone);
-    let vox = vox.map_err(stage_error)?;
-    if let Some(odd) = crate::stages::implausible_size(&placed.mesh) {
-        log::warn!(
-            "{scene_name}: {}{odd} ([mesh] units = \"mm\" or \"cm\", or scale)",
-            view.index
-                .map_or(String::new(), |_| format!("body {}: ", view.name))
-        );
-    }
-    let PlacedMesh {
-        name: mesh_name,
-        mesh,
-        ..
-    } = placed;
+    let (mesh_name, mesh, lattice, vox_stats, cell_labels) = match view.source {
+        BodySource::Mesh(section) => {
+            let source = Scene::source_of(&section.path, &input.origin);
+            let placed =
+                load_placed(&source, &placement, &registry.loaders).map_err(stage_error)?;
+            let hook = |done: u64, total: u64| progress(Progress::Voxelizing { done, total });
+            let vox = lattice_within(
+                &placed.mesh,
+                &placed.name,
+                &voxelize_options,
+                limits,
+                needs,
+                &hook,
+            );
+            progress(Progress::StageDone);
+            let vox = vox.map_err(stage_error)?;
+            if let Some(odd) = crate::stages::implausible_size(&placed.mesh) {
+                log::warn!(
+                    "{scene_name}: {}{odd} ([mesh] units = \"mm\" or \"cm\", or scale)",
+                    view.index
+                        .map_or(String::new(), |_| format!("body {}: ", view.name))
+                );
+            }
+            let PlacedMesh { name, mesh, .. } = placed;
+            (name, mesh, vox.lattice, vox.stats, None)
+        }
+        BodySource::Image(section) => {
+            let path = match Scene::source_of(&section.path, &input.origin) {
+                crate::scene::MeshSource::File(p) => p,
+                crate::scene::MeshSource::Builtin(name) => {
+                    return Err(setting(
+                        view.key("[image] path"),
+                        format!(
+                            "= \"builtin:{name}\"; built-in meshes are not images: give a label image file"
+                        ),
+                    ));
+                }
+            };
+            let choice = crate::stages::ImageChoice {
+                labels: section.labels.as_deref(),
+                threshold: section.threshold,
+                unit_metres: section.units.map(|u| u.factor()),
+                space: section.space.target(),
+                placement,
+            };
+            let placed = crate::stages::image_lattice_within(
+                &path,
+                &choice,
+                &voxelize_options,
+                limits,
+                needs,
+            );
+            progress(Progress::StageDone);
+            let placed = placed.map_err(stage_error)?;
+            log::info!(
+                "{}: {:?} voxels of {:.3?} mm; labels and voxels in the body {:?}",
+                placed.name,
+                placed.dims,
+                placed.spacing.map(|s| s * 1e3),
+                placed.lattice.voxels_per_label
+            );
+            let ImageLattice {
+                lattice,
+                cell_labels,
+                surface,
+                stats,
+                ..
+            } = placed.lattice;
+            (placed.name, surface, lattice, stats, Some(cell_labels))
+        }
+    };
     let (material, param) = input.material_of(view, registry)?;
     let regions = if view.regions.is_empty() {
         None
     } else {
         let mesh_of = |path: &str| input.load_placed_mesh_with(path, &placement, &registry.loaders);
-        let a = crate::regions::assign_regions(
-            &vox.lattice,
+        let a = crate::regions::assign_regions_with_labels(
+            &lattice,
+            cell_labels.as_deref(),
             &material,
             view.regions,
             &registry.regions,
@@ -1026,9 +1079,10 @@ fn prepare_body(
         mesh_name,
         mesh,
         placement: placement.describe(),
-        lattice: vox.lattice,
-        vox_stats: vox.stats,
+        lattice,
+        vox_stats,
         regions,
+        cell_labels,
     })
 }
 

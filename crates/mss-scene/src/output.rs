@@ -291,6 +291,9 @@ pub struct OutputBody<'a> {
     pub lattice: &'a Lattice,
     /// Its input surface, placed.
     pub surface: &'a TriMesh,
+    /// The image label of each of its cells (written as the cell field
+    /// `label`), for a body made from an image.
+    pub cell_labels: Option<&'a [i32]>,
 }
 
 /// One body's files: its lattice frames, skin and surface.
@@ -303,6 +306,8 @@ struct PartWriter {
     cells: std::ops::Range<usize>,
     /// Its cells over its own nodes.
     local_cells: Vec<[u32; 8]>,
+    /// Its cells' image labels (a body made from an image).
+    cell_labels: Option<Vec<i32>>,
     /// Lattice frame exporters with the extension of the files they write
     /// (`None` for custom exporters, whose files are not counted).
     lattice: Vec<(Box<dyn FrameExporter>, Option<&'static str>)>,
@@ -335,6 +340,7 @@ impl PartWriter {
             nodes,
             cells,
             local_cells: body.lattice.cells().to_vec(),
+            cell_labels: body.cell_labels.map(<[i32]>::to_vec),
             lattice: Vec::new(),
             skin: None,
             skin_exporters: Vec::new(),
@@ -715,6 +721,9 @@ impl FrameWriter {
                 .with_cell_field(Field::scalars("correction_force", &a.corr[c.clone()]));
             if !a.material.is_empty() {
                 frame = frame.with_cell_field(Field::ids("material", &a.material[c.clone()]));
+            }
+            if let Some(labels) = &part.cell_labels {
+                frame = frame.with_cell_field(Field::labels("label", labels));
             }
             if let Some(f) = a.contact_force {
                 frame = frame.with_point_field(Field::vectors("contact_force", &f[n.clone()]));

@@ -6,7 +6,9 @@
 //!
 //! A cell belongs to a region when its centre lies inside the region's
 //! shape (for a mesh: inside by the voxelizer's own test, a generalized
-//! winding number of at least 1/2). Regions are applied in the order given,
+//! winding number of at least 1/2), or, for a body made from a label image,
+//! when the label covering most of the cell is one of the region's
+//! (`{ kind = "label", labels = [2] }`). Regions are applied in the order given,
 //! so a later region overrides an earlier one where they overlap. A key left
 //! out of a region keeps the `[material]` value. Material index 0 is
 //! `[material]`, index `k` the `k`-th region; the index is written as the
@@ -76,8 +78,9 @@ pub struct RegionError {
 pub type CellTest = Box<dyn Fn([f64; 3]) -> bool + Send + Sync>;
 
 /// What a region selector's factory may use: the lattice's bounding box
-/// and cell edge, and the loader of the scene's meshes (placed like
-/// `[mesh]`).
+/// and cell edge, the loader of the scene's meshes (placed like `[mesh]`),
+/// and the image label of the cell around a point, for a body made from a
+/// label image.
 pub struct RegionContext<'a> {
     /// The lattice's bounding box (m).
     pub bounds: Aabb,
@@ -85,6 +88,45 @@ pub struct RegionContext<'a> {
     pub h: f64,
     /// Loads and places a mesh file the scene names.
     pub mesh_of: &'a dyn Fn(&str) -> Result<TriMesh, String>,
+    /// The label of the cell holding a point (m), if the body has labels.
+    pub cell_labels: Option<Arc<CellLabels>>,
+}
+
+/// The image labels of a lattice's cells, looked up by a point.
+#[derive(Debug, Clone)]
+pub struct CellLabels {
+    origin: [f64; 3],
+    h: f64,
+    labels: std::collections::HashMap<[u32; 3], i32>,
+}
+
+impl CellLabels {
+    /// The labels of `lattice`'s cells, in its cell order.
+    pub fn new(lattice: &Lattice, labels: &[i32]) -> Self {
+        Self {
+            origin: lattice.origin(),
+            h: lattice.h(),
+            labels: lattice
+                .cell_coords()
+                .iter()
+                .copied()
+                .zip(labels.iter().copied())
+                .collect(),
+        }
+    }
+
+    /// The label of the cell holding `p` (m), if it is a cell.
+    pub fn at(&self, p: [f64; 3]) -> Option<i32> {
+        let mut c = [0u32; 3];
+        for k in 0..3 {
+            let v = ((p[k] - self.origin[k]) / self.h).floor();
+            if !(0.0..u32::MAX as f64).contains(&v) {
+                return None;
+            }
+            c[k] = v as u32;
+        }
+        self.labels.get(&c).copied()
+    }
 }
 
 /// Builds a region's test from its `select` table: one entry of
@@ -175,6 +217,15 @@ fn builtin_test(table: &KindTable, context: &RegionContext<'_>) -> Result<CellTe
             let test = WindingInside::new(&mesh, context.h);
             Box::new(move |p| test.contains(p))
         }
+        RegionSelector::Label { labels } => {
+            let cells = context.cell_labels.clone().ok_or_else(|| {
+                format!(
+                    "selects image labels {labels:?}, but the body is made from a mesh: \
+                     label regions need an [image] body"
+                )
+            })?;
+            Box::new(move |p| cells.at(p).is_some_and(|l| labels.contains(&l)))
+        }
     })
 }
 
@@ -190,6 +241,19 @@ pub fn assign_regions(
     selectors: &RegionSelectors,
     mesh_of: &dyn Fn(&str) -> Result<TriMesh, String>,
 ) -> Result<RegionAssignment, RegionError> {
+    assign_regions_with_labels(lattice, None, base, regions, selectors, mesh_of)
+}
+
+/// [`assign_regions`] for a lattice whose cells carry image labels
+/// (`cell_labels`, in cell order), which `label` regions select.
+pub fn assign_regions_with_labels(
+    lattice: &Lattice,
+    cell_labels: Option<&[i32]>,
+    base: &Material,
+    regions: &[RegionSpec],
+    selectors: &RegionSelectors,
+    mesh_of: &dyn Fn(&str) -> Result<TriMesh, String>,
+) -> Result<RegionAssignment, RegionError> {
     let (o, h) = (lattice.origin(), lattice.h());
     let centres: Vec<[f64; 3]> = lattice
         .cell_coords()
@@ -197,7 +261,12 @@ pub fn assign_regions(
         .map(|c| std::array::from_fn(|k| o[k] + (c[k] as f64 + 0.5) * h))
         .collect();
     let bounds = lattice.bounding_box();
-    let context = RegionContext { bounds, h, mesh_of };
+    let context = RegionContext {
+        bounds,
+        h,
+        mesh_of,
+        cell_labels: cell_labels.map(|l| Arc::new(CellLabels::new(lattice, l))),
+    };
     let mut materials = vec![*base];
     let mut cell_material = vec![0u32; centres.len()];
     let mut selected = Vec::with_capacity(regions.len());
@@ -253,6 +322,7 @@ fn describe(table: &KindTable) -> String {
             format!("the sphere of radius {radius} m around {centre:?} m")
         }
         RegionSelector::Mesh { path } => format!("the mesh {path}"),
+        RegionSelector::Label { labels } => format!("a cell of the labels {labels:?}"),
     }
 }
 
@@ -270,6 +340,7 @@ mod tests {
                 format!("kind = \"sphere\"\ncentre = {centre:?}\nradius = {radius:?}")
             }
             RegionSelector::Mesh { path } => format!("kind = \"mesh\"\npath = {path:?}"),
+            RegionSelector::Label { labels } => format!("kind = \"label\"\nlabels = {labels:?}"),
         };
         toml::from_str(&text).unwrap()
     }

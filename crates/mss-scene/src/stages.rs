@@ -36,6 +36,8 @@
 //! ```
 
 use hexmesh::Embedding;
+use hexmesh::image::ImageLattice;
+use hexmesh::image::resample::IMAGE_GRID_BYTES_PER_CELL;
 use hexmesh::load::{LoadReport, Loaders};
 use hexmesh::voxelize::{GRID_BYTES_PER_CELL, LATTICE_BYTES_PER_CELL, plan_grid};
 use hexmesh::{Placement, PlacementError, TriMesh, VoxelizeError, VoxelizeOptions, Voxelized};
@@ -99,6 +101,9 @@ pub enum StageError {
         /// What else can be done, starting with ", " (or empty).
         hint: &'static str,
     },
+    /// The label image could not be read.
+    #[error(transparent)]
+    Image(#[from] hexmesh::image::ImageError),
     /// The voxelizer refused the mesh or the options.
     #[error("cannot voxelize {mesh}: {source}")]
     Voxelize {
@@ -203,18 +208,9 @@ pub fn lattice_within(
     progress: &(dyn Fn(u64, u64) + Sync),
 ) -> Result<Voxelized, StageError> {
     let needs_matrix = run.needs_matrix;
-    let matrix_hint = if needs_matrix {
-        ", or the explicit solver (no matrices)"
-    } else {
-        ""
-    };
-    let memory = |what: String, needed: u64, hint: &'static str| StageError::Memory {
-        what,
-        needed,
-        limit: limits.memory_bytes,
-        limit_origin: limits.memory_origin(),
-        hint,
-    };
+    let matrix_hint = matrix_hint(needs_matrix);
+    let memory =
+        |what: String, needed: u64, hint: &'static str| memory_error(limits, what, needed, hint);
     let mut opts = options.clone();
     let budget = cell_budget(limits.memory_bytes, needs_matrix);
     let memory_binds = budget < opts.max_cells;
@@ -243,23 +239,170 @@ pub fn lattice_within(
                 source,
             },
         })?;
-    let needed = run_memory_estimate(
-        vox.lattice.num_cells(),
-        vox.lattice.num_nodes(),
-        needs_matrix,
-    ) + mesh_memory_estimate(mesh.vertices.len());
+    check_run_memory(&vox.lattice, mesh.vertices.len(), limits, run)?;
+    Ok(vox)
+}
+
+fn memory_error(limits: &Limits, what: String, needed: u64, hint: &'static str) -> StageError {
+    StageError::Memory {
+        what,
+        needed,
+        limit: limits.memory_bytes,
+        limit_origin: limits.memory_origin(),
+        hint,
+    }
+}
+
+/// What else frees memory when a run needs matrices.
+fn matrix_hint(needs_matrix: bool) -> &'static str {
+    if needs_matrix {
+        ", or the explicit solver (no matrices)"
+    } else {
+        ""
+    }
+}
+
+/// Refuses a run on `lattice` (with an input surface of `surface_vertices`)
+/// whose estimate exceeds the limit.
+fn check_run_memory(
+    lattice: &hexmesh::Lattice,
+    surface_vertices: usize,
+    limits: &Limits,
+    run: RunNeeds<'_>,
+) -> Result<(), StageError> {
+    let needed = run_memory_estimate(lattice.num_cells(), lattice.num_nodes(), run.needs_matrix)
+        + mesh_memory_estimate(surface_vertices);
     if needed > limits.memory_bytes {
-        return Err(memory(
-            format!(
-                "the {} run of {} cells",
-                run.solver,
-                vox.lattice.num_cells()
-            ),
+        return Err(memory_error(
+            limits,
+            format!("the {} run of {} cells", run.solver, lattice.num_cells()),
             needed,
-            matrix_hint,
+            matrix_hint(run.needs_matrix),
         ));
     }
-    Ok(vox)
+    Ok(())
+}
+
+/// A label image read and resampled by [`image_lattice_within`].
+#[derive(Debug, Clone)]
+pub struct PlacedImage {
+    /// Its name in messages (the file).
+    pub name: String,
+    /// Voxels along i, j, k.
+    pub dims: [usize; 3],
+    /// Voxel spacing along i, j, k (m).
+    pub spacing: [f64; 3],
+    /// The lattice, the label of each cell and the labels' surface (m).
+    pub lattice: ImageLattice,
+}
+
+/// What [`image_lattice_within`] makes of a label image.
+#[derive(Debug, Clone)]
+pub struct ImageChoice<'a> {
+    /// Which labels form the body (`None`: every non-zero label).
+    pub labels: Option<&'a [i32]>,
+    /// Fraction of a cell the labels must cover (0 < t <= 1).
+    pub threshold: f64,
+    /// Metres per unit of the file's coordinates (`None`: the file's unit,
+    /// else millimetres).
+    pub unit_metres: Option<f64>,
+    /// The frame to express the file's coordinates in (`None`: the file's).
+    pub space: Option<hexmesh::image::Space>,
+    /// Placement after the file's transform and unit.
+    pub placement: Placement,
+}
+
+/// Reads the label image at `path` and resamples the labels `choice` names
+/// onto cubes at `options`' resolution, within `limits.memory_bytes`: the
+/// voxels' memory is estimated from the header before they are read, the
+/// resampling grid before it is allocated (refused past the limit), and the
+/// cells are capped at what the memory can run for `run`.
+pub fn image_lattice_within(
+    path: &std::path::Path,
+    choice: &ImageChoice<'_>,
+    options: &VoxelizeOptions,
+    limits: &Limits,
+    run: RunNeeds<'_>,
+) -> Result<PlacedImage, StageError> {
+    let name = path.display().to_string();
+    let image_limits = hexmesh::image::ImageLimits {
+        max_bytes: limits.memory_bytes,
+    };
+    let mut image = hexmesh::image::load_image(path, &image_limits)?;
+    if let Some(target) = &choice.space {
+        image = image.in_space(target);
+    }
+    choice
+        .placement
+        .validate()
+        .map_err(|source| StageError::Placement {
+            mesh: name.clone(),
+            source,
+        })?;
+    let unit = choice
+        .unit_metres
+        .unwrap_or_else(|| image.unit_metres_or_default());
+    let to_metres = image.to_metres(unit, &choice.placement);
+    let budget = cell_budget(limits.memory_bytes, run.needs_matrix);
+    let memory_binds = budget < options.max_cells;
+    let resample_options = hexmesh::image::ImageVoxelizeOptions {
+        labels: choice.labels.map(<[i32]>::to_vec),
+        resolution: options.resolution,
+        threshold: choice.threshold,
+        padding_cells: options.padding_cells,
+        max_cells: options.max_cells.min(budget),
+        max_grid_cells: limits.memory_bytes / IMAGE_GRID_BYTES_PER_CELL,
+        components: options.components,
+    };
+    let memory =
+        |what: String, needed: u64, hint: &'static str| memory_error(limits, what, needed, hint);
+    let lattice =
+        hexmesh::image::resample(&image, &to_metres, &resample_options).map_err(|source| {
+            match source {
+                VoxelizeError::GridTooLarge { dims, cells, .. } => memory(
+                    format!("resampling the image (a grid of {dims:?} cells)"),
+                    cells.saturating_mul(IMAGE_GRID_BYTES_PER_CELL),
+                    "",
+                ),
+                VoxelizeError::TooManyCells { cells, .. } if memory_binds => memory(
+                    format!("a lattice of {cells} cells"),
+                    run_memory_estimate(cells as usize, cells as usize, run.needs_matrix)
+                        + cells * LATTICE_BYTES_PER_CELL,
+                    matrix_hint(run.needs_matrix),
+                ),
+                VoxelizeError::EmptyMesh => StageError::Voxelize {
+                    mesh: name.clone(),
+                    source: VoxelizeError::BadRule(format!(
+                        "no voxel carries {}; the image's labels are {:?}",
+                        match choice.labels {
+                            Some(l) => format!("the labels {l:?}"),
+                            None => "a non-zero label".into(),
+                        },
+                        image.label_counts().keys().collect::<Vec<_>>()
+                    )),
+                },
+                source => StageError::Voxelize {
+                    mesh: name.clone(),
+                    source,
+                },
+            }
+        })?;
+    let spacing = {
+        let s = image.spacing();
+        std::array::from_fn(|k| s[k] * unit)
+    };
+    check_run_memory(
+        &lattice.lattice,
+        lattice.surface.vertices.len(),
+        limits,
+        run,
+    )?;
+    Ok(PlacedImage {
+        name,
+        dims: image.dims,
+        spacing,
+        lattice,
+    })
 }
 
 /// What a problem is made of besides its model, as a scene's tables (or a

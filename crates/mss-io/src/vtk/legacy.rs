@@ -57,6 +57,7 @@ pub fn write_legacy_vtk(
         FieldValues::Flags(v) => Attribute::scalars(f.name, 1)
             .with_data(IOBuffer::U8(v.iter().map(|&b| u8::from(b)).collect())),
         FieldValues::Ids(v) => Attribute::scalars(f.name, 1).with_data(v.to_vec()),
+        FieldValues::Labels(v) => Attribute::scalars(f.name, 1).with_data(v.to_vec()),
     };
     let vtk = Vtk {
         version: Version::new_legacy(4, 2),

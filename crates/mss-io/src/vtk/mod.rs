@@ -44,6 +44,9 @@ pub enum FieldValues<'a> {
     /// One unsigned integer per entry (`UInt32`; legacy: `unsigned_int`), e.g.
     /// cell or material ids.
     Ids(&'a [u32]),
+    /// One signed integer per entry (`Int32`; legacy: `int`), e.g. the
+    /// image label of each cell.
+    Labels(&'a [i32]),
 }
 
 impl FieldValues<'_> {
@@ -54,6 +57,7 @@ impl FieldValues<'_> {
             FieldValues::Vectors(v) => v.len(),
             FieldValues::Flags(v) => v.len(),
             FieldValues::Ids(v) => v.len(),
+            FieldValues::Labels(v) => v.len(),
         }
     }
 
@@ -115,6 +119,14 @@ impl<'a> Field<'a> {
         Field {
             name,
             values: FieldValues::Ids(values),
+        }
+    }
+
+    /// A signed integer field (labels).
+    pub fn labels(name: &'a str, values: &'a [i32]) -> Self {
+        Field {
+            name,
+            values: FieldValues::Labels(values),
         }
     }
 }

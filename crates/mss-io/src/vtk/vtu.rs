@@ -99,6 +99,8 @@ enum Source<'a> {
     U32AsI64(&'a [u32]),
     /// Written as UInt32.
     U32(&'a [u32]),
+    /// Written as Int32.
+    I32(&'a [i32]),
     /// Written as UInt8 0/1.
     Bool(&'a [bool]),
     /// Int64 offsets `step, 2 step, ..., count step`.
@@ -118,6 +120,7 @@ impl Source<'_> {
         match *self {
             Source::F64(v) => v.len(),
             Source::U32AsI64(v) | Source::U32(v) => v.len(),
+            Source::I32(v) => v.len(),
             Source::Bool(v) => v.len(),
             Source::Offsets { count, .. } | Source::ConstU8 { count, .. } => count,
         }
@@ -126,7 +129,7 @@ impl Source<'_> {
     fn elem_size(&self) -> usize {
         match self {
             Source::F64(_) | Source::U32AsI64(_) | Source::Offsets { .. } => 8,
-            Source::U32(_) => 4,
+            Source::U32(_) | Source::I32(_) => 4,
             Source::Bool(_) | Source::ConstU8 { .. } => 1,
         }
     }
@@ -136,6 +139,7 @@ impl Source<'_> {
             Source::F64(_) => "Float64",
             Source::U32AsI64(_) | Source::Offsets { .. } => "Int64",
             Source::U32(_) => "UInt32",
+            Source::I32(_) => "Int32",
             Source::Bool(_) | Source::ConstU8 { .. } => "UInt8",
         }
     }
@@ -152,6 +156,9 @@ impl Source<'_> {
             Source::U32(v) => v[range]
                 .iter()
                 .for_each(|x| out.extend_from_slice(&x.to_le_bytes())),
+            Source::I32(v) => v[range]
+                .iter()
+                .for_each(|x| out.extend_from_slice(&x.to_le_bytes())),
             Source::Bool(v) => out.extend(v[range].iter().map(|&b| u8::from(b))),
             Source::Offsets { step, .. } => range
                 .for_each(|k| out.extend_from_slice(&((k as i64 + 1) * step as i64).to_le_bytes())),
@@ -163,6 +170,7 @@ impl Source<'_> {
         match *self {
             Source::F64(v) => write_f64(w, v[k]),
             Source::U32AsI64(v) | Source::U32(v) => write!(w, "{}", v[k]),
+            Source::I32(v) => write!(w, "{}", v[k]),
             Source::Bool(v) => write!(w, "{}", u8::from(v[k])),
             Source::Offsets { step, .. } => write!(w, "{}", (k + 1) * step),
             Source::ConstU8 { value, .. } => write!(w, "{value}"),
@@ -176,6 +184,7 @@ fn field_source<'a>(f: &Field<'a>) -> Source<'a> {
         FieldValues::Vectors(v) => Source::F64(v.as_flattened()),
         FieldValues::Flags(v) => Source::Bool(v),
         FieldValues::Ids(v) => Source::U32(v),
+        FieldValues::Labels(v) => Source::I32(v),
     }
 }
 

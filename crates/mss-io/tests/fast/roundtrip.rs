@@ -61,6 +61,7 @@ struct Sample {
     fixed: Vec<bool>,
     strain: Vec<f64>,
     ids: Vec<u32>,
+    labels: Vec<i32>,
 }
 
 fn sample() -> Sample {
@@ -98,6 +99,7 @@ fn sample() -> Sample {
             .map(|c| (c as f64 + 0.5).ln() * 1e-4 - 1e-5)
             .collect(),
         ids: (0..m as u32).map(|c| c * 1000 + 7).collect(),
+        labels: (0..m as i32).map(|c| (c - 5) * 100_003).collect(),
     }
 }
 
@@ -108,6 +110,7 @@ fn frame(s: &Sample) -> LatticeFrame<'_> {
         .with_point_field(Field::flags("fixed", &s.fixed))
         .with_cell_field(Field::scalars("strain", &s.strain))
         .with_cell_field(Field::ids("cell_id", &s.ids))
+        .with_cell_field(Field::labels("label", &s.labels))
 }
 
 /// Compares bit for bit: the ASCII writers print the shortest digits that
@@ -128,10 +131,12 @@ fn check(s: &Sample, r: &ReadBack) {
     assert_eq!(r.point_data["velocity"], s.velocity.as_flattened());
     let fixed: Vec<f64> = s.fixed.iter().map(|&b| f64::from(u8::from(b))).collect();
     assert_eq!(r.point_data["fixed"], fixed);
-    assert_eq!(r.cell_data.len(), 2);
+    assert_eq!(r.cell_data.len(), 3);
     assert_eq!(r.cell_data["strain"], s.strain);
     let ids: Vec<f64> = s.ids.iter().map(|&i| f64::from(i)).collect();
     assert_eq!(r.cell_data["cell_id"], ids);
+    let labels: Vec<f64> = s.labels.iter().map(|&l| f64::from(l)).collect();
+    assert_eq!(r.cell_data["label"], labels);
 }
 
 #[test]
@@ -511,8 +516,13 @@ fn a_frame_whose_compressed_header_lies_is_refused_before_it_is_unpacked() {
     let bad = dir.path().join("forged.vtu");
     std::fs::write(&bad, forged).unwrap();
     let err = read(&bad).unwrap_err().to_string();
+    // The reader names the line of the array's opening tag.
+    let tag = text[..array].rfind("<DataArray").unwrap();
+    let line = text[..tag].matches('\n').count() + 1;
     assert!(
-        err.contains("forged.vtu") && err.contains("line 25") && err.contains("compression header"),
+        err.contains("forged.vtu")
+            && err.contains(&format!("line {line}:"))
+            && err.contains("compression header"),
         "{err}"
     );
 }

@@ -11,7 +11,8 @@ use serde::Deserialize;
 
 use super::key::KeyError;
 use super::{
-    LoadsSection, MeshSection, ModelSection, MotionSpec, RegionSpec, Scene, VoxelizeSection,
+    ImageSection, LoadsSection, MeshSection, ModelSection, MotionSpec, RegionSpec, Scene,
+    VoxelizeSection,
 };
 
 /// One `[[bodies]]` table.
@@ -22,7 +23,11 @@ pub struct BodySpec {
     /// and `_`; unique in the scene).
     pub name: String,
     /// `[bodies.mesh]`: its surface and placement, as `[mesh]`.
-    pub mesh: MeshSection,
+    #[serde(default)]
+    pub mesh: Option<MeshSection>,
+    /// `[bodies.image]`: a label volume instead, as `[image]`.
+    #[serde(default)]
+    pub image: Option<ImageSection>,
     /// `[bodies.voxelize]`: as `[voxelize]`.
     #[serde(default)]
     pub voxelize: VoxelizeSection,
@@ -57,8 +62,8 @@ pub struct BodyView<'a> {
     pub name: &'a str,
     /// Its index in `[[bodies]]` (`None`: the top-level tables).
     pub index: Option<usize>,
-    /// Its surface.
-    pub mesh: &'a MeshSection,
+    /// What it is made from.
+    pub source: BodySource<'a>,
     /// How it is voxelized.
     pub voxelize: &'a VoxelizeSection,
     /// Its material.
@@ -75,6 +80,33 @@ pub struct BodyView<'a> {
     pub loads: Option<&'a LoadsSection>,
     /// Whether it touches itself.
     pub self_contact: bool,
+}
+
+/// What a body is made from: a surface mesh or a label image.
+#[derive(Debug, Clone, Copy)]
+pub enum BodySource<'a> {
+    /// `[mesh]`.
+    Mesh(&'a MeshSection),
+    /// `[image]`.
+    Image(&'a ImageSection),
+}
+
+impl BodySource<'_> {
+    /// Where its meshes (the body's, its regions' and obstacles') land.
+    pub fn placement(&self) -> hexmesh::Placement {
+        match self {
+            BodySource::Mesh(m) => m.placement(),
+            BodySource::Image(i) => i.placement(),
+        }
+    }
+
+    /// The table's name in a scene (`"[mesh]"`, `"[image]"`).
+    pub fn table(&self) -> &'static str {
+        match self {
+            BodySource::Mesh(_) => "[mesh]",
+            BodySource::Image(_) => "[image]",
+        }
+    }
 }
 
 /// Name of the one body of a scene without `[[bodies]]`.
@@ -131,10 +163,18 @@ impl Scene {
                 .bodies
                 .iter()
                 .enumerate()
-                .map(|(i, b)| BodyView {
+                .filter_map(|(i, b)| {
+                    let source = match (&b.mesh, &b.image) {
+                        (Some(m), _) => BodySource::Mesh(m),
+                        (None, Some(image)) => BodySource::Image(image),
+                        (None, None) => return None,
+                    };
+                    Some((i, b, source))
+                })
+                .map(|(i, b, source)| BodyView {
                     name: &b.name,
                     index: Some(i),
-                    mesh: &b.mesh,
+                    source,
                     voxelize: &b.voxelize,
                     material: b.material,
                     model: &b.model,
@@ -146,11 +186,16 @@ impl Scene {
                 })
                 .collect();
         }
-        match (&self.mesh, self.material) {
-            (Some(mesh), Some(material)) => vec![BodyView {
+        let source = match (&self.mesh, &self.image) {
+            (Some(m), _) => BodySource::Mesh(m),
+            (None, Some(image)) => BodySource::Image(image),
+            (None, None) => return Vec::new(),
+        };
+        match self.material {
+            Some(material) => vec![BodyView {
                 name: SINGLE_BODY_NAME,
                 index: None,
-                mesh,
+                source,
                 voxelize: &self.voxelize,
                 material,
                 model: &self.model,

@@ -61,6 +61,12 @@ pub enum RegionSelector {
         /// The mesh file.
         path: String,
     },
+    /// Cells whose image label (the label covering most of the cell) is
+    /// one of `labels`: for a body made from an `[image]`.
+    Label {
+        /// The labels.
+        labels: Vec<i32>,
+    },
 }
 
 /// One `[[regions]]` table.
@@ -80,7 +86,7 @@ pub struct RegionSpec {
 
 impl RegionSelector {
     /// The built-ins' kinds, as `select = { kind = ... }` names them.
-    pub const KINDS: [&'static str; 3] = ["box", "sphere", "mesh"];
+    pub const KINDS: [&'static str; 4] = ["box", "sphere", "mesh", "label"];
 }
 
 impl RegionSpec {
@@ -116,6 +122,13 @@ impl RegionSpec {
                     ));
                 }
                 RegionSelector::Mesh { .. } => {}
+                RegionSelector::Label { labels } if labels.is_empty() => {
+                    return Err(KeyError::new(
+                        "",
+                        "labels = []; name the image labels whose cells the region takes",
+                    ));
+                }
+                RegionSelector::Label { .. } => {}
             }
         }
         for (what, value) in [

@@ -52,6 +52,7 @@ use thiserror::Error;
 mod bodies;
 mod constraints;
 mod contact;
+mod image;
 mod key;
 mod loads;
 mod material;
@@ -61,9 +62,10 @@ mod output;
 mod solver;
 mod voxelize;
 
-pub use bodies::{BodySpec, BodyView, SINGLE_BODY_NAME};
+pub use bodies::{BodySource, BodySpec, BodyView, SINGLE_BODY_NAME};
 pub use constraints::*;
 pub use contact::*;
+pub use image::*;
 pub use key::{KeyError, value_from_str};
 pub use loads::*;
 pub use material::*;
@@ -153,9 +155,12 @@ pub enum SceneError {
 #[serde(deny_unknown_fields)]
 pub struct Scene {
     /// `[mesh]`: the input surface (required unless the scene has
-    /// `[[bodies]]`, where each body has its own).
+    /// `[image]` or `[[bodies]]`, where each body has its own).
     #[serde(default)]
     pub mesh: Option<MeshSection>,
+    /// `[image]`: a segmented label volume as the body, instead of `[mesh]`.
+    #[serde(default)]
+    pub image: Option<ImageSection>,
     /// `[voxelize]`: how the surface becomes a cubic lattice.
     #[serde(default)]
     pub voxelize: VoxelizeSection,
@@ -439,11 +444,21 @@ impl Scene {
         invalid: &dyn Fn(String, String) -> SceneError,
     ) -> Result<(), SceneError> {
         if self.bodies.is_empty() {
-            if self.mesh.is_none() {
-                return Err(invalid(
-                    "[mesh]".into(),
-                    "missing field `mesh`: a scene needs a [mesh] table (path = \"...\"), or [[bodies]] each with its own".into(),
-                ));
+            match (&self.mesh, &self.image) {
+                (None, None) => {
+                    return Err(invalid(
+                        "[mesh]".into(),
+                        "missing field `mesh`: a scene needs a [mesh] table (path = \"...\"), an [image] table, or [[bodies]] each with its own".into(),
+                    ));
+                }
+                (Some(_), Some(_)) => {
+                    return Err(invalid(
+                        "[image]".into(),
+                        "a body is made from a [mesh] or from an [image], not both: remove one"
+                            .into(),
+                    ));
+                }
+                _ => {}
             }
             if self.material.is_none() {
                 return Err(invalid(
@@ -455,6 +470,7 @@ impl Scene {
             // What is given at the top level, and where it goes in a body.
             let per_body = [
                 ("[mesh]", self.mesh.is_some(), "[bodies.mesh]"),
+                ("[image]", self.image.is_some(), "[bodies.image]"),
                 ("[material]", self.material.is_some(), "[bodies.material]"),
                 (
                     "[voxelize]",
@@ -505,6 +521,13 @@ impl Scene {
                         ),
                     ));
                 }
+                if b.mesh.is_some() == b.image.is_some() {
+                    return Err(invalid(
+                        format!("[[bodies]] #{} ({})", i + 1, b.name),
+                        "a body needs a [bodies.mesh] or a [bodies.image] table (one of them)"
+                            .into(),
+                    ));
+                }
                 if b.loads.gravity.is_some() {
                     return Err(invalid(
                         format!("[[bodies]] #{} ({}) [loads] gravity", i + 1, b.name),
@@ -520,7 +543,10 @@ impl Scene {
                 let e = e.within(&format!("{list} #{}", i + 1));
                 invalid(body.key(&e.key), e.message)
             };
-            body.mesh.check().map_err(|e| in_table("[mesh]", e))?;
+            match body.source {
+                BodySource::Mesh(mesh) => mesh.check().map_err(|e| in_table("[mesh]", e))?,
+                BodySource::Image(image) => image.check().map_err(|e| in_table("[image]", e))?,
+            }
             body.voxelize
                 .check()
                 .map_err(|e| in_table("[voxelize]", e))?;

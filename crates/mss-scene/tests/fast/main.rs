@@ -4,6 +4,7 @@
 
 mod blender;
 mod bodies;
+mod image;
 mod job;
 mod placement;
 mod plug_points;
