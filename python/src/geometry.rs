@@ -177,7 +177,7 @@ fn stage_error(e: &StageError) -> PyErr {
         StageError::Source(_) | StageError::Image(_) => Kind::Mesh,
         StageError::Placement { .. } => Kind::Scene,
         StageError::Memory { .. } => Kind::Resource,
-        StageError::Voxelize { .. } => Kind::Voxelize,
+        StageError::Voxelize { .. } | StageError::NoLabelledVoxels { .. } => Kind::Voxelize,
     };
     from_error(kind, e)
 }

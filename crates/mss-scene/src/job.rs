@@ -940,6 +940,9 @@ fn prepare_body(
         },
         StageError::Source(other) => setting(view.key("[mesh] path"), other.to_string()),
         StageError::Image(e) => setting(view.key("[image] path"), e.to_string()),
+        e @ StageError::NoLabelledVoxels { .. } => {
+            setting(view.key("[image] labels"), e.to_string())
+        }
         e @ StageError::Placement { .. } => setting(view.key("[mesh]"), e.to_string()),
         StageError::Memory {
             what,

@@ -104,6 +104,16 @@ pub enum StageError {
     /// The label image could not be read.
     #[error(transparent)]
     Image(#[from] hexmesh::image::ImageError),
+    /// No voxel of the image carries the labels chosen.
+    #[error("{image}: no voxel carries {wanted}; the image's labels are {present:?}")]
+    NoLabelledVoxels {
+        /// The image.
+        image: String,
+        /// The labels asked for, in words.
+        wanted: String,
+        /// The labels the image holds.
+        present: Vec<i32>,
+    },
     /// The voxelizer refused the mesh or the options.
     #[error("cannot voxelize {mesh}: {source}")]
     Voxelize {
@@ -370,16 +380,13 @@ pub fn image_lattice_within(
                         + cells * LATTICE_BYTES_PER_CELL,
                     matrix_hint(run.needs_matrix),
                 ),
-                VoxelizeError::EmptyMesh => StageError::Voxelize {
-                    mesh: name.clone(),
-                    source: VoxelizeError::BadRule(format!(
-                        "no voxel carries {}; the image's labels are {:?}",
-                        match choice.labels {
-                            Some(l) => format!("the labels {l:?}"),
-                            None => "a non-zero label".into(),
-                        },
-                        image.label_counts().keys().collect::<Vec<_>>()
-                    )),
+                VoxelizeError::EmptyMesh => StageError::NoLabelledVoxels {
+                    image: name.clone(),
+                    wanted: match choice.labels {
+                        Some(l) => format!("the labels {l:?}"),
+                        None => "a non-zero label".into(),
+                    },
+                    present: image.label_counts().keys().copied().collect(),
                 },
                 source => StageError::Voxelize {
                     mesh: name.clone(),

@@ -164,14 +164,30 @@ fn print_body(
     report: &CheckReport,
 ) -> anyhow::Result<()> {
     let [ex, ey, ez] = body.mesh.bounding_box().map_or([0.0; 3], |b| b.extent());
-    crate::outln!(
-        "mesh             {}: {} vertices, {} triangles, {ex:.4} x {ey:.4} x {ez:.4} m \
-         (placement: {})",
-        body.mesh_name,
-        body.mesh.vertices.len(),
-        body.mesh.triangles.len(),
-        body.placement
-    );
+    match &body.cell_labels {
+        None => crate::outln!(
+            "mesh             {}: {} vertices, {} triangles, {ex:.4} x {ey:.4} x {ez:.4} m \
+             (placement: {})",
+            body.mesh_name,
+            body.mesh.vertices.len(),
+            body.mesh.triangles.len(),
+            body.placement
+        ),
+        Some(labels) => {
+            let mut per_label = std::collections::BTreeMap::new();
+            for &l in labels {
+                *per_label.entry(l).or_insert(0usize) += 1;
+            }
+            crate::outln!(
+                "image            {}: labels' surface {ex:.4} x {ey:.4} x {ez:.4} m, volume \
+                 {:.4e} m^3; cells per label {:?} (placement: {})",
+                body.mesh_name,
+                body.vox_stats.mesh_volume,
+                per_label.into_iter().collect::<Vec<_>>(),
+                body.placement
+            )
+        }
+    }
     crate::outln!(
         "lattice          {} cells, {} nodes, cell size {}",
         span.cells.len(),

@@ -1,6 +1,6 @@
-//! `mss voxelize`: voxelizes a surface mesh and writes the lattice, its
-//! boundary skin, the embedded surface, `stats.json` and, with `--springs`,
-//! the springs as lines.
+//! `mss voxelize`: voxelizes a surface mesh, or resamples a label image,
+//! and writes the lattice, its boundary skin, the embedded surface,
+//! `stats.json` and, with `--springs`, the springs as lines.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -19,9 +19,19 @@ use crate::progress::JobBars;
 /// Arguments of `mss voxelize`.
 #[derive(Debug, Clone, Args)]
 pub struct VoxelizeArgs {
-    /// Surface mesh (OBJ, STL, PLY, VTK .vtk/.vtu/.vtp), or "builtin:critter".
+    /// Surface mesh (OBJ, STL, PLY, VTK .vtk/.vtu/.vtp), "builtin:critter",
+    /// or a label image (NIfTI .nii/.nii.gz/.hdr, NRRD .nrrd/.nhdr).
     #[arg(value_name = "MESH")]
     pub mesh: String,
+    /// For an image: the labels that form the body, comma-separated
+    /// [default: every non-zero label].
+    #[arg(
+        long,
+        value_name = "L,L,...",
+        value_delimiter = ',',
+        allow_negative_numbers = true
+    )]
+    pub labels: Option<Vec<i32>>,
     /// Cells along the longest axis of the mesh's bounding box [default: 24].
     #[arg(long, value_name = "N", conflicts_with = "size")]
     pub cells: Option<u32>,
@@ -32,7 +42,8 @@ pub struct VoxelizeArgs {
     /// solid), fraction (at least --fraction of the cell inside).
     #[arg(long, value_name = "RULE", default_value = "centre")]
     pub rule: String,
-    /// Minimum inside fraction for --rule fraction.
+    /// Minimum inside fraction for --rule fraction; for an image, the
+    /// fraction of a cell the labels must cover.
     #[arg(long, value_name = "F", default_value_t = 0.5)]
     pub fraction: f64,
     /// Keep every connected component (default: only the largest).
@@ -41,9 +52,10 @@ pub struct VoxelizeArgs {
     /// Refuse lattices with more cells than this.
     #[arg(long, value_name = "N", default_value_t = VoxelizeSection::default().max_cells)]
     pub max_cells: u64,
-    /// Unit of the mesh's coordinates: m, cm or mm (as `[mesh] units`).
-    #[arg(long, value_name = "UNIT", default_value = "m", value_parser = value_from_str::<Units>)]
-    pub units: Units,
+    /// Unit of the mesh's coordinates: m, cm or mm (as `[mesh] units`)
+    /// [default: m; for an image, the unit its header names, else mm].
+    #[arg(long, value_name = "UNIT", value_parser = value_from_str::<Units>)]
+    pub units: Option<Units>,
     /// Scale factor after units (as `[mesh] scale`).
     #[arg(long, value_name = "S", default_value_t = 1.0)]
     pub scale: f64,
@@ -68,6 +80,8 @@ pub fn default_folder(mesh: &str) -> String {
     let name = mesh
         .strip_prefix(mss_scene::scene::BUILTIN_PREFIX)
         .unwrap_or(mesh);
+    // `seg.nii.gz` -> `seg`: the extensions an image file name stacks.
+    let name = name.strip_suffix(".gz").unwrap_or(name);
     let stem = Path::new(name)
         .file_stem()
         .and_then(|s| s.to_str())
@@ -113,6 +127,23 @@ pub struct VoxelizeSummary {
     pub output_folder: String,
     /// Files written (besides `stats.json`).
     pub files: Vec<String>,
+    /// For an image: its voxels along each axis, their spacing (m), and
+    /// each chosen label with its number of voxels.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub image: Option<ImageSummary>,
+}
+
+/// What `mss voxelize` read from a label image.
+#[derive(Debug, Clone, Serialize)]
+pub struct ImageSummary {
+    /// Voxels along i, j, k.
+    pub dims: [usize; 3],
+    /// Voxel spacing along i, j, k (m).
+    pub spacing: [f64; 3],
+    /// The labels forming the body, each with its voxels.
+    pub voxels_per_label: Vec<(i32, usize)>,
+    /// Lattice cells per label (the label covering most of each cell).
+    pub cells_per_label: Vec<(i32, usize)>,
 }
 
 /// Runs `mss voxelize`.
@@ -161,12 +192,21 @@ pub fn run(args: &VoxelizeArgs, global: &GlobalArgs) -> anyhow::Result<()> {
                 .map_or(e.message.as_str(), |(_, r)| r);
             anyhow::anyhow!("--{flag} {value}: {reason}")
         })?;
+    if mss_scene::hexmesh::image::ImageFormat::from_path(Path::new(&args.mesh)).is_some() {
+        return run_image(args, global, &options, &out_dir);
+    }
+    if args.labels.is_some() {
+        anyhow::bail!(
+            "--labels: {} is a surface mesh; labels choose the body in a label image (.nii, .nii.gz, .nrrd, .nhdr)",
+            args.mesh
+        );
+    }
     let source = match args.mesh.strip_prefix(mss_scene::scene::BUILTIN_PREFIX) {
         Some(name) => MeshSource::Builtin(name.to_owned()),
         None => MeshSource::File(PathBuf::from(&args.mesh)),
     };
     let placement = mss_scene::hexmesh::Placement {
-        units: args.units,
+        units: args.units.unwrap_or_default(),
         scale: [args.scale; 3],
         up: args.up,
         ..mss_scene::hexmesh::Placement::default()
@@ -203,7 +243,14 @@ pub fn run(args: &VoxelizeArgs, global: &GlobalArgs) -> anyhow::Result<()> {
     } else {
         VtuEncoding::Base64Zlib
     };
-    write_outputs(&out_dir, lattice, &loaded.mesh, args.springs, encoding)?;
+    write_outputs(
+        &out_dir,
+        lattice,
+        &loaded.mesh,
+        None,
+        args.springs,
+        encoding,
+    )?;
     let summary = VoxelizeSummary {
         mesh: mesh_name,
         mesh_vertices: loaded.mesh.vertices.len(),
@@ -226,28 +273,125 @@ pub fn run(args: &VoxelizeArgs, global: &GlobalArgs) -> anyhow::Result<()> {
             .chain(args.springs.then_some("springs.vtu"))
             .map(str::to_owned)
             .collect(),
+        image: None,
     };
-    let json = serde_json::to_string_pretty(&summary).context("cannot encode the statistics")?;
+    finish(&summary, &out_dir, global)
+}
+
+/// Writes `stats.json` and prints the summary.
+fn finish(summary: &VoxelizeSummary, out_dir: &Path, global: &GlobalArgs) -> anyhow::Result<()> {
+    let json = serde_json::to_string_pretty(summary).context("cannot encode the statistics")?;
     mss_scene::mss_io::atomic::write_atomic(&out_dir.join("stats.json"), |w| {
         w.write_all(json.as_bytes())?;
         w.write_all(b"\n")
     })?;
     if global.chatty() {
-        print_summary(&summary)?;
+        print_summary(summary)?;
     }
     Ok(())
+}
+
+/// `mss voxelize IMAGE`: the chosen labels resampled to cubes.
+fn run_image(
+    args: &VoxelizeArgs,
+    global: &GlobalArgs,
+    options: &mss_scene::hexmesh::VoxelizeOptions,
+    out_dir: &Path,
+) -> anyhow::Result<()> {
+    if args.rule != "centre" {
+        anyhow::bail!(
+            "--rule {}: an image's cells are kept by the fraction the labels cover (--fraction), not by a rule",
+            args.rule
+        );
+    }
+    if args.scale != 1.0 || args.up != UpAxis::Z {
+        anyhow::bail!(
+            "--scale and --up place surface meshes; an image is placed by its own transform (and --units)"
+        );
+    }
+    mss_scene::build::prepare_output_folder(out_dir)?;
+    let t0 = Instant::now();
+    let choice = stages::ImageChoice {
+        labels: args.labels.as_deref(),
+        threshold: args.fraction,
+        unit_metres: args.units.map(Units::factor),
+        space: None,
+        placement: mss_scene::hexmesh::Placement::default(),
+    };
+    let placed = stages::image_lattice_within(
+        Path::new(&args.mesh),
+        &choice,
+        options,
+        &global.limits(),
+        stages::RunNeeds::EXPLICIT,
+    )?;
+    let voxelize_seconds = t0.elapsed().as_secs_f64();
+    let t2 = Instant::now();
+    let encoding = if args.compression == "none" {
+        VtuEncoding::Base64
+    } else {
+        VtuEncoding::Base64Zlib
+    };
+    let image = &placed.lattice;
+    let lattice = &image.lattice;
+    write_outputs(
+        out_dir,
+        lattice,
+        &image.surface,
+        Some(&image.cell_labels),
+        args.springs,
+        encoding,
+    )?;
+    let mut cells_per_label = std::collections::BTreeMap::new();
+    for &l in &image.cell_labels {
+        *cells_per_label.entry(l).or_insert(0usize) += 1;
+    }
+    let summary = VoxelizeSummary {
+        mesh: placed.name.clone(),
+        mesh_vertices: image.surface.vertices.len(),
+        mesh_triangles: image.surface.triangles.len(),
+        cells: lattice.num_cells(),
+        nodes: lattice.num_nodes(),
+        springs: lattice.num_unique_edges() + 4 * lattice.num_cells(),
+        cell_size: lattice.h(),
+        grid: lattice.dims(),
+        components_kept: image.stats.components_kept,
+        components_dropped: image.stats.components_dropped,
+        lattice_volume: lattice.volume(),
+        mesh_volume: image.stats.mesh_volume,
+        load_seconds: 0.0,
+        voxelize_seconds,
+        write_seconds: t2.elapsed().as_secs_f64(),
+        output_folder: out_dir.display().to_string(),
+        files: ["lattice.vtu", "skin.obj", "surface.obj"]
+            .into_iter()
+            .chain(args.springs.then_some("springs.vtu"))
+            .map(str::to_owned)
+            .collect(),
+        image: Some(ImageSummary {
+            dims: placed.dims,
+            spacing: placed.spacing,
+            voxels_per_label: image.voxels_per_label.clone(),
+            cells_per_label: cells_per_label.into_iter().collect(),
+        }),
+    };
+    finish(&summary, out_dir, global)
 }
 
 fn write_outputs(
     dir: &Path,
     lattice: &mss_scene::hexmesh::Lattice,
     mesh: &mss_scene::hexmesh::TriMesh,
+    cell_labels: Option<&[i32]>,
     springs: bool,
     encoding: VtuEncoding,
 ) -> anyhow::Result<()> {
     let coords: Vec<f64> = lattice.cell_coords().iter().map(|c| c[2] as f64).collect();
-    let frame = LatticeFrame::new(lattice.nodes(), lattice.cells())
+    let mut frame = LatticeFrame::new(lattice.nodes(), lattice.cells())
         .with_cell_field(Field::scalars("layer", &coords));
+    if let Some(labels) = cell_labels {
+        frame = frame.with_cell_field(Field::labels("label", labels));
+    }
     write_vtu(&dir.join("lattice.vtu"), &frame, encoding)?;
     let skin = mss_scene::hexmesh::boundary_skin(lattice);
     let skin_pos = skin.positions(lattice.nodes());
@@ -290,11 +434,27 @@ fn print_summary(s: &VoxelizeSummary) -> Result<(), crate::StdoutError> {
         crate::progress::human_length(s.cell_size),
         s.grid
     );
+    let of = if s.image.is_some() {
+        "the labelled voxels"
+    } else {
+        "the mesh"
+    };
     crate::outln!(
-        "volume       {:.4e} m^3 ({:+.1}% of the mesh)",
+        "volume       {:.4e} m^3 ({:+.1}% of {of})",
         s.lattice_volume,
         100.0 * (s.lattice_volume / s.mesh_volume - 1.0)
     );
+    if let Some(image) = &s.image {
+        crate::outln!(
+            "image        {:?} voxels of {} x {} x {}; voxels per label {:?}; cells per label {:?}",
+            image.dims,
+            crate::progress::human_length(image.spacing[0]),
+            crate::progress::human_length(image.spacing[1]),
+            crate::progress::human_length(image.spacing[2]),
+            image.voxels_per_label,
+            image.cells_per_label
+        );
+    }
     crate::outln!(
         "components   {} kept, {} dropped",
         s.components_kept,
@@ -324,5 +484,7 @@ mod tests {
         assert_eq!(default_folder("builtin:critter"), "critter_lattice");
         assert_eq!(default_folder("scan.vtu"), "scan_lattice");
         assert_eq!(default_folder("/"), "mesh_lattice");
+        assert_eq!(default_folder("scans/seg.nii.gz"), "seg_lattice");
+        assert_eq!(default_folder("seg.nrrd"), "seg_lattice");
     }
 }

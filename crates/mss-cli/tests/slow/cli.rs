@@ -877,3 +877,50 @@ fn voxelize_writes_its_own_folder_and_hints_at_units() {
     assert!(out.status.success(), "{stderr}");
     assert!(!stderr.contains("large for a soft body"), "{stderr}");
 }
+
+/// `mss voxelize IMAGE` resamples a label image: its own folder named
+/// without the image's extensions, the `label` cell field, and the labels'
+/// voxels and cells in stats.json; flags that only place meshes are refused.
+#[test]
+fn voxelize_takes_a_label_image() {
+    let dir = tempfile::tempdir().unwrap();
+    let organ = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../data/images/organ.nii.gz"
+    );
+    let out = Command::new(MSS)
+        .args(["voxelize", organ, "--labels", "1,2", "--cells", "12"])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    let folder = dir.path().join("organ_lattice");
+    let stats: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(folder.join("stats.json")).unwrap()).unwrap();
+    let labels: Vec<i64> = stats["image"]["cells_per_label"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p[0].as_i64().unwrap())
+        .collect();
+    assert_eq!(labels, vec![1, 2]);
+    assert_eq!(stats["image"]["dims"], serde_json::json!([72, 56, 30]));
+    let lattice = std::fs::read_to_string(folder.join("lattice.vtu")).unwrap();
+    assert!(lattice.contains("Name=\"label\""));
+    for (args, wanted) in [
+        (&["--scale", "2"][..], "--scale"),
+        (&["--rule", "any"], "--rule any"),
+        (&["--labels", "9"], "no voxel carries the labels [9]"),
+    ] {
+        let out = Command::new(MSS)
+            .args(["voxelize", organ, "--cells", "8"])
+            .args(args)
+            .current_dir(dir.path())
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {stderr}");
+        assert!(stderr.contains(wanted), "{args:?}: {stderr}");
+    }
+}
