@@ -22,6 +22,12 @@ Two ways in:
       state = hexmss.State(problem)
       hexmss.Integrator(problem, "explicit").step(state, n=100)
 
+- segmented images (NIfTI, NRRD) instead of meshes::
+
+      image = hexmss.load_image("seg.nii.gz")        # labels, affine
+      body = hexmss.voxelize_image("seg.nii.gz", labels=[1, 2], cells=24)
+      body.lattice, body.cell_labels, body.surface
+
 Long calls release the GIL and take an optional ``progress(stage, done,
 total)`` callback; ``set_threads`` chooses the worker threads (results do
 not depend on it). Errors are the exceptions of :mod:`hexmss.errors`.
@@ -30,6 +36,8 @@ not depend on it). Errors are the exceptions of :mod:`hexmss.errors`.
 from . import errors
 from ._hexmss import (
     Embedding,
+    Image,
+    ImageLattice,
     Integrator,
     Job,
     Lattice,
@@ -44,6 +52,7 @@ from ._hexmss import (
     __version__,
     get_threads,
     integrators,
+    load_image,
     load_mesh,
     parameterizations,
     prepare,
@@ -53,6 +62,7 @@ from ._hexmss import (
     stop_views,
     view,
     voxelize,
+    voxelize_image,
     write_obj,
     write_stl,
     write_vtu,
@@ -74,6 +84,8 @@ __all__ = [
     "DivergedError",
     "Embedding",
     "HexmssError",
+    "Image",
+    "ImageLattice",
     "Integrator",
     "Job",
     "Lattice",
@@ -97,6 +109,7 @@ __all__ = [
     "errors",
     "get_threads",
     "integrators",
+    "load_image",
     "load_mesh",
     "parameterizations",
     "prepare",
@@ -106,6 +119,7 @@ __all__ = [
     "stop_views",
     "view",
     "voxelize",
+    "voxelize_image",
     "write_obj",
     "write_stl",
     "write_vtu",

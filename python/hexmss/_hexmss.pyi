@@ -89,6 +89,71 @@ def voxelize(
     """The cubic lattice of a mesh (the keys of a scene's [voxelize] table):
     ``cells`` along the longest axis (default 24) or ``cell_size`` (m)."""
 
+LabelArray = npt.NDArray[np.int32]
+
+class Image:
+    """A label volume: one integer label per voxel, and where the voxels are."""
+
+    @property
+    def labels(self) -> LabelArray:
+        """The labels, indexed labels[i, j, k] (shape (ni, nj, nk)), read-only."""
+    @property
+    def affine(self) -> FloatArray:
+        """4 x 4 voxel-to-world matrix (file units): voxel (i, j, k) is at affine @ (i, j, k, 1)."""
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        """Voxels along i, j, k."""
+    @property
+    def spacing(self) -> tuple[float, float, float]:
+        """Voxel spacing along i, j, k (file units)."""
+    @property
+    def unit_metres(self) -> Optional[float]:
+        """Metres per unit of the world coordinates as the file says, or None (read as mm)."""
+    @property
+    def space(self) -> str:
+        """The frame of the world coordinates: "RAS", "LPS" or the file's name for another."""
+    @property
+    def name(self) -> str:
+        """The file it was read from."""
+    def label_counts(self) -> dict[int, int]:
+        """The number of voxels of each label."""
+
+def load_image(path: PathLike) -> Image:
+    """Reads a label image: NIfTI-1/-2 (.nii, .nii.gz, .hdr/.img) or NRRD (.nrrd, .nhdr)."""
+
+class ImageLattice:
+    """The lattice of a label image, the label of each cell and the labels' surface."""
+
+    @property
+    def lattice(self) -> "Lattice":
+        """The cubic lattice."""
+    @property
+    def cell_labels(self) -> LabelArray:
+        """The label covering most of each cell, (C,)."""
+    @property
+    def surface(self) -> Mesh:
+        """The chosen labels' boundary (m)."""
+    @property
+    def voxels_per_label(self) -> dict[int, int]:
+        """Voxels of each chosen label."""
+
+def voxelize_image(
+    path: PathLike,
+    *,
+    labels: Optional[Sequence[int]] = None,
+    threshold: float = 0.5,
+    units: Optional[Literal["m", "cm", "mm"]] = None,
+    space: Literal["file", "RAS", "LPS"] = "file",
+    rotate: Sequence[float] = (0.0, 0.0, 0.0),
+    translate: Sequence[float] = (0.0, 0.0, 0.0),
+    cells: Optional[int] = None,
+    cell_size: Optional[float] = None,
+    components: Literal["largest", "all"] = "largest",
+    max_cells: int = 10_000_000,
+) -> ImageLattice:
+    """The chosen labels of a label image resampled to cubes (the keys of a
+    scene's [image] and [voxelize] tables)."""
+
 class Lattice:
     """A cubic lattice of cells (hexahedra) and their corner nodes."""
 

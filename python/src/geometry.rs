@@ -172,7 +172,7 @@ fn place(mesh: &mut TriMesh, name: &str, placement: Option<&Bound<'_, PyDict>>) 
 }
 
 /// The exception of a stage's error.
-fn stage_error(e: &StageError) -> PyErr {
+pub(crate) fn stage_error(e: &StageError) -> PyErr {
     let kind = match e {
         StageError::Source(_) | StageError::Image(_) => Kind::Mesh,
         StageError::Placement { .. } => Kind::Scene,

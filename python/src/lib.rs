@@ -23,6 +23,7 @@ use pyo3::prelude::*;
 mod convert;
 mod errors;
 mod geometry;
+mod image;
 mod io;
 mod physics;
 mod progress;
@@ -37,6 +38,7 @@ fn _hexmss(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(threads::set_threads, m)?)?;
     m.add_function(wrap_pyfunction!(threads::get_threads, m)?)?;
     geometry::register(m)?;
+    image::register(m)?;
     physics::register(m)?;
     scene::register(m)?;
     io::register(m)?;
