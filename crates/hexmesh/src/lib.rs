@@ -69,6 +69,7 @@ pub mod load;
 pub mod loader;
 pub mod mesh;
 pub mod placement;
+pub mod plane;
 #[cfg(feature = "ply")]
 pub mod ply;
 pub mod skin;

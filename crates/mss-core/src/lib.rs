@@ -38,6 +38,7 @@ pub mod loads;
 pub mod material;
 pub mod model;
 pub mod modes;
+pub mod plane;
 pub mod simulation;
 pub mod solver;
 pub mod sparse;

@@ -11,5 +11,6 @@ mod formats;
 mod fuzz_replay;
 mod image;
 mod load_errors;
+mod plane;
 mod skin_embed;
 mod voxelize;

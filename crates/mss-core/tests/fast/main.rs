@@ -8,6 +8,7 @@ mod contact;
 mod determinism;
 mod hourglass;
 mod model_facts;
+mod plane;
 mod rigid_cell_modes;
 mod solvers;
 mod step_control;

@@ -1,0 +1,722 @@
+//! The paper's 2D element (section 3.1): rectangles `l0 x h0` of any aspect
+//! ratio in plane stress, of thickness `t`, on a [`RectLattice`].
+//!
+//! Each cell has two edge springs along x (`k_l`, rest length `l0`), two
+//! along y (`k_h`, `h0`), two diagonals (`k_d`, `sqrt(l0^2 + h0^2)`) and,
+//! in the `paper` variant, correction forces that restore Poisson's ratio.
+//! docs/model.md (section 9) derives every coefficient from the Lagrangian
+//! of the virtual shear and tension tests; the tests check that those tests
+//! return E, nu and G at every aspect ratio.
+//!
+//! Nodes are [`Vec3`] in the plane `z = 0` so that the 3D solvers' pieces
+//! (Newton's method, the sparse direct solves) serve the plane as they
+//! are; the z components stay zero and are always held.
+//!
+//! Variants ([`PlaneParameterization`]):
+//! - `Paper`: the paper's springs and correction forces (exact for every
+//!   homogeneous strain, any nu in (-1/3, 1/2), any aspect ratio).
+//! - `Springs`: the same springs without corrections (the classic MSS:
+//!   exact only at nu = 1/3).
+//! - `Areal`: springs exact in shear, plus an energy of the area change
+//!   (`kappa t A0 (J - 1)^2 / 2`), conservative and exact for every
+//!   homogeneous strain.
+//!
+//! Hourglass control (`hourglass = Some(alpha)`): the lattice's bending
+//! modes (one cell's `u_x ~ x y` and `u_y ~ x y`) are resisted only by the
+//! edge springs, whose stiffness the continuum fit sets, and `k_l < 0`
+//! once `l0 / h0 > sqrt(2 + 3 nu)`: such lattices are unstable in bending.
+//! The control adds, per cell, `K/2 (L_top - L_bottom)^2` on the two x
+//! edges and the same on the y edges: zero for every homogeneous strain and
+//! every rigid motion, exactly conservative, raising the bending modes'
+//! stiffness to `alpha` times that of pure bending where the springs give
+//! less.
+//!
+//! ```
+//! use hexmesh::plane::RectLattice;
+//! use mss_core::Material;
+//! use mss_core::plane::{PlaneModel, PlaneParameterization};
+//!
+//! let lattice = RectLattice::block([4, 2], [0.02, 0.01], [0.0, 0.0]).unwrap();
+//! let steel_like = Material::new(2.0e5, 0.3, 1000.0).unwrap();
+//! let model = PlaneModel::new(&lattice, steel_like, 0.005, PlaneParameterization::Paper, None).unwrap();
+//! // At rest no force.
+//! let mut f = vec![mss_core::Vec3::zeros(); model.num_nodes()];
+//! model.internal_forces(model.rest_positions(), &mut f);
+//! assert!(f.iter().all(|v| v.norm() < 1e-12));
+//! assert!((model.total_mass() - 1000.0 * 0.08 * 0.02 * 0.005).abs() < 1e-15);
+//! ```
+
+use hexmesh::plane::RectLattice;
+use rayon::prelude::*;
+use thiserror::Error;
+
+use crate::solver::{LinearSolver, LinearSolverKind};
+use crate::solver::{NewtonFailure, NewtonOptions, NonlinearSystem, newton};
+use crate::{BlockCsr, Material, Vec3};
+
+/// The 2D variants.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PlaneParameterization {
+    /// The paper's springs and correction forces.
+    Paper,
+    /// The paper's springs alone.
+    Springs,
+    /// Springs exact in shear and an areal energy.
+    Areal,
+}
+
+impl PlaneParameterization {
+    /// The variants by name (`"paper"`, `"springs"`, `"areal"`).
+    pub const NAMES: [&'static str; 3] = ["paper", "springs", "areal"];
+
+    /// The variant called `name`.
+    pub fn from_name(name: &str) -> Option<Self> {
+        match name {
+            "paper" => Some(Self::Paper),
+            "springs" => Some(Self::Springs),
+            "areal" => Some(Self::Areal),
+            _ => None,
+        }
+    }
+
+    /// Its name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Paper => "paper",
+            Self::Springs => "springs",
+            Self::Areal => "areal",
+        }
+    }
+}
+
+/// Why a 2D model could not be built.
+#[derive(Debug, Error, Clone, PartialEq)]
+pub enum PlaneModelError {
+    /// The thickness is not a positive finite length.
+    #[error("thickness {0} must be a positive length (m)")]
+    Thickness(f64),
+    /// Poisson's ratio is outside what the variant reproduces.
+    #[error(
+        "Poisson's ratio {nu} is outside ({min}, {max}), the range the \"{variant}\" 2D element reproduces"
+    )]
+    Poisson {
+        /// The value.
+        nu: f64,
+        /// Lower bound (open).
+        min: f64,
+        /// Upper bound (open).
+        max: f64,
+        /// The variant.
+        variant: &'static str,
+    },
+    /// The hourglass strength is not a non-negative finite number.
+    #[error("hourglass strength {0} must be a non-negative number")]
+    Hourglass(f64),
+}
+
+/// The constants of one cell: spring stiffnesses (N/m), the corrections'
+/// coupling, the areal modulus and the hourglass stiffnesses.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlaneCoefficients {
+    /// Each x edge (rest length `l0`).
+    pub k_l: f64,
+    /// Each y edge (rest length `h0`).
+    pub k_h: f64,
+    /// Each diagonal.
+    pub k_d: f64,
+    /// Face force along x per unit face force along y (corrections).
+    pub c_xy: f64,
+    /// Face force along y per unit face force along x.
+    pub c_yx: f64,
+    /// Areal modulus `kappa t` (N/m): the energy `kappa t A0 (J - 1)^2 / 2`.
+    pub areal: f64,
+    /// Hourglass stiffness on the x edges' length difference (N/m).
+    pub hg_x: f64,
+    /// Hourglass stiffness on the y edges' length difference (N/m).
+    pub hg_y: f64,
+}
+
+impl PlaneCoefficients {
+    /// The coefficients of an `l0 x h0` cell of thickness `t` (m).
+    pub fn new(
+        variant: PlaneParameterization,
+        hourglass: Option<f64>,
+        m: &Material,
+        t: f64,
+        [l0, h0]: [f64; 2],
+    ) -> Result<Self, PlaneModelError> {
+        if !(t.is_finite() && t > 0.0) {
+            return Err(PlaneModelError::Thickness(t));
+        }
+        let (e, nu) = (m.young, m.poisson);
+        let (min, max) = match variant {
+            // The corrections' 2 x 2 system is singular at nu = -1/3.
+            PlaneParameterization::Paper => (-1.0 / 3.0, 0.5),
+            PlaneParameterization::Springs | PlaneParameterization::Areal => (-1.0, 0.5),
+        };
+        if !(nu > min && nu < max) {
+            return Err(PlaneModelError::Poisson {
+                nu,
+                min,
+                max,
+                variant: variant.name(),
+            });
+        }
+        let g = e / (2.0 * (1.0 + nu));
+        let k_d = e * t * (l0 * l0 + h0 * h0) / (4.0 * l0 * h0 * (1.0 + nu));
+        let (k_l, k_h, c_xy, c_yx, areal) = match variant {
+            PlaneParameterization::Paper | PlaneParameterization::Springs => {
+                let k = |i: f64, j: f64| {
+                    e * t * (j * j * (2.0 + 3.0 * nu) - i * i) / (4.0 * l0 * h0 * (1.0 + nu))
+                };
+                let c = if variant == PlaneParameterization::Paper {
+                    (3.0 * nu - 1.0) / 2.0
+                } else {
+                    0.0
+                };
+                (k(l0, h0), k(h0, l0), c * h0 / l0, c * l0 / h0, 0.0)
+            }
+            PlaneParameterization::Areal => {
+                let lambda_plane = e * nu / (1.0 - nu * nu);
+                (
+                    g * t * (3.0 * h0 * h0 - l0 * l0) / (2.0 * l0 * h0),
+                    g * t * (3.0 * l0 * l0 - h0 * h0) / (2.0 * l0 * h0),
+                    0.0,
+                    0.0,
+                    (lambda_plane - g) * t,
+                )
+            }
+        };
+        let (hg_x, hg_y) = match hourglass {
+            None => (0.0, 0.0),
+            Some(alpha) if alpha.is_finite() && alpha >= 0.0 => {
+                // Pure bending's stiffness in the cell's bending modes; the
+                // springs give 8 k there, the penalty 16 K.
+                let target_x = alpha * 4.0 / 3.0 * e * t * h0 / l0;
+                let target_y = alpha * 4.0 / 3.0 * e * t * l0 / h0;
+                ((target_x - 8.0 * k_l) / 16.0, (target_y - 8.0 * k_h) / 16.0)
+            }
+            Some(alpha) => return Err(PlaneModelError::Hourglass(alpha)),
+        };
+        Ok(Self {
+            k_l,
+            k_h,
+            k_d,
+            c_xy,
+            c_yx,
+            areal,
+            hg_x,
+            hg_y,
+        })
+    }
+}
+
+/// A 2D mass-spring model on a [`RectLattice`].
+#[derive(Debug, Clone)]
+pub struct PlaneModel {
+    rest: Vec<Vec3>,
+    cells: Vec<[u32; 4]>,
+    size: [f64; 2],
+    thickness: f64,
+    masses: Vec<f64>,
+    coefficients: PlaneCoefficients,
+    material: Material,
+    variant: PlaneParameterization,
+    /// CSR node -> (cell, corner), for a gather in a fixed order.
+    node_offsets: Vec<u32>,
+    node_corners: Vec<u32>,
+}
+
+/// `s_x` and `s_y` of the corners (`-1` on the low face, `+1` on the high).
+const SIGNS: [[f64; 2]; 4] = [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]];
+
+impl PlaneModel {
+    /// The model of `lattice` in one material, thickness `thickness` (m).
+    pub fn new(
+        lattice: &RectLattice,
+        material: Material,
+        thickness: f64,
+        variant: PlaneParameterization,
+        hourglass: Option<f64>,
+    ) -> Result<Self, PlaneModelError> {
+        let size = lattice.cell_size();
+        let coefficients = PlaneCoefficients::new(variant, hourglass, &material, thickness, size)?;
+        let rest: Vec<Vec3> = lattice
+            .nodes()
+            .iter()
+            .map(|p| Vec3::new(p[0], p[1], 0.0))
+            .collect();
+        let n = rest.len();
+        let corner_mass = material.density * size[0] * size[1] * thickness / 4.0;
+        let mut masses = vec![0.0; n];
+        let mut node_offsets = vec![0u32; n + 1];
+        for c in lattice.cells() {
+            for &a in c {
+                masses[a as usize] += corner_mass;
+                node_offsets[a as usize + 1] += 1;
+            }
+        }
+        for i in 0..n {
+            node_offsets[i + 1] += node_offsets[i];
+        }
+        let mut fill = node_offsets.clone();
+        let mut node_corners = vec![0u32; node_offsets[n] as usize];
+        for (ci, c) in lattice.cells().iter().enumerate() {
+            for (k, &a) in c.iter().enumerate() {
+                node_corners[fill[a as usize] as usize] = (4 * ci + k) as u32;
+                fill[a as usize] += 1;
+            }
+        }
+        Ok(Self {
+            rest,
+            cells: lattice.cells().to_vec(),
+            size,
+            thickness,
+            masses,
+            coefficients,
+            material,
+            variant,
+            node_offsets,
+            node_corners,
+        })
+    }
+
+    /// Rest positions (m, z = 0).
+    pub fn rest_positions(&self) -> &[Vec3] {
+        &self.rest
+    }
+    /// The cells (counter-clockwise).
+    pub fn cells(&self) -> &[[u32; 4]] {
+        &self.cells
+    }
+    /// The cells as 8 corners (each quad twice), for the 3D sparse patterns.
+    pub fn cells_as_hex(&self) -> Vec<[u32; 8]> {
+        self.cells
+            .iter()
+            .map(|c| [c[0], c[1], c[2], c[3], c[0], c[1], c[2], c[3]])
+            .collect()
+    }
+    /// The cell size `[l0, h0]` (m).
+    pub fn cell_size(&self) -> [f64; 2] {
+        self.size
+    }
+    /// The thickness (m).
+    pub fn thickness(&self) -> f64 {
+        self.thickness
+    }
+    /// Lumped node masses (kg).
+    pub fn masses(&self) -> &[f64] {
+        &self.masses
+    }
+    /// Total mass (kg).
+    pub fn total_mass(&self) -> f64 {
+        self.masses.iter().sum()
+    }
+    /// Number of nodes.
+    pub fn num_nodes(&self) -> usize {
+        self.rest.len()
+    }
+    /// Number of cells.
+    pub fn num_cells(&self) -> usize {
+        self.cells.len()
+    }
+    /// The cells' coefficients.
+    pub fn coefficients(&self) -> PlaneCoefficients {
+        self.coefficients
+    }
+    /// The material.
+    pub fn material(&self) -> Material {
+        self.material
+    }
+    /// The variant.
+    pub fn parameterization(&self) -> PlaneParameterization {
+        self.variant
+    }
+
+    fn corners(&self, x: &[Vec3], c: usize) -> [[f64; 2]; 4] {
+        self.cells[c].map(|a| [x[a as usize].x, x[a as usize].y])
+    }
+
+    /// The internal forces of cell `c` on its 4 corners (N).
+    pub fn cell_forces(&self, x: &[Vec3], c: usize) -> [[f64; 2]; 4] {
+        cell_forces(&self.coefficients, self.size, &self.corners(x, c))
+    }
+
+    /// The internal forces at `x` (N; z components zero). Cells in
+    /// parallel, each node summing its cells in a fixed order: the result
+    /// does not depend on the thread count.
+    pub fn internal_forces(&self, x: &[Vec3], out: &mut [Vec3]) {
+        assert_eq!(x.len(), self.num_nodes(), "positions: one per node");
+        let per_cell: Vec<[[f64; 2]; 4]> = (0..self.cells.len())
+            .into_par_iter()
+            .map(|c| self.cell_forces(x, c))
+            .collect();
+        out.par_iter_mut().enumerate().for_each(|(i, f)| {
+            let mut s = [0.0; 2];
+            let span = self.node_offsets[i] as usize..self.node_offsets[i + 1] as usize;
+            for &k in &self.node_corners[span] {
+                let g = per_cell[k as usize / 4][k as usize % 4];
+                s[0] += g[0];
+                s[1] += g[1];
+            }
+            *f = Vec3::new(s[0], s[1], 0.0);
+        });
+    }
+
+    /// Potential energy of the conservative terms (springs, areal energy,
+    /// hourglass control; J). The corrections of the `paper` variant are
+    /// not the gradient of an energy.
+    pub fn energy(&self, x: &[Vec3]) -> f64 {
+        (0..self.cells.len())
+            .map(|c| cell_energy(&self.coefficients, self.size, &self.corners(x, c)))
+            .sum()
+    }
+
+    /// The Jacobian d(internal force)/dx (N/m) as 3 x 3 blocks (z rows and
+    /// columns zero), each cell's 8 x 8 block by central differences of its
+    /// forces (step `1e-6` of the smaller cell side: relative accuracy
+    /// about 1e-10 on these smooth forces).
+    pub fn tangent(&self, x: &[Vec3]) -> BlockCsr {
+        let hex = self.cells_as_hex();
+        let mut m = BlockCsr::lattice_pattern(self.num_nodes(), &hex);
+        let step = 1e-6 * self.size[0].min(self.size[1]);
+        // Column `col` of each cell's 8 x 8 Jacobian: d f / d (dof col).
+        let columns: Vec<[[f64; 8]; 8]> = (0..self.cells.len())
+            .into_par_iter()
+            .map(|c| {
+                let p = self.corners(x, c);
+                let mut columns = [[0.0; 8]; 8];
+                for (col, column) in columns.iter_mut().enumerate() {
+                    let (n, d) = (col / 2, col % 2);
+                    let mut plus = p;
+                    plus[n][d] += step;
+                    let mut minus = p;
+                    minus[n][d] -= step;
+                    let fp = cell_forces(&self.coefficients, self.size, &plus);
+                    let fm = cell_forces(&self.coefficients, self.size, &minus);
+                    for (row, v) in column.iter_mut().enumerate() {
+                        *v = (fp[row / 2][row % 2] - fm[row / 2][row % 2]) / (2.0 * step);
+                    }
+                }
+                columns
+            })
+            .collect();
+        for (c, columns) in columns.iter().enumerate() {
+            for (b, &rb) in self.cells[c].iter().enumerate() {
+                for (a, &ca) in self.cells[c].iter().enumerate() {
+                    let k = m
+                        .find(rb as usize, ca as usize)
+                        .expect("pair in the pattern");
+                    for e in 0..2 {
+                        for d in 0..2 {
+                            m.blocks[k][(e, d)] += columns[2 * a + d][2 * b + e];
+                        }
+                    }
+                }
+            }
+        }
+        m
+    }
+
+    /// Highest angular frequency bound at rest (1/s), by Gershgorin's
+    /// theorem on the rest stiffness and the lumped masses.
+    pub fn omega_max_bound(&self) -> f64 {
+        let k = self.tangent(&self.rest);
+        let mut worst: f64 = 0.0;
+        for i in 0..self.num_nodes() {
+            let span = k.row_offsets[i] as usize..k.row_offsets[i + 1] as usize;
+            for d in 0..2 {
+                let row: f64 = span
+                    .clone()
+                    .map(|j| (0..2).map(|e| k.blocks[j][(d, e)].abs()).sum::<f64>())
+                    .sum();
+                worst = worst.max(row / self.masses[i]);
+            }
+        }
+        worst.sqrt()
+    }
+
+    /// A stable explicit time step (s): `2 / omega_max` times `safety`.
+    pub fn stable_time_step(&self, safety: f64) -> f64 {
+        safety * 2.0 / self.omega_max_bound()
+    }
+}
+
+fn sub(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
+    [a[0] - b[0], a[1] - b[1]]
+}
+
+fn norm(a: [f64; 2]) -> f64 {
+    (a[0] * a[0] + a[1] * a[1]).sqrt()
+}
+
+/// The 6 springs as (node a, node b, stiffness, rest length).
+fn springs(k: &PlaneCoefficients, [l0, h0]: [f64; 2]) -> [(usize, usize, f64, f64); 6] {
+    let d = (l0 * l0 + h0 * h0).sqrt();
+    [
+        (0, 1, k.k_l, l0),
+        (3, 2, k.k_l, l0),
+        (1, 2, k.k_h, h0),
+        (0, 3, k.k_h, h0),
+        (0, 2, k.k_d, d),
+        (1, 3, k.k_d, d),
+    ]
+}
+
+/// The edge pairs whose length difference the hourglass control penalizes:
+/// ((bottom x edge, top x edge), stiffness), then the y edges'.
+fn hourglass_pairs(k: &PlaneCoefficients) -> [([usize; 2], [usize; 2], f64); 2] {
+    [([0, 1], [3, 2], k.hg_x), ([0, 3], [1, 2], k.hg_y)]
+}
+
+fn area(p: &[[f64; 2]; 4]) -> f64 {
+    0.5 * (0..4)
+        .map(|i| p[i][0] * p[(i + 1) % 4][1] - p[(i + 1) % 4][0] * p[i][1])
+        .sum::<f64>()
+}
+
+fn cell_energy(k: &PlaneCoefficients, size: [f64; 2], p: &[[f64; 2]; 4]) -> f64 {
+    let mut e = 0.0;
+    for (a, b, stiffness, rest) in springs(k, size) {
+        let stretch = norm(sub(p[b], p[a])) - rest;
+        e += 0.5 * stiffness * stretch * stretch;
+    }
+    if k.areal != 0.0 {
+        let a0 = size[0] * size[1];
+        let j = area(p) / a0;
+        e += 0.5 * k.areal * a0 * (j - 1.0) * (j - 1.0);
+    }
+    for (lo, hi, stiffness) in hourglass_pairs(k) {
+        if stiffness != 0.0 {
+            let diff = norm(sub(p[hi[1]], p[hi[0]])) - norm(sub(p[lo[1]], p[lo[0]]));
+            e += 0.5 * stiffness * diff * diff;
+        }
+    }
+    e
+}
+
+/// The internal forces of one cell on its corners.
+fn cell_forces(k: &PlaneCoefficients, size: [f64; 2], p: &[[f64; 2]; 4]) -> [[f64; 2]; 4] {
+    let mut f = [[0.0; 2]; 4];
+    for (a, b, stiffness, rest) in springs(k, size) {
+        let d = sub(p[b], p[a]);
+        let len = norm(d);
+        if len == 0.0 {
+            continue;
+        }
+        let s = stiffness * (len - rest) / len;
+        for c in 0..2 {
+            f[a][c] += s * d[c];
+            f[b][c] -= s * d[c];
+        }
+    }
+    if k.c_xy != 0.0 || k.c_yx != 0.0 {
+        // Current axes: the mean edge directions.
+        let ax = {
+            let v = [
+                p[1][0] - p[0][0] + p[2][0] - p[3][0],
+                p[1][1] - p[0][1] + p[2][1] - p[3][1],
+            ];
+            let n = norm(v);
+            [v[0] / n, v[1] / n]
+        };
+        let ay = {
+            let v = [
+                p[3][0] - p[0][0] + p[2][0] - p[1][0],
+                p[3][1] - p[0][1] + p[2][1] - p[1][1],
+            ];
+            let n = norm(v);
+            [v[0] / n, v[1] / n]
+        };
+        // Spring tension across each axis (positive when stretched).
+        let mut t = [0.0; 2];
+        for (n, s) in SIGNS.iter().enumerate() {
+            t[0] -= 0.5 * s[0] * (f[n][0] * ax[0] + f[n][1] * ax[1]);
+            t[1] -= 0.5 * s[1] * (f[n][0] * ay[0] + f[n][1] * ay[1]);
+        }
+        // Face forces N: N_x - c_xy N_y = T_x, N_y - c_yx N_x = T_y.
+        let det = 1.0 - k.c_xy * k.c_yx;
+        let nx = (t[0] + k.c_xy * t[1]) / det;
+        let ny = (t[1] + k.c_yx * t[0]) / det;
+        let corr = [k.c_xy * ny, k.c_yx * nx];
+        for (n, s) in SIGNS.iter().enumerate() {
+            for c in 0..2 {
+                f[n][c] += -0.5 * s[0] * corr[0] * ax[c] - 0.5 * s[1] * corr[1] * ay[c];
+            }
+        }
+    }
+    if k.areal != 0.0 {
+        let a0 = size[0] * size[1];
+        let j = area(p) / a0;
+        let scale = -k.areal * (j - 1.0);
+        for i in 0..4 {
+            let (next, prev) = (p[(i + 1) % 4], p[(i + 3) % 4]);
+            f[i][0] += scale * 0.5 * (next[1] - prev[1]);
+            f[i][1] += scale * 0.5 * (prev[0] - next[0]);
+        }
+    }
+    for (lo, hi, stiffness) in hourglass_pairs(k) {
+        if stiffness == 0.0 {
+            continue;
+        }
+        let dl = sub(p[lo[1]], p[lo[0]]);
+        let dh = sub(p[hi[1]], p[hi[0]]);
+        let (ll, lh) = (norm(dl), norm(dh));
+        let s = -stiffness * (lh - ll);
+        for c in 0..2 {
+            // d(lh)/d p[hi[1]] = dh / lh, and the opposite at hi[0].
+            f[hi[1]][c] += s * dh[c] / lh;
+            f[hi[0]][c] -= s * dh[c] / lh;
+            f[lo[1]][c] -= s * dl[c] / ll;
+            f[lo[0]][c] += s * dl[c] / ll;
+        }
+    }
+    f
+}
+
+/// A 2D problem: a model, held nodes, in-plane gravity, nodal forces and
+/// mass-proportional damping.
+#[derive(Debug, Clone)]
+pub struct PlaneProblem {
+    /// The model.
+    pub model: PlaneModel,
+    /// Held nodes (both in-plane components; `[x, y]` each).
+    pub held: Vec<[bool; 2]>,
+    /// Gravity in the plane (m/s^2).
+    pub gravity: [f64; 2],
+    /// Extra forces per node (N).
+    pub forces: Vec<[f64; 2]>,
+    /// Mass-proportional damping (1/s).
+    pub damping: f64,
+}
+
+/// Why a 2D solve failed.
+#[derive(Debug, Error, Clone, PartialEq)]
+pub enum PlaneSolveError {
+    /// Newton's method did not converge.
+    #[error("the static solve did not converge: {0}")]
+    Newton(String),
+    /// The motion grew without bound.
+    #[error("the simulation diverged at step {0} (a position is no longer finite)")]
+    Diverged(usize),
+}
+
+impl PlaneProblem {
+    /// A problem on `model` with nothing held and no load.
+    pub fn new(model: PlaneModel) -> Self {
+        let n = model.num_nodes();
+        Self {
+            model,
+            held: vec![[false; 2]; n],
+            gravity: [0.0; 2],
+            forces: vec![[0.0; 2]; n],
+            damping: 0.0,
+        }
+    }
+
+    /// Internal plus external forces at `x` (N).
+    pub fn total_forces(&self, x: &[Vec3], out: &mut [Vec3]) {
+        self.model.internal_forces(x, out);
+        for (i, f) in out.iter_mut().enumerate() {
+            let m = self.model.masses[i];
+            f.x += m * self.gravity[0] + self.forces[i][0];
+            f.y += m * self.gravity[1] + self.forces[i][1];
+        }
+    }
+
+    /// The free dofs in the 3D layout `newton` takes (z always held).
+    fn free_dofs(&self) -> Vec<bool> {
+        self.held
+            .iter()
+            .flat_map(|h| [!h[0], !h[1], false])
+            .collect()
+    }
+
+    /// The static equilibrium from `x` (held nodes stay where `x` has
+    /// them). Returns the Newton iterations.
+    pub fn solve_static(&self, x: &mut [Vec3]) -> Result<u32, PlaneSolveError> {
+        struct System<'a>(&'a PlaneProblem);
+        impl NonlinearSystem for System<'_> {
+            fn residual(&mut self, x: &[Vec3], r: &mut [Vec3]) -> f64 {
+                self.0.total_forces(x, r);
+                let p = self.0;
+                let weight: f64 = p
+                    .model
+                    .masses
+                    .iter()
+                    .map(|m| m * p.gravity[0].hypot(p.gravity[1]))
+                    .sum();
+                let applied: f64 = p.forces.iter().map(|f| f[0].hypot(f[1])).sum();
+                let reactions: f64 = r.iter().map(|v| v.norm()).sum();
+                (weight + applied).max(1e-3 * reactions).max(1e-300)
+            }
+            fn jacobian(&mut self, x: &[Vec3]) -> BlockCsr {
+                self.0.model.tangent(x)
+            }
+        }
+        let free = self.free_dofs();
+        let model = &self.model;
+        let size = {
+            let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+            for p in &model.rest {
+                lo = [lo[0].min(p.x), lo[1].min(p.y)];
+                hi = [hi[0].max(p.x), hi[1].max(p.y)];
+            }
+            (hi[0] - lo[0]).max(hi[1] - lo[1])
+        };
+        let h = model.size[0].min(model.size[1]);
+        let mut linear = LinearSolver::for_lattice(
+            &model.cells_as_hex(),
+            &model.rest,
+            h,
+            LinearSolverKind::Direct,
+        );
+        let opts = NewtonOptions {
+            max_iterations: 60,
+            rtol: 1e-10,
+            slope_line_search: false,
+        };
+        newton(&mut System(self), x, &free, size, h, opts, &mut linear).map_err(|e| {
+            PlaneSolveError::Newton(match e {
+                NewtonFailure::Diverged(d) => format!("{d:?}"),
+                NewtonFailure::Singular(nodes) => format!(
+                    "the stiffness is singular: the held nodes leave a mechanism (nodes {:?} move freely)",
+                    &nodes[..nodes.len().min(8)]
+                ),
+                NewtonFailure::Linear(m) => m,
+                NewtonFailure::Cancelled => "cancelled".into(),
+            })
+        })
+    }
+
+    /// `steps` explicit steps of `dt` (s) from `(x, v)`: semi-implicit
+    /// Euler with the damping applied implicitly; held nodes do not move.
+    pub fn step_explicit(
+        &self,
+        x: &mut [Vec3],
+        v: &mut [Vec3],
+        dt: f64,
+        steps: usize,
+    ) -> Result<(), PlaneSolveError> {
+        let mut f = vec![Vec3::zeros(); x.len()];
+        let keep = 1.0 / (1.0 + dt * self.damping);
+        for step in 0..steps {
+            self.total_forces(x, &mut f);
+            for i in 0..x.len() {
+                let inv_m = 1.0 / self.model.masses[i];
+                for d in 0..2 {
+                    if self.held[i][d] {
+                        v[i][d] = 0.0;
+                    } else {
+                        v[i][d] = (v[i][d] + dt * f[i][d] * inv_m) * keep;
+                        x[i][d] += dt * v[i][d];
+                    }
+                }
+            }
+            if !x.iter().all(|p| p.x.is_finite() && p.y.is_finite()) {
+                return Err(PlaneSolveError::Diverged(step));
+            }
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,406 @@
+//! The 2D element: the virtual tension and shear tests return E, nu and G
+//! at every aspect ratio; rigid motions give no force; forces are minus the
+//! energy's gradient where the model is conservative; momentum is
+//! conserved; the static and the damped dynamic answers agree; results do
+//! not depend on the thread count; hourglass control makes elongated cells
+//! stable in bending.
+
+use hexmesh::plane::RectLattice;
+use mss_core::plane::{PlaneModel, PlaneParameterization, PlaneProblem};
+use mss_core::{Material, Vec3};
+
+use crate::on_threads;
+
+const VARIANTS: [PlaneParameterization; 2] =
+    [PlaneParameterization::Paper, PlaneParameterization::Areal];
+const RATIOS: [f64; 5] = [1.0, 2.0, 4.0, 0.5, 0.25];
+const NUS: [f64; 5] = [0.0, 0.25, 0.3, 0.45, 0.49];
+
+fn model(
+    n: [u32; 2],
+    cell: [f64; 2],
+    nu: f64,
+    variant: PlaneParameterization,
+    hourglass: Option<f64>,
+) -> PlaneModel {
+    let lattice = RectLattice::block(n, cell, [0.0, 0.0]).unwrap();
+    let material = Material::with_poisson_range(1.0e4, nu, 1000.0, -1.0, 0.5).unwrap();
+    PlaneModel::new(&lattice, material, 0.01, variant, hourglass).unwrap()
+}
+
+/// Uniaxial tension along `axis` of a block with rollers on the low faces:
+/// (E, nu) measured from the mean displacements of the high faces.
+fn tension(model: PlaneModel, axis: usize, stress: f64) -> (f64, f64) {
+    let other = 1 - axis;
+    let rest = model.rest_positions().to_vec();
+    let hi = |d: usize| rest.iter().map(|p| p[d]).fold(f64::MIN, f64::max);
+    let [l0, h0] = model.cell_size();
+    let face_length = [h0, l0];
+    let t = model.thickness();
+    let mut p = PlaneProblem::new(model);
+    let (len, width) = (hi(axis), hi(other));
+    for (i, x) in rest.iter().enumerate() {
+        for d in 0..2 {
+            if x[d].abs() < 1e-12 {
+                p.held[i][d] = true;
+            }
+        }
+        if (x[axis] - len).abs() < 1e-12 {
+            // Consistent loads: half of each cell face's force to each node.
+            let mut share = face_length[axis];
+            if x[other].abs() < 1e-12 || (x[other] - width).abs() < 1e-12 {
+                share *= 0.5;
+            }
+            p.forces[i][axis] = stress * share * t;
+        }
+    }
+    let mut x = rest.clone();
+    p.solve_static(&mut x).unwrap();
+    let mean = |d: usize, at: f64, along: usize| {
+        let (s, n) = rest
+            .iter()
+            .zip(&x)
+            .filter(|(r, _)| (r[along] - at).abs() < 1e-12)
+            .fold((0.0, 0), |(s, n), (r, x)| (s + x[d] - r[d], n + 1));
+        s / n as f64
+    };
+    let eps_axis = mean(axis, len, axis) / len;
+    let eps_other = mean(other, width, other) / width;
+    (stress / eps_axis, -eps_other / eps_axis)
+}
+
+#[test]
+fn the_virtual_tension_tests_return_e_and_nu_at_every_aspect_ratio() {
+    for variant in VARIANTS {
+        for ratio in RATIOS {
+            for nu in NUS {
+                for axis in 0..2 {
+                    let m = model([4, 3], [0.01 * ratio, 0.01], nu, variant, None);
+                    let (e, measured_nu) = tension(m, axis, 1e-3);
+                    let tag = format!("{variant:?} l0/h0 = {ratio} nu = {nu} axis {axis}");
+                    assert!((e / 1.0e4 - 1.0).abs() < 1e-5, "{tag}: E = {e}");
+                    assert!((measured_nu - nu).abs() < 1e-5, "{tag}: nu = {measured_nu}");
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn springs_alone_reproduce_nu_only_at_one_third() {
+    let exact = tension(
+        model(
+            [4, 3],
+            [0.01, 0.01],
+            1.0 / 3.0,
+            PlaneParameterization::Springs,
+            None,
+        ),
+        0,
+        1e-3,
+    );
+    assert!((exact.1 - 1.0 / 3.0).abs() < 1e-5, "{exact:?}");
+    let off = tension(
+        model(
+            [4, 3],
+            [0.01, 0.01],
+            0.45,
+            PlaneParameterization::Springs,
+            None,
+        ),
+        0,
+        1e-3,
+    );
+    assert!((off.1 - 0.45).abs() > 0.05, "{off:?}");
+}
+
+/// Simple shear of every node by `gamma`; G from the shear force the top
+/// row of nodes carries.
+fn shear_modulus(model: &PlaneModel, gamma: f64) -> f64 {
+    let rest = model.rest_positions();
+    let x: Vec<Vec3> = rest
+        .iter()
+        .map(|p| p + Vec3::new(gamma * p.y, 0.0, 0.0))
+        .collect();
+    let mut f = vec![Vec3::zeros(); x.len()];
+    model.internal_forces(&x, &mut f);
+    let top = rest.iter().map(|p| p.y).fold(f64::MIN, f64::max);
+    let width = rest.iter().map(|p| p.x).fold(f64::MIN, f64::max);
+    let carried: f64 = rest
+        .iter()
+        .zip(&f)
+        .filter(|(r, _)| (r.y - top).abs() < 1e-12)
+        .map(|(_, f)| -f.x)
+        .sum();
+    carried / (width * model.thickness()) / gamma
+}
+
+#[test]
+fn the_virtual_shear_test_returns_g_at_every_aspect_ratio() {
+    for variant in [
+        PlaneParameterization::Paper,
+        PlaneParameterization::Springs,
+        PlaneParameterization::Areal,
+    ] {
+        for ratio in RATIOS {
+            for nu in NUS {
+                let m = model([3, 4], [0.01 * ratio, 0.01], nu, variant, Some(1.0));
+                let g = shear_modulus(&m, 1e-7);
+                let want = 1.0e4 / (2.0 * (1.0 + nu));
+                assert!(
+                    (g / want - 1.0).abs() < 1e-5,
+                    "{variant:?} l0/h0 = {ratio} nu = {nu}: G = {g}, want {want}"
+                );
+            }
+        }
+    }
+}
+
+fn deformed(model: &PlaneModel, amplitude: f64) -> Vec<Vec3> {
+    model
+        .rest_positions()
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let s = (i as f64 * 1.7).sin();
+            let c = (i as f64 * 0.9).cos();
+            p + Vec3::new(amplitude * s, amplitude * c, 0.0)
+        })
+        .collect()
+}
+
+#[test]
+fn rigid_motions_give_no_force() {
+    for variant in [
+        PlaneParameterization::Paper,
+        PlaneParameterization::Springs,
+        PlaneParameterization::Areal,
+    ] {
+        let m = model([3, 2], [0.04, 0.01], 0.3, variant, Some(1.0));
+        let (s, c) = 0.7f64.sin_cos();
+        let x: Vec<Vec3> = m
+            .rest_positions()
+            .iter()
+            .map(|p| Vec3::new(c * p.x - s * p.y + 0.3, s * p.x + c * p.y - 1.0, 0.0))
+            .collect();
+        let mut f = vec![Vec3::zeros(); x.len()];
+        m.internal_forces(&x, &mut f);
+        let scale = m.coefficients().k_d * 0.01;
+        assert!(
+            f.iter().all(|v| v.norm() < 1e-9 * scale),
+            "{variant:?}: {:?}",
+            f.iter().map(|v| v.norm()).fold(0.0, f64::max)
+        );
+    }
+}
+
+#[test]
+fn forces_are_minus_the_gradient_of_the_energy_where_conservative() {
+    for variant in [PlaneParameterization::Springs, PlaneParameterization::Areal] {
+        for hourglass in [None, Some(1.0)] {
+            let m = model([3, 2], [0.04, 0.01], 0.2, variant, hourglass);
+            let x = deformed(&m, 2e-3);
+            let mut f = vec![Vec3::zeros(); x.len()];
+            m.internal_forces(&x, &mut f);
+            let step = 1e-7;
+            let scale = f.iter().map(|v| v.norm()).fold(0.0, f64::max);
+            for i in 0..x.len() {
+                for d in 0..2 {
+                    let mut plus = x.clone();
+                    plus[i][d] += step;
+                    let mut minus = x.clone();
+                    minus[i][d] -= step;
+                    let g = (m.energy(&plus) - m.energy(&minus)) / (2.0 * step);
+                    assert!(
+                        (f[i][d] + g).abs() < 1e-6 * scale,
+                        "{variant:?} {hourglass:?} node {i} dof {d}: force {} gradient {g}",
+                        f[i][d]
+                    );
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn the_forces_sum_to_zero_and_conservative_ones_exert_no_torque() {
+    for variant in [
+        PlaneParameterization::Paper,
+        PlaneParameterization::Springs,
+        PlaneParameterization::Areal,
+    ] {
+        let m = model([3, 3], [0.02, 0.01], 0.4, variant, Some(1.0));
+        let x = deformed(&m, 3e-3);
+        let mut f = vec![Vec3::zeros(); x.len()];
+        m.internal_forces(&x, &mut f);
+        let scale = f.iter().map(|v| v.norm()).sum::<f64>();
+        let total: Vec3 = f.iter().sum();
+        assert!(total.norm() < 1e-12 * scale, "{variant:?}: {total:?}");
+        if variant != PlaneParameterization::Paper {
+            let torque: f64 = x.iter().zip(&f).map(|(p, f)| p.x * f.y - p.y * f.x).sum();
+            assert!(torque.abs() < 1e-12 * scale, "{variant:?}: torque {torque}");
+        }
+    }
+}
+
+#[test]
+fn a_free_body_keeps_its_momentum_while_it_vibrates() {
+    let m = model(
+        [4, 2],
+        [0.02, 0.01],
+        0.3,
+        PlaneParameterization::Paper,
+        Some(1.0),
+    );
+    let dt = m.stable_time_step(0.5);
+    let masses = m.masses().to_vec();
+    let p = PlaneProblem::new(m);
+    let mut x = deformed(&p.model, 1e-3);
+    let mut v: Vec<Vec3> = (0..x.len()).map(|_| Vec3::new(0.3, -0.2, 0.0)).collect();
+    let momentum = |v: &[Vec3]| -> Vec3 { v.iter().zip(&masses).map(|(v, m)| v * *m).sum() };
+    let before = momentum(&v);
+    p.step_explicit(&mut x, &mut v, dt, 2000).unwrap();
+    let after = momentum(&v);
+    assert!(
+        (after - before).norm() < 1e-12 * before.norm(),
+        "{before:?} -> {after:?}"
+    );
+}
+
+/// A cantilever `n` cells long, clamped at x = 0, under gravity along -y,
+/// Young's modulus `e`.
+fn cantilever(n: [u32; 2], cell: [f64; 2], e: f64, variant: PlaneParameterization) -> PlaneProblem {
+    let lattice = RectLattice::block(n, cell, [0.0, 0.0]).unwrap();
+    let material = Material::new(e, 0.3, 1000.0).unwrap();
+    let m = PlaneModel::new(&lattice, material, 0.01, variant, Some(1.0)).unwrap();
+    let mut p = PlaneProblem::new(m);
+    for (i, r) in p.model.rest_positions().iter().enumerate() {
+        if r.x.abs() < 1e-12 {
+            p.held[i] = [true, true];
+        }
+    }
+    p.gravity = [0.0, -9.81];
+    p
+}
+
+fn tip_sag(p: &PlaneProblem, x: &[Vec3]) -> f64 {
+    p.model
+        .rest_positions()
+        .iter()
+        .zip(x)
+        .map(|(r, x)| r.y - x.y)
+        .fold(f64::MIN, f64::max)
+}
+
+#[test]
+fn static_and_damped_dynamic_answers_agree() {
+    let p = {
+        let mut p = cantilever([8, 2], [0.02, 0.02], 1.0e7, PlaneParameterization::Paper);
+        p.damping = 40.0;
+        p
+    };
+    let mut xs = p.model.rest_positions().to_vec();
+    p.solve_static(&mut xs).unwrap();
+    let mut x = p.model.rest_positions().to_vec();
+    let mut v = vec![Vec3::zeros(); x.len()];
+    let dt = p.model.stable_time_step(0.8);
+    p.step_explicit(&mut x, &mut v, dt, (2.0 / dt) as usize)
+        .unwrap();
+    let (s, d) = (tip_sag(&p, &xs), tip_sag(&p, &x));
+    assert!(s > 1e-4, "sag {s}");
+    assert!((s - d).abs() < 1e-3 * s, "static {s}, dynamic {d}");
+}
+
+#[test]
+fn results_do_not_depend_on_the_thread_count() {
+    let p = cantilever([12, 3], [0.02, 0.01], 1.0e7, PlaneParameterization::Paper);
+    let run = || {
+        let mut x = p.model.rest_positions().to_vec();
+        p.solve_static(&mut x).unwrap();
+        let mut v = vec![Vec3::zeros(); x.len()];
+        p.step_explicit(&mut x, &mut v, 1e-5, 50).unwrap();
+        x
+    };
+    let one = on_threads(1, run);
+    for threads in [2, 3] {
+        assert_eq!(one, on_threads(threads, run), "{threads} threads");
+    }
+}
+
+/// The smallest eigenvalue of the rest stiffness on the free dofs, scaled
+/// by the largest.
+fn smallest_stiffness(p: &PlaneProblem) -> f64 {
+    let k = p.model.tangent(p.model.rest_positions());
+    let free: Vec<usize> = (0..p.model.num_nodes())
+        .flat_map(|i| (0..2).map(move |d| (i, d)))
+        .filter(|&(i, d)| !p.held[i][d])
+        .map(|(i, d)| 2 * i + d)
+        .collect();
+    let n = free.len();
+    let mut dense = nalgebra::DMatrix::<f64>::zeros(n, n);
+    for (a, &ra) in free.iter().enumerate() {
+        for (b, &rb) in free.iter().enumerate() {
+            if let Some(j) = k.find(ra / 2, rb / 2) {
+                dense[(a, b)] = -k.blocks[j][(ra % 2, rb % 2)];
+            }
+        }
+    }
+    let sym = (&dense + dense.transpose()) * 0.5;
+    let eig = sym.symmetric_eigenvalues();
+    let max = eig.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    eig.iter().fold(f64::MAX, |m, v| m.min(*v)) / max
+}
+
+#[test]
+fn hourglass_control_makes_elongated_cells_stable_in_bending() {
+    // One cell thick, cells four times longer than high: k_l < 0.
+    let lattice = RectLattice::block([6, 1], [0.04, 0.01], [0.0, 0.0]).unwrap();
+    let material = Material::new(1.0e5, 0.3, 1000.0).unwrap();
+    for (hourglass, stable) in [(None, false), (Some(1.0), true)] {
+        let m = PlaneModel::new(
+            &lattice,
+            material,
+            0.01,
+            PlaneParameterization::Paper,
+            hourglass,
+        )
+        .unwrap();
+        assert!(m.coefficients().k_l < 0.0);
+        let mut p = PlaneProblem::new(m);
+        for (i, r) in p.model.rest_positions().iter().enumerate() {
+            if r.x.abs() < 1e-12 {
+                p.held[i] = [true, true];
+            }
+        }
+        let lowest = smallest_stiffness(&p);
+        assert_eq!(lowest > 0.0, stable, "{hourglass:?}: lowest {lowest}");
+    }
+}
+
+#[test]
+fn a_cantilever_converges_towards_timoshenko_under_refinement() {
+    // 0.4 x 0.04 m, E = 1e9 Pa (a sag of 0.06 % of the length: linear),
+    // nu = 0.3, t = 0.01 m, its own weight.
+    let (len, height, t): (f64, f64, f64) = (0.4, 0.04, 0.01);
+    let e = 1.0e9;
+    let g = e / 2.6;
+    let w = 1000.0 * 9.81 * height * t; // N/m along the beam
+    let i = t * height.powi(3) / 12.0;
+    let timoshenko =
+        w * len.powi(4) / (8.0 * e * i) + w * len * len / (2.0 * 5.0 / 6.0 * g * height * t);
+    let mut errors = Vec::new();
+    for k in [1u32, 2, 4] {
+        let p = cantilever(
+            [10 * k, k],
+            [len / (10 * k) as f64, height / k as f64],
+            e,
+            PlaneParameterization::Paper,
+        );
+        let mut x = p.model.rest_positions().to_vec();
+        p.solve_static(&mut x).unwrap();
+        let sag = tip_sag(&p, &x);
+        errors.push(sag / timoshenko - 1.0);
+    }
+    eprintln!("tip sag against Timoshenko's, relative errors at 1, 2, 4 cells through: {errors:?}");
+    assert!(errors.iter().all(|e| e.abs() < 0.01), "{errors:?}");
+}
