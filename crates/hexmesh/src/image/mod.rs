@@ -463,12 +463,16 @@ pub(crate) struct VoxelLayout {
 }
 
 impl VoxelLayout {
+    /// The number of voxels, saturating: a header may declare dimensions
+    /// whose product overflows, which the memory check then refuses.
     pub(crate) fn voxels(&self) -> u64 {
-        self.dims.iter().map(|&d| d as u64).product()
+        self.dims
+            .iter()
+            .fold(1u64, |n, &d| n.saturating_mul(d as u64))
     }
 
     pub(crate) fn data_bytes(&self) -> u64 {
-        self.voxels() * self.kind.bytes() as u64
+        self.voxels().saturating_mul(self.kind.bytes() as u64)
     }
 
     /// Refuses a layout whose labels would not fit in `limits`.

@@ -466,7 +466,9 @@ pub(super) fn read_bytes(
         });
     }
     header.layout.check_memory(name, limits)?;
-    if !compressed && (bytes.len() as u64) < header.vox_offset + header.layout.data_bytes() {
+    if !compressed
+        && (bytes.len() as u64) < header.vox_offset.saturating_add(header.layout.data_bytes())
+    {
         return Err(ImageError::Truncated {
             path: name.to_owned(),
             what: "voxel data",
@@ -542,7 +544,7 @@ pub(super) fn read_file(
     };
     if let Some(len) = data_len {
         let start = header.vox_offset;
-        if len < start + header.layout.data_bytes() {
+        if len < start.saturating_add(header.layout.data_bytes()) {
             return Err(ImageError::Truncated {
                 path: data_name,
                 what: "voxel data",

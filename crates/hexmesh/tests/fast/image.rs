@@ -172,6 +172,20 @@ fn bad_nifti_headers_get_typed_errors_naming_the_field() {
 }
 
 #[test]
+fn dimensions_whose_product_overflows_are_refused_as_too_large() {
+    // NIfTI-2 dimensions are 64-bit: 2^40 cubed overflows any count.
+    let mut b = std::fs::read(fixtures().join("nifti2_i2_le.nii")).unwrap();
+    for axis in 1..=3 {
+        let at = 16 + 8 * axis;
+        b[at..at + 8].copy_from_slice(&(1i64 << 40).to_le_bytes());
+    }
+    match load_image_bytes(&b, ImageFormat::Nifti, "huge.nii", &ImageLimits::default()) {
+        Err(ImageError::TooLarge { dims, .. }) => assert_eq!(dims, [1 << 40; 3]),
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
 fn a_compressed_header_that_claims_more_voxels_than_its_stream_holds_costs_only_the_stream() {
     use std::io::Write;
     // 2^10 x 2^10 x 2^8 int32 voxels declared (1 GiB of labels), 100 bytes sent.
