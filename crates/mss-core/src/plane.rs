@@ -239,8 +239,30 @@ impl PlaneModel {
         variant: PlaneParameterization,
         hourglass: Option<f64>,
     ) -> Result<Self, PlaneModelError> {
+        let coefficients = PlaneCoefficients::new(
+            variant,
+            hourglass,
+            &material,
+            thickness,
+            lattice.cell_size(),
+        )?;
+        let mut model = Self::with_coefficients(lattice, material, thickness, coefficients)?;
+        model.variant = variant;
+        Ok(model)
+    }
+
+    /// The model of `lattice` with given cell coefficients (to study
+    /// other parameterizations; the variant reads `paper`).
+    pub fn with_coefficients(
+        lattice: &RectLattice,
+        material: Material,
+        thickness: f64,
+        coefficients: PlaneCoefficients,
+    ) -> Result<Self, PlaneModelError> {
+        if !(thickness.is_finite() && thickness > 0.0) {
+            return Err(PlaneModelError::Thickness(thickness));
+        }
         let size = lattice.cell_size();
-        let coefficients = PlaneCoefficients::new(variant, hourglass, &material, thickness, size)?;
         let rest: Vec<Vec3> = lattice
             .nodes()
             .iter()
@@ -275,7 +297,7 @@ impl PlaneModel {
             masses,
             coefficients,
             material,
-            variant,
+            variant: PlaneParameterization::Paper,
             node_offsets,
             node_corners,
         })

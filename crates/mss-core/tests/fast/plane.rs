@@ -87,6 +87,24 @@ fn the_virtual_tension_tests_return_e_and_nu_at_every_aspect_ratio() {
 }
 
 #[test]
+fn the_papers_printed_correction_size_misses_nu_and_twice_it_does_not() {
+    // docs/model.md, section 9: the printed F_perp is half of ours.
+    let lattice = RectLattice::block([4, 3], [0.01, 0.01], [0.0, 0.0]).unwrap();
+    for (nu, printed_nu) in [(0.3, 0.3226), (0.45, 0.3762)] {
+        let material = Material::new(1.0e4, nu, 1000.0).unwrap();
+        let ours =
+            PlaneModel::new(&lattice, material, 0.01, PlaneParameterization::Paper, None).unwrap();
+        let mut c = ours.coefficients();
+        c.c_xy /= 2.0;
+        c.c_yx /= 2.0;
+        let printed = PlaneModel::with_coefficients(&lattice, material, 0.01, c).unwrap();
+        assert!((tension(ours, 0, 1e-3).1 - nu).abs() < 1e-5);
+        let measured = tension(printed, 0, 1e-3).1;
+        assert!((measured - printed_nu).abs() < 1e-3, "nu {nu}: {measured}");
+    }
+}
+
+#[test]
 fn springs_alone_reproduce_nu_only_at_one_third() {
     let exact = tension(
         model(
