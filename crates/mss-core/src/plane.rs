@@ -700,7 +700,7 @@ impl PlaneProblem {
         };
         newton(&mut System(self), x, &free, size, h, opts, &mut linear).map_err(|e| {
             PlaneSolveError::Newton(match e {
-                NewtonFailure::Diverged(d) => format!("{d:?}"),
+                NewtonFailure::Diverged(d) => d.to_string(),
                 NewtonFailure::Singular(nodes) => format!(
                     "the stiffness is singular: the held nodes leave a mechanism (nodes {:?} move freely)",
                     &nodes[..nodes.len().min(8)]

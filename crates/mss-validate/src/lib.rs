@@ -12,6 +12,8 @@
 //!   paper's error metric.
 //! - [`figures`]: published figures (the paper's, and those of the independent
 //!   implementation `docs/model.md` quotes) as named data.
+//! - [`plane`]: the 2D element's virtual tests and cantilever study against
+//!   bilinear plane-stress finite elements (`mss experiment 2d`).
 //! - [`report`]: Markdown sections, CSV tables, SVG plots and `.vtu` files of
 //!   the results.
 //!
@@ -33,6 +35,7 @@ pub mod experiments;
 pub mod fem;
 pub mod figures;
 pub mod material_test;
+pub mod plane;
 pub mod report;
 pub mod suite;
 

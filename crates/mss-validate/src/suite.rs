@@ -27,7 +27,8 @@ pub enum Experiment {
     Lshape,
     /// Virtual material tests (E, nu, G, K).
     Material,
-    /// All of the above.
+    /// All of the above, and the 2D element's report
+    /// ([`crate::plane::plane_report`]).
     All,
 }
 
@@ -68,6 +69,9 @@ pub enum SuiteError {
     /// A model name is unknown.
     #[error(transparent)]
     Model(#[from] mss_core::ParameterizationError),
+    /// The 2D experiments failed.
+    #[error("the 2D experiments: {0}")]
+    Plane(Box<crate::plane::PlaneExperimentError>),
     /// Writing the outputs failed.
     #[error(transparent)]
     Io(#[from] IoError),
@@ -430,6 +434,14 @@ pub fn run_suite(
         let _ = writeln!(md, "\nTime: {:.1} s.\n", t.elapsed().as_secs_f64());
     }
     md.push_str(&comparison(&beams, lres.as_ref().map(|(c, _)| c)));
+    if which == Experiment::All {
+        progress("The 2D element against plane-stress FEM");
+        let plane = crate::plane::plane_report(q).map_err(|e| SuiteError::Plane(Box::new(e)))?;
+        md.push_str(&plane);
+        md.push('\n');
+        headlines
+            .push("2d               the 2D element's virtual tests and cantilever study".into());
+    }
     let _ = writeln!(
         md,
         "Total time: {:.1} s (2-core machine, release build).",

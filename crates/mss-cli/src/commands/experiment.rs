@@ -27,6 +27,11 @@ pub enum Which {
     Material,
     /// All of the above.
     All,
+    /// The paper's 2D element: virtual elongation and shear tests at aspect
+    /// ratios 1, 2, 4, and a cantilever convergence study against bilinear
+    /// plane-stress FEM and Timoshenko's beam.
+    #[value(name = "2d")]
+    Plane,
     /// Any scene file (given after it): the MSS static equilibrium under its
     /// fixed regions and loads against a Q1 FEM reference on the refined lattice.
     Scene,
@@ -82,6 +87,7 @@ pub fn run(
 ) -> anyhow::Result<()> {
     let which = match args.which {
         Which::Scene => return run_scene(args, out_dir, chatty, limits),
+        Which::Plane => return run_plane(args, out_dir, chatty),
         Which::Beam => Experiment::Beam,
         Which::Lshape => Experiment::Lshape,
         Which::Material => Experiment::Material,
@@ -120,15 +126,45 @@ pub fn run(
         for line in &outcome.headlines {
             crate::outln!("{line}");
         }
-        crate::outln!(
-            "report           {}{} ({:.1} s)",
-            out_dir.join("report.md").display(),
-            args.report
-                .as_ref()
-                .map_or_else(String::new, |r| format!(" and {}", r.display())),
-            outcome.seconds
+        print_report_line(out_dir, args.report.as_deref(), outcome.seconds)?;
+    }
+    Ok(())
+}
+
+/// `mss experiment 2d`: the 2D element's report.
+fn run_plane(args: &ExperimentArgs, out_dir: &Path, chatty: bool) -> anyhow::Result<()> {
+    if args.scene.is_some() {
+        anyhow::bail!(
+            "a scene file is only taken by `mss experiment scene SCENE.toml`, not by `2d`"
         );
     }
+    let t0 = Instant::now();
+    let spinner = progress::spinner("The 2D element against plane-stress FEM", chatty);
+    let md = mss_validate::plane::plane_report(args.quick);
+    spinner.finish_and_clear();
+    let md = md.context("the 2D experiments failed")?;
+    mss_scene::mss_io::atomic::ensure_dir(out_dir)?;
+    report::write_text(&out_dir.join("report.md"), &md)?;
+    if let Some(rep) = &args.report {
+        report::write_text(rep, &md)?;
+    }
+    if chatty {
+        print_report_line(out_dir, args.report.as_deref(), t0.elapsed().as_secs_f64())?;
+    }
+    Ok(())
+}
+
+/// The closing line: where the report is and how long it took.
+fn print_report_line(
+    out_dir: &Path,
+    report: Option<&Path>,
+    seconds: f64,
+) -> Result<(), crate::StdoutError> {
+    crate::outln!(
+        "report           {}{} ({seconds:.1} s)",
+        out_dir.join("report.md").display(),
+        report.map_or_else(String::new, |r| format!(" and {}", r.display())),
+    );
     Ok(())
 }
 

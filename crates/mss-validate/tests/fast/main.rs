@@ -5,3 +5,4 @@
 mod experiments;
 mod fem;
 mod material_tests;
+mod plane;
