@@ -68,6 +68,8 @@ pub mod lattice;
 pub mod load;
 pub mod loader;
 pub mod mesh;
+#[cfg(feature = "svg")]
+pub mod outline;
 pub mod placement;
 pub mod plane;
 #[cfg(feature = "ply")]

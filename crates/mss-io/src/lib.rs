@@ -35,6 +35,7 @@
 
 pub mod atomic;
 pub mod exporters;
+pub mod outline;
 pub mod pc2;
 pub mod skin;
 pub mod vtk;

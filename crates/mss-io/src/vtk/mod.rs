@@ -22,13 +22,15 @@ pub use pvd::{PvdEntry, PvdWriter, time_decimals};
 #[cfg(feature = "legacy-vtk")]
 pub use series::LegacyVtkSeries;
 pub use series::{FrameExporter, VtuSeries};
-pub use vtu::{VtuEncoding, write_lines_vtu, write_vtu};
+pub use vtu::{VtuEncoding, write_lines_vtu, write_quads_vtu, write_vtu};
 
 use crate::IoError;
 use std::path::Path;
 
 /// VTK cell type of a two-node line.
 pub const VTK_LINE: u8 = 3;
+/// VTK cell type of a four-node quadrilateral.
+pub const VTK_QUAD: u8 = 9;
 /// VTK cell type of an eight-node hexahedron.
 pub const VTK_HEXAHEDRON: u8 = 12;
 

@@ -90,6 +90,30 @@ pub fn write_lines_vtu(
     write_atomic(path, |w| write_grid(w, &grid, encoding))
 }
 
+/// Writes quadrilateral cells (VTK_QUAD, 4 points counter-clockwise), e.g.
+/// a 2D lattice with its point and cell fields, as an XML
+/// UnstructuredGrid, atomically.
+pub fn write_quads_vtu(
+    path: &Path,
+    points: &[[f64; 3]],
+    quads: &[[u32; 4]],
+    point_data: &[Field],
+    cell_data: &[Field],
+    encoding: VtuEncoding,
+) -> Result<(), IoError> {
+    let connectivity = quads.as_flattened();
+    validate_grid(path, points, connectivity, 4, point_data, cell_data)?;
+    let grid = Grid {
+        points,
+        connectivity,
+        nodes_per_cell: 4,
+        cell_type: super::VTK_QUAD,
+        point_data,
+        cell_data,
+    };
+    write_atomic(path, |w| write_grid(w, &grid, encoding))
+}
+
 /// An array as the writer sees it: a typed source of elements, some generated
 /// on the fly so that nothing is copied before encoding.
 #[derive(Clone, Copy)]
