@@ -365,7 +365,32 @@ fn run<'py>(
     max_memory: Option<&Bound<'py, PyAny>>,
     resume: bool,
 ) -> PyResult<Bound<'py, PyAny>> {
+    let input = scene_of(scene)?;
+    if input.scene.is_plane() {
+        if resume {
+            return Err(raise(
+                Kind::Scene,
+                "resume=True: a 2D run has no checkpoints; run it again",
+            ));
+        }
+        return run_plane(py, input, out);
+    }
     let cb = progress.as_ref().map(|p| p.clone_ref(py));
     let job = prepare(py, scene, max_memory, cb)?;
     run_job(py, &job.job, out, progress, resume)
+}
+
+/// `run` of a 2D scene (`[model] dimension = 2`).
+fn run_plane<'py>(
+    py: Python<'py>,
+    input: mss_scene::SceneInput,
+    out: Option<PathBuf>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let out_dir = mss_scene::build::output_folder(&input.scene, out.as_deref());
+    let job = mss_scene::plane_job::PlaneJob::prepare(input).map_err(job_error)?;
+    let cancel = mss_scene::Cancel::new();
+    let summary = detached(py, || job.run(&out_dir, &cancel)).map_err(job_error)?;
+    let text = serde_json::to_string(&summary)
+        .map_err(|e| raise(Kind::Output, format!("summary: {e}")))?;
+    py.import("json")?.call_method1("loads", (text,))
 }

@@ -596,6 +596,9 @@ fn cell_forces(k: &PlaneCoefficients, size: [f64; 2], p: &[[f64; 2]; 4]) -> [[f6
     f
 }
 
+/// Smallest load increment of a 2D static solve, as a fraction of the load.
+pub const MIN_LOAD_STEP: f64 = 1.0 / 1024.0;
+
 /// A 2D problem: a model, held nodes, in-plane gravity, nodal forces and
 /// mass-proportional damping.
 #[derive(Debug, Clone)]
@@ -655,8 +658,38 @@ impl PlaneProblem {
     }
 
     /// The static equilibrium from `x` (held nodes stay where `x` has
-    /// them). Returns the Newton iterations.
+    /// them). The load is applied whole first; when Newton's method fails
+    /// (large deformation), in increments that halve on failure and grow
+    /// on success. Returns the Newton iterations.
     pub fn solve_static(&self, x: &mut [Vec3]) -> Result<u32, PlaneSolveError> {
+        let mut scaled = self.clone();
+        let (mut done, mut step) = (0.0f64, 1.0f64);
+        let mut iterations = 0;
+        while done < 1.0 {
+            let target = (done + step).min(1.0);
+            scaled.gravity = self.gravity.map(|g| g * target);
+            for (s, f) in scaled.forces.iter_mut().zip(&self.forces) {
+                *s = f.map(|c| c * target);
+            }
+            let mut trial = x.to_vec();
+            match scaled.newton_at_full_load(&mut trial) {
+                Ok(n) => {
+                    iterations += n;
+                    x.copy_from_slice(&trial);
+                    done = target;
+                    step = (2.0 * step).min(1.0 - done);
+                }
+                Err(e) if step > MIN_LOAD_STEP => {
+                    log::debug!("2D static solve: load step {step} failed ({e}); halving");
+                    step *= 0.5;
+                }
+                Err(e) => return Err(e),
+            }
+        }
+        Ok(iterations)
+    }
+
+    fn newton_at_full_load(&self, x: &mut [Vec3]) -> Result<u32, PlaneSolveError> {
         struct System<'a>(&'a PlaneProblem);
         impl NonlinearSystem for System<'_> {
             fn residual(&mut self, x: &[Vec3], r: &mut [Vec3]) -> f64 {

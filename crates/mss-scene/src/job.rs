@@ -307,6 +307,15 @@ impl Job {
         progress: ProgressFn<'_>,
     ) -> Result<Job, JobError> {
         let scene = &input.scene;
+        if scene.is_plane() {
+            return Err(JobError::Setting {
+                scene: input.name(),
+                key: "[model] dimension".into(),
+                message: "= 2: a 2D scene runs with `mss run` (or hexmss.run); `mss view`, \
+                          hexmss.prepare and the interactive simulation take 3D scenes"
+                    .into(),
+            });
+        }
         let t0 = Instant::now();
         let mut registry = registry;
         limits.bound_loaders(&mut registry.loaders);

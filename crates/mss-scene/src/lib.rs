@@ -69,6 +69,7 @@ pub mod limits;
 pub mod load_check;
 pub mod obstacles;
 pub mod output;
+pub mod plane_job;
 pub mod regions;
 pub mod registry;
 pub mod scene;

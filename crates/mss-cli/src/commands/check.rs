@@ -27,7 +27,11 @@ pub fn run(args: &CheckArgs, global: &GlobalArgs) -> anyhow::Result<()> {
         });
     let bars = JobBars::new(&label, global.chatty());
     // The same preparation as `mss run`: whatever it refuses, check refuses.
-    let job = super::run::prepare(args.scene.as_deref(), None, global.limits(), &bars)?;
+    let input = super::run::load_input(args.scene.as_deref(), None)?;
+    if input.scene.is_plane() {
+        return check_plane(input, global);
+    }
+    let job = super::run::prepare_input(input, global.limits(), &bars)?;
     let cancel = mss_scene::Cancel::new();
     super::run::interrupt_on_signals(&cancel)?;
     let report = CheckReport::new_cancellable(&job, &cancel.flag());
@@ -154,6 +158,62 @@ fn human_seconds(s: f64) -> String {
     } else {
         format!("{:.1} h", s / 3600.0)
     }
+}
+
+/// `mss check` of a 2D scene: what the run would build and its step.
+fn check_plane(input: mss_scene::SceneInput, global: &GlobalArgs) -> anyhow::Result<()> {
+    let job = mss_scene::plane_job::PlaneJob::prepare(input)?;
+    if !global.chatty() {
+        return Ok(());
+    }
+    let p = &job.problem;
+    let [lx, ly] = job.lattice.cell_size();
+    crate::outln!(
+        "scene            {}: OK (2D, plane stress)",
+        job.input.name()
+    );
+    crate::outln!(
+        "outline          {}: {} polygons, area {:.4e} m^2",
+        job.outline_name,
+        job.outline.polygons().len(),
+        job.outline.area()
+    );
+    crate::outln!(
+        "lattice          {} cells of {} x {}, {} nodes, area {:.4e} m^2",
+        job.lattice.num_cells(),
+        crate::progress::human_length(lx),
+        crate::progress::human_length(ly),
+        job.lattice.num_nodes(),
+        job.lattice.area()
+    );
+    let c = p.model.coefficients();
+    crate::outln!(
+        "model            {:?}, springs k_l {:.4e}, k_h {:.4e}, k_d {:.4e} N/m{}",
+        p.model.parameterization(),
+        c.k_l,
+        c.k_h,
+        c.k_d,
+        if c.k_l < 0.0 || c.k_h < 0.0 {
+            " (a negative edge spring: the cells are elongated; hourglass control keeps bending stable)"
+        } else {
+            ""
+        }
+    );
+    crate::outln!(
+        "mass             {:.4e} kg, {} held nodes",
+        p.model.total_mass(),
+        p.held.iter().filter(|h| h[0] || h[1]).count()
+    );
+    if job.input.scene.solver.is_static() {
+        crate::outln!("time stepping    static");
+    } else {
+        crate::outln!(
+            "time stepping    explicit, dt = {:.3e} s, {} steps",
+            job.dt,
+            job.steps
+        );
+    }
+    Ok(())
 }
 
 /// The mesh, lattice, material and regions lines of one body.

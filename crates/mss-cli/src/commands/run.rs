@@ -35,6 +35,14 @@ pub fn prepare(
     limits: mss_scene::limits::Limits,
     bars: &JobBars,
 ) -> anyhow::Result<Job> {
+    prepare_input(load_input(scene, duration)?, limits, bars)
+}
+
+/// Reads the scene of `mss run`/`mss check`, with `--duration` applied.
+pub fn load_input(
+    scene: Option<&std::path::Path>,
+    duration: Option<f64>,
+) -> anyhow::Result<SceneInput> {
     let mut input = SceneInput::load(scene)?;
     if let Some(d) = duration {
         if !(d.is_finite() && d > 0.0) {
@@ -42,6 +50,15 @@ pub fn prepare(
         }
         input.scene.solver.duration = d;
     }
+    Ok(input)
+}
+
+/// Prepares the job of a (3D) scene behind progress bars.
+pub fn prepare_input(
+    input: SceneInput,
+    limits: mss_scene::limits::Limits,
+    bars: &JobBars,
+) -> anyhow::Result<Job> {
     let job = Job::prepare_with_limits(input, Registry::default(), limits, &|p| bars.report(p));
     bars.clear();
     Ok(job?)
@@ -59,7 +76,14 @@ pub fn run(args: &RunArgs, global: &GlobalArgs) -> anyhow::Result<()> {
     let bars = JobBars::new(&label, show);
     // Everything is checked before the output folder is created, so that bad
     // input leaves no file behind.
-    let job = prepare(args.scene.as_deref(), args.duration, global.limits(), &bars)?;
+    let input = load_input(args.scene.as_deref(), args.duration)?;
+    if input.scene.is_plane() {
+        if args.resume.is_some() {
+            bail!("--resume: a 2D run has no checkpoints; run it again");
+        }
+        return run_plane(input, global);
+    }
+    let job = prepare_input(input, global.limits(), &bars)?;
     let out_dir = match (&args.resume, &global.out) {
         (Some(folder), Some(out)) if folder != out => {
             bail!(
@@ -105,6 +129,66 @@ pub fn run(args: &RunArgs, global: &GlobalArgs) -> anyhow::Result<()> {
                 .as_ref()
                 .map_or(String::new(), |p| format!(" {}", p.display())),
             summary.output_folder
+        );
+    }
+    Ok(())
+}
+
+/// `mss run` of a 2D scene (`[model] dimension = 2`).
+fn run_plane(input: SceneInput, global: &GlobalArgs) -> anyhow::Result<()> {
+    let out_dir = mss_scene::build::output_folder(&input.scene, global.out.as_deref());
+    let job = mss_scene::plane_job::PlaneJob::prepare(input)?;
+    let cancel = Cancel::new();
+    interrupt_on_signals(&cancel)?;
+    let spinner = crate::progress::spinner("2D run", global.chatty());
+    let summary = job.run(&out_dir, &cancel);
+    spinner.finish_and_clear();
+    let s = summary?;
+    if global.chatty() {
+        crate::outln!("scene            {} (2D, plane stress)", s.scene);
+        crate::outln!(
+            "outline          {}: {} cells of {} x {}, {} nodes, thickness {}",
+            s.mesh,
+            s.cells,
+            crate::progress::human_length(s.cell_size[0]),
+            crate::progress::human_length(s.cell_size[1]),
+            s.nodes,
+            crate::progress::human_length(s.thickness)
+        );
+        crate::outln!(
+            "model            {}, mass {:.4e} kg",
+            s.parameterization,
+            s.mass
+        );
+        if s.solver == "static" {
+            crate::outln!("solver           static, {} Newton iterations", s.steps);
+        } else {
+            crate::outln!(
+                "solver           explicit, time step {:.3e} s, {} steps, {:.4} s simulated",
+                s.dt,
+                s.steps,
+                s.time
+            );
+        }
+        crate::outln!(
+            "max displacement {:.4e} m at the end, {:.4e} m at its peak (t = {:.4} s)",
+            s.max_displacement,
+            s.peak_displacement,
+            s.peak_time
+        );
+        crate::outln!(
+            "output           {}: {} frames (lattice quads .vtu, outline .svg and .obj), {:.2} s",
+            out_dir.display(),
+            s.frames,
+            s.wall_seconds
+        );
+    }
+    if cancel.is_cancelled() {
+        bail!(
+            "{}: interrupted at t = {:.3e} s; the frames written so far are in {}",
+            s.scene,
+            s.time,
+            out_dir.display()
         );
     }
     Ok(())

@@ -158,6 +158,7 @@ pub fn run(args: &VoxelizeArgs, global: &GlobalArgs) -> anyhow::Result<()> {
     let section = VoxelizeSection {
         cells: args.cells,
         cell_size: args.size,
+        cell_sides: None,
         rule: args.rule.clone(),
         fraction: args.fraction,
         components: if args.all_components {

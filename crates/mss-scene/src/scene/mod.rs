@@ -425,6 +425,7 @@ impl Scene {
             o.check().map_err(|e| in_list("[[obstacles]]", i, e))?;
         }
         self.contact.check().map_err(|e| in_table("[contact]", e))?;
+        self.check_plane(&invalid)?;
         if self.output.checkpoint_every.is_some() && self.solver.is_static() {
             return Err(invalid(
                 "[output] checkpoint_every".into(),
@@ -436,6 +437,88 @@ impl Scene {
 }
 
 impl Scene {
+    /// Whether the scene's body is 2D (`[model] dimension = 2`).
+    pub fn is_plane(&self) -> bool {
+        self.bodies.is_empty() && self.model.is_plane()
+    }
+
+    /// What a 2D scene may hold: one body from `[mesh]` (an SVG or a planar
+    /// mesh), in-plane gravity and forces, held nodes, the explicit or the
+    /// static solver.
+    fn check_plane(
+        &self,
+        invalid: &dyn Fn(String, String) -> SceneError,
+    ) -> Result<(), SceneError> {
+        if self.bodies.iter().any(|b| b.model.is_plane()) {
+            return Err(invalid(
+                "[[bodies]] [model] dimension".into(),
+                "= 2; a 2D body is a scene of its own (top-level [mesh] and [model] dimension = 2), not one of [[bodies]]".into(),
+            ));
+        }
+        if !self.is_plane() {
+            return Ok(());
+        }
+        let not_yet = |table: &str, what: &str| {
+            Err(invalid(
+                table.into(),
+                format!("{what} is not available for 2D bodies yet ([model] dimension = 2)"),
+            ))
+        };
+        if self.image.is_some() {
+            return not_yet("[image]", "a label image");
+        }
+        if !self.regions.is_empty() {
+            return not_yet("[[regions]]", "a material per region");
+        }
+        if !self.obstacles.is_empty() {
+            return not_yet("[[obstacles]]", "contact with obstacles");
+        }
+        if !self.motions.is_empty() {
+            return not_yet("[[motions]]", "a prescribed motion");
+        }
+        if !(self.loads.tractions.is_empty()
+            && self.loads.drags.is_empty()
+            && self.loads.custom.is_empty())
+        {
+            return not_yet("[loads]", "a traction, drag or custom load");
+        }
+        if let Some(g) = self.loads.gravity
+            && g[2] != 0.0
+        {
+            return Err(invalid(
+                "[loads] gravity".into(),
+                format!(
+                    "= {g:?}; a 2D body lies in the x-y plane, where gravity along z does nothing: give it in the plane, e.g. [0.0, -9.81, 0.0]"
+                ),
+            ));
+        }
+        if let Some((i, f)) = self
+            .loads
+            .forces
+            .iter()
+            .enumerate()
+            .find(|(_, f)| f.force[2] != 0.0)
+        {
+            return Err(invalid(
+                format!("[[loads.forces]] #{} force", i + 1),
+                format!(
+                    "= {:?}; a 2D body takes forces in the x-y plane (z = 0)",
+                    f.force
+                ),
+            ));
+        }
+        if !(self.solver.is_static() || self.solver.kind == "explicit") {
+            return Err(invalid(
+                "[solver] kind".into(),
+                format!(
+                    "= {:?}; a 2D body runs with \"explicit\" or \"static\"",
+                    self.solver.kind
+                ),
+            ));
+        }
+        Ok(())
+    }
+
     /// The checks of each body's tables, and of `[[bodies]]` against the
     /// top level: with bodies, the tables that belong to a body are not
     /// given at the top level; without, `[mesh]` and `[material]` are.
@@ -550,6 +633,13 @@ impl Scene {
             body.voxelize
                 .check()
                 .map_err(|e| in_table("[voxelize]", e))?;
+            body.model.check().map_err(|e| in_table("[model]", e))?;
+            if !body.model.is_plane() && body.voxelize.cell_sides.is_some() {
+                return Err(invalid(
+                    body.key("[voxelize] cell_size"),
+                    "two sides are for a 2D body ([model] dimension = 2); the 3D model's cells are cubes: give one length".into(),
+                ));
+            }
             check_material(&body.material).map_err(|e| in_table("[material]", e))?;
             for (i, s) in body.fixed.iter().enumerate() {
                 check_selector(s).map_err(|e| in_list("[[fixed]]", i, e))?;

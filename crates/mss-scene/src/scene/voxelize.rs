@@ -91,28 +91,70 @@ impl OccupancyRules {
 /// `[voxelize]`: how the surface becomes a lattice. Give `cells` or
 /// `cell_size`, not both; with neither, `cells = 24` ([`DEFAULT_CELLS`]).
 #[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(from = "RawVoxelizeSection")]
 pub struct VoxelizeSection {
     /// Number of cells along the longest axis of the mesh's bounding box.
     pub cells: Option<u32>,
     /// Cell edge h (m), instead of `cells`.
     pub cell_size: Option<f64>,
+    /// A 2D body's cell sides `[lx, ly]` (m): `cell_size = [lx, ly]` in a
+    /// scene (rectangles of any aspect ratio; the 3D model needs cubes).
+    pub cell_sides: Option<[f64; 2]>,
     /// Occupancy rule, by its name in [`OccupancyRules`]: `"centre"` (cell
     /// centre inside the surface, default), `"any"` (cell overlaps the
     /// solid), `"fraction"` (at least `fraction` of the cell inside), or one a
     /// program registered.
-    #[serde(default = "default_rule")]
     pub rule: String,
     /// Minimum inside fraction for `rule = "fraction"` (0 < f <= 1, default 0.5).
-    #[serde(default = "default_fraction")]
     pub fraction: f64,
     /// Connected components kept: `"largest"` (default) or `"all"`.
-    #[serde(default)]
     pub components: ComponentPolicy,
     /// Refuse lattices with more cells than this (default:
     /// [`VoxelizeOptions::default`]'s).
-    #[serde(default = "default_max_cells")]
     pub max_cells: u64,
+}
+
+/// `[voxelize]` as written.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawVoxelizeSection {
+    cells: Option<u32>,
+    cell_size: Option<CellSizeKey>,
+    #[serde(default = "default_rule")]
+    rule: String,
+    #[serde(default = "default_fraction")]
+    fraction: f64,
+    #[serde(default)]
+    components: ComponentPolicy,
+    #[serde(default = "default_max_cells")]
+    max_cells: u64,
+}
+
+/// `cell_size`: one length, or two for a 2D body's rectangles.
+#[derive(Deserialize)]
+#[serde(untagged, expecting = "a length in metres, or [lx, ly] for a 2D body")]
+enum CellSizeKey {
+    Cube(f64),
+    Sides([f64; 2]),
+}
+
+impl From<RawVoxelizeSection> for VoxelizeSection {
+    fn from(raw: RawVoxelizeSection) -> Self {
+        let (cell_size, cell_sides) = match raw.cell_size {
+            None => (None, None),
+            Some(CellSizeKey::Cube(h)) => (Some(h), None),
+            Some(CellSizeKey::Sides(s)) => (None, Some(s)),
+        };
+        Self {
+            cells: raw.cells,
+            cell_size,
+            cell_sides,
+            rule: raw.rule,
+            fraction: raw.fraction,
+            components: raw.components,
+            max_cells: raw.max_cells,
+        }
+    }
 }
 
 fn default_rule() -> String {
@@ -130,6 +172,7 @@ impl Default for VoxelizeSection {
         Self {
             cells: None,
             cell_size: None,
+            cell_sides: None,
             rule: default_rule(),
             fraction: default_fraction(),
             components: ComponentPolicy::default(),
@@ -159,6 +202,17 @@ impl VoxelizeSection {
     /// key its own way ([`KeyError::key`]).
     pub fn check(&self) -> Result<(), KeyError> {
         let bad = |key: &str, message: String| Err(KeyError::new(key, message));
+        if let Some(s) = self.cell_sides {
+            if self.cells.is_some() {
+                return bad("", "give either `cells` or `cell_size`, not both".into());
+            }
+            if !s.iter().all(|h| h.is_finite() && *h > 0.0) {
+                return bad(
+                    "cell_size",
+                    format!("= {s:?}; the cell sides must be positive lengths in metres"),
+                );
+            }
+        }
         match (self.cells, self.cell_size) {
             (Some(_), Some(_)) => {
                 return bad("", "give either `cells` or `cell_size`, not both".into());

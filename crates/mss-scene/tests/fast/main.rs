@@ -7,6 +7,7 @@ mod bodies;
 mod image;
 mod job;
 mod placement;
+mod plane;
 mod plug_points;
 mod regions;
 mod shapes;

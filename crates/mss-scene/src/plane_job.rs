@@ -1,0 +1,477 @@
+//! Running a 2D scene (`[model] dimension = 2`): the outline of `[mesh]` (an
+//! SVG drawing or a planar mesh) rasterized into rectangles, the paper's
+//! 2D element on them (`mss_core::plane`), held nodes, in-plane gravity and
+//! forces, the explicit or the static solver, and frames written as VTK
+//! quads (`lattice_NNNN.vtu`, `lattice.pvd`) with the outline carried by the
+//! lattice as SVG and OBJ (`outline_NNNN.svg`, `outline_NNNN.obj`).
+//!
+//! ```
+//! use mss_scene::SceneInput;
+//! use mss_scene::plane_job::PlaneJob;
+//!
+//! let dir = tempfile::tempdir().unwrap();
+//! std::fs::write(dir.path().join("bar.svg"),
+//!     r#"<svg><rect x="0" y="-0.02" width="0.2" height="0.02"/></svg>"#).unwrap();
+//! let scene = format!(r#"
+//!     [mesh]
+//!     path = "{}"
+//!     [voxelize]
+//!     cell_size = [0.02, 0.01]
+//!     [model]
+//!     dimension = 2
+//!     thickness = 0.01
+//!     [material]
+//!     young = 1.0e6
+//!     poisson = 0.3
+//!     density = 1000.0
+//!     [[fixed]]
+//!     kind = "face"
+//!     face = "x-"
+//!     [loads]
+//!     gravity = [0.0, -9.81, 0.0]
+//!     [solver]
+//!     kind = "static"
+//!     "#, dir.path().join("bar.svg").display());
+//! let input = SceneInput::from_toml(&scene, "bar.toml").unwrap();
+//! let job = PlaneJob::prepare(input).unwrap();
+//! assert_eq!(job.lattice.num_cells(), 20);
+//! let summary = job.run(&dir.path().join("out"), &mss_scene::Cancel::new()).unwrap();
+//! assert!(summary.max_displacement > 1e-4);
+//! assert!(dir.path().join("out/lattice_0001.vtu").exists());
+//! assert!(dir.path().join("out/outline_0001.svg").exists());
+//! ```
+
+use std::path::Path;
+use std::time::Instant;
+
+use hexmesh::outline::{OutlineEmbedding, load_outline};
+use hexmesh::plane::{Outline, RectLattice, rasterize};
+use mss_core::Vec3;
+use mss_core::constraints::{Face, NodeSelector};
+use mss_core::plane::{PlaneModel, PlaneProblem};
+use mss_io::vtk::{Field, PvdWriter, VtuEncoding, write_quads_vtu};
+use serde::Serialize;
+
+use crate::build::{SceneInput, prepare_output_folder};
+use crate::error::JobError;
+use crate::job::Cancel;
+use crate::scene::{MeshSource, Scene, TimeStep};
+
+/// A prepared 2D scene.
+#[derive(Debug, Clone)]
+pub struct PlaneJob {
+    /// The scene.
+    pub input: SceneInput,
+    /// The outline's file.
+    pub outline_name: String,
+    /// The outline, placed (m).
+    pub outline: Outline,
+    /// The rectangles.
+    pub lattice: RectLattice,
+    /// Model, held nodes and loads.
+    pub problem: PlaneProblem,
+    /// The outline carried by the lattice.
+    pub embedding: OutlineEmbedding,
+    /// Time step (s), 0 for a static solve.
+    pub dt: f64,
+    /// Steps to the scene's duration (0 for a static solve).
+    pub steps: usize,
+    /// Steps between frames (`usize::MAX`: only the first and last).
+    pub frame_every: usize,
+}
+
+/// What a 2D run did (`summary.json`).
+#[derive(Debug, Clone, Serialize)]
+pub struct PlaneSummary {
+    /// The scene.
+    pub scene: String,
+    /// Always 2.
+    pub dimension: u32,
+    /// The outline's file.
+    pub mesh: String,
+    /// Cells and nodes.
+    pub cells: usize,
+    /// Nodes.
+    pub nodes: usize,
+    /// Cell sides `[lx, ly]` (m).
+    pub cell_size: [f64; 2],
+    /// Thickness (m).
+    pub thickness: f64,
+    /// Total mass (kg).
+    pub mass: f64,
+    /// The 2D variant (`paper`, `springs`, `areal`) and its hourglass factor.
+    pub parameterization: String,
+    /// `explicit` or `static`.
+    pub solver: String,
+    /// Time step (s; 0 for static).
+    pub dt: f64,
+    /// Steps taken (Newton iterations for static).
+    pub steps: usize,
+    /// Simulated time (s).
+    pub time: f64,
+    /// Largest node displacement at the end (m).
+    pub max_displacement: f64,
+    /// Largest node displacement over the run (m) and when (s).
+    pub peak_displacement: f64,
+    /// When the peak happened (s).
+    pub peak_time: f64,
+    /// Frames written.
+    pub frames: usize,
+    /// Wall-clock seconds.
+    pub wall_seconds: f64,
+}
+
+impl PlaneJob {
+    /// Reads the outline, rasterizes it and builds the problem.
+    pub fn prepare(input: SceneInput) -> Result<Self, JobError> {
+        let scene = &input.scene;
+        let name = input.name();
+        let setting = |key: &str, message: String| JobError::Setting {
+            scene: name.clone(),
+            key: key.to_owned(),
+            message,
+        };
+        let mesh = scene.mesh.as_ref().ok_or_else(|| {
+            setting(
+                "[mesh]",
+                "a 2D body needs its outline: [mesh] path = \"shape.svg\"".into(),
+            )
+        })?;
+        let path = match Scene::source_of(&mesh.path, &input.origin) {
+            MeshSource::File(p) => p,
+            MeshSource::Builtin(b) => {
+                return Err(setting(
+                    "[mesh] path",
+                    format!(
+                        "= \"builtin:{b}\"; a 2D body needs an outline: an SVG drawing or a planar mesh file"
+                    ),
+                ));
+            }
+        };
+        let outline_name = path.display().to_string();
+        let raw = load_outline(&path).map_err(|e| setting("[mesh] path", e.to_string()))?;
+        // The placement's units, scale, rotation and translation, kept in
+        // the x-y plane.
+        let placement = mesh.placement();
+        let mut polygons = Vec::new();
+        for poly in raw.polygons() {
+            let mut placed = Vec::with_capacity(poly.len());
+            for p in poly {
+                let q = placement.apply_point([p[0], p[1], 0.0]);
+                if q[2].abs() > 1e-9 * (1.0 + q[0].abs() + q[1].abs()) {
+                    return Err(setting(
+                        "[mesh]",
+                        "the placement turns the outline out of the x-y plane: a 2D body's up and rotate keep z".into(),
+                    ));
+                }
+                placed.push([q[0], q[1]]);
+            }
+            polygons.push(placed);
+        }
+        let outline = Outline::new(polygons).map_err(|e| setting("[mesh] path", e.to_string()))?;
+        let (lo, hi) = outline.bounds();
+        let longest = (hi[0] - lo[0]).max(hi[1] - lo[1]);
+        let vox = &scene.voxelize;
+        let cell = match (vox.cell_sides, vox.cell_size, vox.cells) {
+            (Some(s), _, _) => s,
+            (None, Some(h), _) => [h, h],
+            (None, None, n) => {
+                let h = longest / n.unwrap_or(crate::scene::DEFAULT_CELLS) as f64;
+                [h, h]
+            }
+        };
+        let grid = ((hi[0] - lo[0]) / cell[0] + 3.0) * ((hi[1] - lo[1]) / cell[1] + 3.0);
+        if grid > vox.max_cells as f64 * 16.0 {
+            return Err(setting(
+                "[voxelize]",
+                format!(
+                    "cells of {cell:?} m on an outline of {:.3} x {:.3} m make a grid of {grid:.3e} cells; use larger cells",
+                    hi[0] - lo[0],
+                    hi[1] - lo[1]
+                ),
+            ));
+        }
+        let lattice =
+            rasterize(&outline, cell).map_err(|e| setting("[voxelize]", e.to_string()))?;
+        if lattice.num_cells() as u64 > vox.max_cells {
+            return Err(setting(
+                "[voxelize] max_cells",
+                format!(
+                    "the lattice would have {} cells, more than {}",
+                    lattice.num_cells(),
+                    vox.max_cells
+                ),
+            ));
+        }
+        let (variant, hourglass) = scene
+            .model
+            .plane_variant()
+            .map_err(|e| setting("[model] parameterization", e.message))?;
+        let material = scene
+            .material
+            .ok_or_else(|| setting("[material]", "missing".into()))?;
+        let thickness = scene.model.thickness.unwrap_or_default();
+        let model = PlaneModel::new(&lattice, material, thickness, variant, hourglass)
+            .map_err(|e| setting("[model]", e.to_string()))?;
+        let mut problem = PlaneProblem::new(model);
+        let rest = problem.model.rest_positions().to_vec();
+        let h = cell[0].min(cell[1]);
+        let select = |s: &NodeSelector, key: &str| -> Result<Vec<u32>, JobError> {
+            let nodes = match s {
+                NodeSelector::LowestLayer => {
+                    let low = rest.iter().map(|p| p.y).fold(f64::INFINITY, f64::min);
+                    (0..rest.len() as u32)
+                        .filter(|&i| rest[i as usize].y <= low + 1e-9 * h)
+                        .collect()
+                }
+                NodeSelector::Face {
+                    face: Face::ZMin | Face::ZMax,
+                } => {
+                    return Err(setting(
+                        key,
+                        "a 2D body has no z faces: use x-, x+, y- or y+".into(),
+                    ));
+                }
+                other => other
+                    .select_checked(&rest, h)
+                    .map_err(|e| setting(key, e.to_string()))?,
+            };
+            if nodes.is_empty() {
+                return Err(setting(key, "selects no node of the lattice".into()));
+            }
+            Ok(nodes)
+        };
+        for (i, s) in scene.fixed.iter().enumerate() {
+            for n in select(s, &format!("[[fixed]] #{}", i + 1))? {
+                problem.held[n as usize] = [true, true];
+            }
+        }
+        for (i, f) in scene.loads.forces.iter().enumerate() {
+            let nodes = select(&f.select, &format!("[[loads.forces]] #{}", i + 1))?;
+            let share = if f.per_node {
+                1.0
+            } else {
+                1.0 / nodes.len() as f64
+            };
+            for n in nodes {
+                problem.forces[n as usize][0] += f.force[0] * share;
+                problem.forces[n as usize][1] += f.force[1] * share;
+            }
+        }
+        if let Some(g) = scene.loads.gravity {
+            problem.gravity = [g[0], g[1]];
+        }
+        problem.damping = scene.solver.damping;
+        let (dt, steps, frame_every) = if scene.solver.is_static() {
+            (0.0, 0, usize::MAX)
+        } else {
+            let stable = problem.model.stable_time_step(1.0);
+            let dt = match scene.solver.dt {
+                TimeStep::Auto => stable * scene.solver.safety,
+                TimeStep::Seconds(dt) if dt > stable => {
+                    return Err(setting(
+                        "[solver] dt",
+                        format!(
+                            "= {dt} s is above the stable step of this lattice, {stable:.3e} s: use dt = \"auto\" or a smaller step"
+                        ),
+                    ));
+                }
+                TimeStep::Seconds(dt) => dt,
+            };
+            let steps = (scene.solver.duration / dt).ceil().max(1.0) as usize;
+            let dt = scene.solver.duration / steps as f64;
+            let out = &scene.output;
+            let every = if out.last_only {
+                usize::MAX
+            } else if let Some(n) = out.every_steps {
+                n.max(1) as usize
+            } else if let Some(t) = out.every_time {
+                ((t / dt).round() as usize).max(1)
+            } else {
+                (steps / crate::build::DEFAULT_FRAMES as usize).max(1)
+            };
+            (dt, steps, every)
+        };
+        let embedding = OutlineEmbedding::new(&lattice, &outline);
+        Ok(Self {
+            input,
+            outline_name,
+            outline,
+            lattice,
+            problem,
+            embedding,
+            dt,
+            steps,
+            frame_every,
+        })
+    }
+
+    /// Runs the scene, writing frames and `summary.json` into `out_dir`.
+    pub fn run(&self, out_dir: &Path, cancel: &Cancel) -> Result<PlaneSummary, JobError> {
+        let start = Instant::now();
+        prepare_output_folder(out_dir)?;
+        let p = &self.problem;
+        let rest = p.model.rest_positions().to_vec();
+        let mut x = rest.clone();
+        let mut v = vec![Vec3::zeros(); x.len()];
+        let mut writer = FrameWriter::new(self, out_dir);
+        let displacement = |x: &[Vec3]| {
+            x.iter()
+                .zip(&rest)
+                .map(|(a, b)| (a - b).norm())
+                .fold(0.0, f64::max)
+        };
+        writer.write(0.0, &x, &v)?;
+        let (mut peak, mut peak_time) = (0.0, 0.0);
+        let solver_error = |e: mss_core::plane::PlaneSolveError| JobError::Setting {
+            scene: self.input.name(),
+            key: "[solver]".into(),
+            message: e.to_string(),
+        };
+        let (steps, time) = if self.input.scene.solver.is_static() {
+            let iterations = p.solve_static(&mut x).map_err(solver_error)?;
+            peak = displacement(&x);
+            writer.write(0.0, &x, &v)?;
+            (iterations as usize, 0.0)
+        } else {
+            let mut done = 0;
+            while done < self.steps {
+                if cancel.is_cancelled() {
+                    break;
+                }
+                let chunk = self.frame_every.min(self.steps - done);
+                p.step_explicit(&mut x, &mut v, self.dt, chunk)
+                    .map_err(solver_error)?;
+                done += chunk;
+                let t = done as f64 * self.dt;
+                let d = displacement(&x);
+                if d > peak {
+                    (peak, peak_time) = (d, t);
+                }
+                if done % self.frame_every == 0 || done == self.steps {
+                    writer.write(t, &x, &v)?;
+                }
+            }
+            (done, done as f64 * self.dt)
+        };
+        writer.finish()?;
+        let (variant, hourglass) = self
+            .input
+            .scene
+            .model
+            .plane_variant()
+            .expect("checked when the job was prepared");
+        let summary = PlaneSummary {
+            scene: self.input.name(),
+            dimension: 2,
+            mesh: self.outline_name.clone(),
+            cells: self.lattice.num_cells(),
+            nodes: self.lattice.num_nodes(),
+            cell_size: self.lattice.cell_size(),
+            thickness: p.model.thickness(),
+            mass: p.model.total_mass(),
+            parameterization: match hourglass {
+                Some(a) => format!("{}+hg ({a})", variant.name()),
+                None => variant.name().to_owned(),
+            },
+            solver: self.input.scene.solver.kind.clone(),
+            dt: self.dt,
+            steps,
+            time,
+            max_displacement: displacement(&x),
+            peak_displacement: peak,
+            peak_time,
+            frames: writer.frames,
+            wall_seconds: start.elapsed().as_secs_f64(),
+        };
+        let json = serde_json::to_string_pretty(&summary).expect("a summary encodes");
+        mss_io::atomic::write_atomic(&out_dir.join("summary.json"), |w| {
+            w.write_all(json.as_bytes())?;
+            w.write_all(b"\n")
+        })?;
+        Ok(summary)
+    }
+}
+
+/// The frames of a 2D run.
+struct FrameWriter<'a> {
+    job: &'a PlaneJob,
+    dir: &'a Path,
+    pvd: Option<PvdWriter>,
+    frames: usize,
+}
+
+impl<'a> FrameWriter<'a> {
+    fn new(job: &'a PlaneJob, dir: &'a Path) -> Self {
+        let pvd = job
+            .input
+            .scene
+            .output
+            .pvd
+            .then(|| PvdWriter::new(dir.join("lattice.pvd")));
+        Self {
+            job,
+            dir,
+            pvd,
+            frames: 0,
+        }
+    }
+
+    fn write(&mut self, time: f64, x: &[Vec3], v: &[Vec3]) -> Result<(), JobError> {
+        let out = &self.job.input.scene.output;
+        let p = &self.job.problem;
+        let index = self.frames;
+        let points: Vec<[f64; 3]> = x.iter().map(|p| [p.x, p.y, 0.0]).collect();
+        if out.vtu {
+            let rest = p.model.rest_positions();
+            let displacement: Vec<[f64; 3]> = x
+                .iter()
+                .zip(rest)
+                .map(|(a, b)| [a.x - b.x, a.y - b.y, 0.0])
+                .collect();
+            let velocity: Vec<[f64; 3]> = v.iter().map(|v| [v.x, v.y, 0.0]).collect();
+            let mut f = vec![Vec3::zeros(); x.len()];
+            p.model.internal_forces(x, &mut f);
+            let force: Vec<[f64; 3]> = f.iter().map(|f| [f.x, f.y, 0.0]).collect();
+            let fixed: Vec<bool> = p.held.iter().map(|h| h[0] || h[1]).collect();
+            let file = format!("lattice_{index:04}.vtu");
+            write_quads_vtu(
+                &self.dir.join(&file),
+                &points,
+                p.model.cells(),
+                &[
+                    Field::vectors("displacement", &displacement),
+                    Field::vectors("velocity", &velocity),
+                    Field::vectors("internal_force", &force),
+                    Field::flags("fixed", &fixed),
+                ],
+                &[],
+                VtuEncoding::Base64Zlib,
+            )?;
+            if let Some(pvd) = &mut self.pvd {
+                pvd.add_frame(time, &file)?;
+            }
+        }
+        if out.embedded || out.skin_obj {
+            let nodes: Vec<[f64; 2]> = x.iter().map(|p| [p.x, p.y]).collect();
+            let loops = self.job.embedding.deform(&nodes);
+            mss_io::outline::write_outline_svg(
+                &self.dir.join(format!("outline_{index:04}.svg")),
+                &loops,
+            )?;
+            mss_io::outline::write_outline_obj(
+                &self.dir.join(format!("outline_{index:04}.obj")),
+                &loops,
+            )?;
+        }
+        self.frames += 1;
+        Ok(())
+    }
+
+    fn finish(&mut self) -> Result<(), JobError> {
+        if let Some(pvd) = &self.pvd {
+            pvd.write()?;
+        }
+        Ok(())
+    }
+}

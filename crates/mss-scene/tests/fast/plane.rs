@@ -1,0 +1,128 @@
+//! 2D scenes (`[model] dimension = 2`): the bundled bracket runs and
+//! settles where the static solve puts it; its frames are VTK quads and
+//! outlines; every key a 2D body cannot take is a typed error naming it.
+
+use std::path::PathBuf;
+
+use mss_scene::plane_job::PlaneJob;
+use mss_scene::{Cancel, Job, Registry, SceneInput, no_progress};
+
+const BRACKET: &str = include_str!("../../../../data/scenes/bracket.toml");
+
+fn bracket_text() -> String {
+    let svg = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../data/shapes/bracket.svg")
+        .canonicalize()
+        .unwrap();
+    BRACKET.replace("../shapes/bracket.svg", &svg.display().to_string())
+}
+
+fn prepare(text: &str) -> Result<PlaneJob, String> {
+    let input = SceneInput::from_toml(text, "plane.toml").map_err(|e| e.to_string())?;
+    PlaneJob::prepare(input).map_err(|e| e.to_string())
+}
+
+#[test]
+fn the_bracket_settles_where_the_static_solve_puts_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let dynamic = prepare(&bracket_text().replace("duration = 1.0", "duration = 2.0")).unwrap();
+    assert_eq!(dynamic.lattice.num_cells(), 344);
+    let d = dynamic
+        .run(&dir.path().join("dyn"), &Cancel::new())
+        .unwrap();
+    let stat =
+        prepare(&bracket_text().replace("kind = \"explicit\"", "kind = \"static\"")).unwrap();
+    let s = stat
+        .run(&dir.path().join("static"), &Cancel::new())
+        .unwrap();
+    assert!(s.max_displacement > 5e-3, "{s:?}");
+    assert!(
+        (d.max_displacement - s.max_displacement).abs() < 1e-3 * s.max_displacement,
+        "dynamic {} static {}",
+        d.max_displacement,
+        s.max_displacement
+    );
+    assert!(d.peak_displacement > d.max_displacement);
+    // Frames: quads ParaView reads, and the outline carried along.
+    let frame = dir.path().join("dyn/lattice_0001.vtu");
+    let vtk = vtkio::Vtk::import(&frame).unwrap();
+    let vtkio::model::DataSet::UnstructuredGrid { pieces, .. } = vtk.data else {
+        panic!("not an unstructured grid");
+    };
+    let piece = pieces[0].load_piece_data(None).unwrap();
+    assert_eq!(piece.cells.types.len(), 344);
+    assert!(
+        piece
+            .cells
+            .types
+            .iter()
+            .all(|t| *t == vtkio::model::CellType::Quad)
+    );
+    let svg = std::fs::read_to_string(dir.path().join("dyn/outline_0040.svg")).unwrap();
+    assert_eq!(svg.matches("<path").count(), 2, "the outline and its hole");
+    assert!(dir.path().join("dyn/lattice.pvd").exists());
+    assert!(dir.path().join("static/summary.json").exists());
+}
+
+#[test]
+fn what_a_2d_body_cannot_take_is_refused_by_key() {
+    let text = bracket_text();
+    for (change, key, words) in [
+        (
+            ("thickness = 0.01", ""),
+            "[model] thickness",
+            "needs its thickness",
+        ),
+        (
+            ("thickness = 0.01", "thickness = -1.0"),
+            "[model] thickness",
+            "positive",
+        ),
+        (
+            ("dimension = 2", "dimension = 4"),
+            "[model] dimension",
+            "3 (cubes) or 2",
+        ),
+        (
+            ("gravity = [0.0, -9.81, 0.0]", "gravity = [0.0, 0.0, -9.81]"),
+            "[loads] gravity",
+            "in the plane",
+        ),
+        (
+            ("kind = \"explicit\"", "kind = \"implicit\""),
+            "[solver] kind",
+            "\"explicit\" or \"static\"",
+        ),
+        (
+            ("paper+hg", "volumetric"),
+            "[model] parameterization",
+            "paper, springs, areal",
+        ),
+        (
+            ("face = \"x-\"", "face = \"z-\""),
+            "[[fixed]] #1",
+            "no z faces",
+        ),
+    ] {
+        let e = prepare(&text.replace(change.0, change.1)).unwrap_err();
+        assert!(e.contains(key) && e.contains(words), "{change:?}: {e}");
+    }
+    let with_ground = format!("{text}\n[[obstacles]]\nshape = {{ kind = \"ground\" }}\n");
+    let e = prepare(&with_ground).unwrap_err();
+    assert!(e.contains("[[obstacles]]") && e.contains("2D"), "{e}");
+    // Per-axis cell sides are for 2D bodies only.
+    let cube = "[mesh]\npath = \"builtin:cube\"\nscale = 0.1\n[voxelize]\ncell_size = [0.01, 0.02]\n\
+                [material]\nyoung = 1e4\npoisson = 0.3\ndensity = 1000.0\n";
+    let input = SceneInput::from_toml(cube, "cube.toml");
+    let e = input.map(|_| ()).unwrap_err().to_string();
+    assert!(
+        e.contains("[voxelize] cell_size") && e.contains("2D"),
+        "{e}"
+    );
+    // The 3D job and its front ends say where a 2D scene runs.
+    let input = SceneInput::from_toml(&text, "plane.toml").unwrap();
+    let e = Job::prepare(input, Registry::default(), &no_progress)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("mss run"), "{e}");
+}
