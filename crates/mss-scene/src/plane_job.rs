@@ -213,6 +213,23 @@ impl PlaneJob {
         let thickness = scene.model.thickness.unwrap_or_default();
         let model = PlaneModel::new(&lattice, material, thickness, variant, hourglass)
             .map_err(|e| setting("[model]", e.to_string()))?;
+        let c = model.coefficients();
+        if hourglass.is_none() && (c.k_l < 0.0 || c.k_h < 0.0) {
+            // Without hourglass control such a lattice has bending modes of
+            // negative stiffness: no stable equilibrium, a run that explodes.
+            return Err(setting(
+                "[model] parameterization",
+                format!(
+                    "= {:?} on cells of {:?} m: a cell longer than sqrt(2 + 3 nu) = {:.2} times its \
+                     height gives negative edge springs, and the lattice is unstable in bending; \
+                     use \"{}+hg\" (hourglass control) or squarer cells",
+                    scene.model.parameterization,
+                    cell,
+                    (2.0 + 3.0 * material.poisson).sqrt(),
+                    variant.name()
+                ),
+            ));
+        }
         let mut problem = PlaneProblem::new(model);
         let rest = problem.model.rest_positions().to_vec();
         let h = cell[0].min(cell[1]);
