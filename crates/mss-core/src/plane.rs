@@ -458,6 +458,17 @@ impl PlaneModel {
         worst.sqrt()
     }
 
+    /// The largest stiffness of a node at rest (N/m): the scale of a
+    /// contact penalty that keeps the body out of obstacles without
+    /// shortening the step much.
+    pub fn max_node_stiffness(&self) -> f64 {
+        let k = self.tangent(&self.rest);
+        (0..self.num_nodes())
+            .filter_map(|i| k.find(i, i))
+            .map(|j| k.blocks[j][(0, 0)].abs().max(k.blocks[j][(1, 1)].abs()))
+            .fold(0.0, f64::max)
+    }
+
     /// A stable explicit time step (s): `2 / omega_max` times `safety`.
     pub fn stable_time_step(&self, safety: f64) -> f64 {
         safety * 2.0 / self.omega_max_bound()
@@ -596,6 +607,113 @@ fn cell_forces(k: &PlaneCoefficients, size: [f64; 2], p: &[[f64; 2]; 4]) -> [[f6
     f
 }
 
+/// A rigid obstacle in the plane: the solid a node must stay out of.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum PlaneObstacle {
+    /// The half-plane behind the line through `point` with outward `normal`
+    /// (unit length).
+    HalfPlane {
+        /// A point of the line (m).
+        point: [f64; 2],
+        /// Outward unit normal.
+        normal: [f64; 2],
+    },
+    /// A disc.
+    Disc {
+        /// Centre (m).
+        centre: [f64; 2],
+        /// Radius (m).
+        radius: f64,
+    },
+    /// An axis-aligned rectangle.
+    Rect {
+        /// Lower-left corner (m).
+        min: [f64; 2],
+        /// Upper-right corner (m).
+        max: [f64; 2],
+    },
+}
+
+impl PlaneObstacle {
+    /// How deep `p` lies inside (m, > 0) and the outward normal of the
+    /// surface nearest to it; `None` outside.
+    pub fn penetration(&self, p: [f64; 2]) -> Option<(f64, [f64; 2])> {
+        self.within(p, 0.0)
+    }
+
+    /// [`PlaneObstacle::penetration`], counting points up to `margin` (m)
+    /// outside too (with a negative depth).
+    pub fn within(&self, p: [f64; 2], margin: f64) -> Option<(f64, [f64; 2])> {
+        match *self {
+            PlaneObstacle::HalfPlane { point, normal } => {
+                let d = (point[0] - p[0]) * normal[0] + (point[1] - p[1]) * normal[1];
+                (d > -margin).then_some((d, normal))
+            }
+            PlaneObstacle::Disc { centre, radius } => {
+                let r = [p[0] - centre[0], p[1] - centre[1]];
+                let len = norm(r);
+                (len < radius + margin).then(|| {
+                    let n = if len > 0.0 {
+                        [r[0] / len, r[1] / len]
+                    } else {
+                        [0.0, 1.0]
+                    };
+                    (radius - len, n)
+                })
+            }
+            PlaneObstacle::Rect { min, max } => {
+                let inside = p[0] > min[0] - margin
+                    && p[0] < max[0] + margin
+                    && p[1] > min[1] - margin
+                    && p[1] < max[1] + margin;
+                inside.then(|| {
+                    // Out through the nearest side.
+                    [
+                        (p[0] - min[0], [-1.0, 0.0]),
+                        (max[0] - p[0], [1.0, 0.0]),
+                        (p[1] - min[1], [0.0, -1.0]),
+                        (max[1] - p[1], [0.0, 1.0]),
+                    ]
+                    .into_iter()
+                    .min_by(|a, b| a.0.total_cmp(&b.0))
+                    .expect("four sides")
+                })
+            }
+        }
+    }
+}
+
+/// Contact of a 2D body's nodes with rigid obstacles: a penalty along the
+/// obstacle's normal, and Coulomb friction applied to the velocities of
+/// the explicit step (a node sticks while the friction an impulse can give
+/// stops it, else slides against it).
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlaneContact {
+    /// The obstacles.
+    pub obstacles: Vec<PlaneObstacle>,
+    /// Penalty stiffness per node (N/m).
+    pub stiffness: f64,
+    /// Coulomb friction coefficient.
+    pub friction: f64,
+}
+
+impl PlaneContact {
+    /// The contact force on a node at `p` (N) and the normal force's size.
+    fn force(&self, p: [f64; 2]) -> ([f64; 2], f64) {
+        let mut f = [0.0; 2];
+        let mut normal = 0.0;
+        for o in &self.obstacles {
+            if let Some((depth, n)) = o.penetration(p) {
+                let fn_ = self.stiffness * depth;
+                f[0] += fn_ * n[0];
+                f[1] += fn_ * n[1];
+                normal += fn_;
+            }
+        }
+        (f, normal)
+    }
+}
+
 /// Smallest load increment of a 2D static solve, as a fraction of the load.
 pub const MIN_LOAD_STEP: f64 = 1.0 / 1024.0;
 
@@ -613,6 +731,8 @@ pub struct PlaneProblem {
     pub forces: Vec<[f64; 2]>,
     /// Mass-proportional damping (1/s).
     pub damping: f64,
+    /// Contact with rigid obstacles.
+    pub contact: Option<PlaneContact>,
 }
 
 /// Why a 2D solve failed.
@@ -636,7 +756,24 @@ impl PlaneProblem {
             gravity: [0.0; 2],
             forces: vec![[0.0; 2]; n],
             damping: 0.0,
+            contact: None,
         }
+    }
+
+    /// A stable explicit step (s) for the model and the contact penalty:
+    /// `2 / omega_max` times `safety`.
+    pub fn stable_time_step(&self, safety: f64) -> f64 {
+        let omega = self.model.omega_max_bound();
+        let contact = self.contact.as_ref().map_or(0.0, |c| {
+            let lightest = self
+                .model
+                .masses
+                .iter()
+                .copied()
+                .fold(f64::INFINITY, f64::min);
+            c.stiffness / lightest
+        });
+        safety * 2.0 / (omega * omega + contact).sqrt()
     }
 
     /// Internal plus external forces at `x` (N).
@@ -646,6 +783,11 @@ impl PlaneProblem {
             let m = self.model.masses[i];
             f.x += m * self.gravity[0] + self.forces[i][0];
             f.y += m * self.gravity[1] + self.forces[i][1];
+            if let Some(c) = &self.contact {
+                let (g, _) = c.force([x[i].x, x[i].y]);
+                f.x += g[0];
+                f.y += g[1];
+            }
         }
     }
 
@@ -706,7 +848,28 @@ impl PlaneProblem {
                 (weight + applied).max(1e-3 * reactions).max(1e-300)
             }
             fn jacobian(&mut self, x: &[Vec3]) -> BlockCsr {
-                self.0.model.tangent(x)
+                let mut j = self.0.model.tangent(x);
+                if let Some(c) = &self.0.contact {
+                    // The penalty's tangent along each touching normal
+                    // (exact for lines; a disc's turning normal is left out),
+                    // for nodes within 1 % of a cell of touching too: a body
+                    // that rests on an obstacle at its start is held by it
+                    // from the first Newton step.
+                    let margin = 0.01 * self.0.model.size[0].min(self.0.model.size[1]);
+                    for (i, p) in x.iter().enumerate() {
+                        for o in &c.obstacles {
+                            if let Some((_, n)) = o.within([p.x, p.y], margin) {
+                                let k = j.find(i, i).expect("the diagonal is in the pattern");
+                                for e in 0..2 {
+                                    for d in 0..2 {
+                                        j.blocks[k][(e, d)] -= c.stiffness * n[e] * n[d];
+                                    }
+                                }
+                            }
+                        }
+                    }
+                }
+                j
             }
         }
         let free = self.free_dofs();
@@ -744,6 +907,26 @@ impl PlaneProblem {
         })
     }
 
+    /// Coulomb friction on a touching node's velocity: the impulse
+    /// `friction * normal force * dt` stops its tangential motion if it can
+    /// (sticking), else slows it by that much (sliding).
+    fn apply_friction(&self, c: &PlaneContact, x: Vec3, v: &mut Vec3, dt_over_m: f64) {
+        if c.friction == 0.0 {
+            return;
+        }
+        for o in &c.obstacles {
+            if let Some((depth, n)) = o.penetration([x.x, x.y]) {
+                let vn = v.x * n[0] + v.y * n[1];
+                let vt = [v.x - vn * n[0], v.y - vn * n[1]];
+                let speed = norm(vt);
+                let stop = c.friction * c.stiffness * depth * dt_over_m;
+                let scale = if speed <= stop { 1.0 } else { stop / speed };
+                v.x -= scale * vt[0];
+                v.y -= scale * vt[1];
+            }
+        }
+    }
+
     /// `steps` explicit steps of `dt` (s) from `(x, v)`: semi-implicit
     /// Euler with the damping applied implicitly; held nodes do not move.
     pub fn step_explicit(
@@ -760,10 +943,22 @@ impl PlaneProblem {
             for i in 0..x.len() {
                 let inv_m = 1.0 / self.model.masses[i];
                 for d in 0..2 {
-                    if self.held[i][d] {
-                        v[i][d] = 0.0;
+                    v[i][d] = if self.held[i][d] {
+                        0.0
                     } else {
-                        v[i][d] = (v[i][d] + dt * f[i][d] * inv_m) * keep;
+                        (v[i][d] + dt * f[i][d] * inv_m) * keep
+                    };
+                }
+                if let Some(c) = &self.contact {
+                    self.apply_friction(c, x[i], &mut v[i], dt * inv_m);
+                    for (vd, &held) in v[i].iter_mut().zip(&self.held[i]) {
+                        if held {
+                            *vd = 0.0;
+                        }
+                    }
+                }
+                for d in 0..2 {
+                    if !self.held[i][d] {
                         x[i][d] += dt * v[i][d];
                     }
                 }

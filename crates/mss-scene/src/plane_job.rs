@@ -279,10 +279,47 @@ impl PlaneJob {
             problem.gravity = [g[0], g[1]];
         }
         problem.damping = scene.solver.damping;
+        if !scene.obstacles.is_empty() {
+            let low = rest.iter().map(|p| p.y).fold(f64::INFINITY, f64::min);
+            let mut obstacles = Vec::new();
+            let mut friction = None;
+            let mut stiffness = None;
+            for (i, o) in scene.obstacles.iter().enumerate() {
+                let key = format!("[[obstacles]] #{} shape", i + 1);
+                let shape: crate::obstacles::BuiltinShape = o
+                    .shape
+                    .tagged_as()
+                    .map_err(|e| setting(&key, e.to_string()))?;
+                obstacles.push(plane_obstacle(shape, low).map_err(|m| setting(&key, m))?);
+                friction = friction.or(o.friction);
+                stiffness = stiffness.or(o.stiffness);
+            }
+            let friction = friction.or(scene.contact.friction).unwrap_or(0.5);
+            let stiffness = stiffness
+                .or(scene.contact.stiffness)
+                .unwrap_or_else(|| problem.model.max_node_stiffness());
+            if !(friction.is_finite()
+                && friction >= 0.0
+                && stiffness.is_finite()
+                && stiffness > 0.0)
+            {
+                return Err(setting(
+                    "[[obstacles]]",
+                    format!(
+                        "friction {friction} and stiffness {stiffness} N/m must be >= 0 and > 0"
+                    ),
+                ));
+            }
+            problem.contact = Some(mss_core::plane::PlaneContact {
+                obstacles,
+                stiffness,
+                friction,
+            });
+        }
         let (dt, steps, frame_every) = if scene.solver.is_static() {
             (0.0, 0, usize::MAX)
         } else {
-            let stable = problem.model.stable_time_step(1.0);
+            let stable = problem.stable_time_step(1.0);
             let dt = match scene.solver.dt {
                 TimeStep::Auto => stable * scene.solver.safety,
                 TimeStep::Seconds(dt) if dt > stable => {
@@ -407,6 +444,67 @@ impl PlaneJob {
             w.write_all(b"\n")
         })?;
         Ok(summary)
+    }
+}
+
+/// A scene's obstacle shape in the plane z = 0 (`lowest`: the lattice's
+/// lowest y, for `ground`).
+fn plane_obstacle(
+    shape: crate::obstacles::BuiltinShape,
+    lowest: f64,
+) -> Result<mss_core::plane::PlaneObstacle, String> {
+    use crate::obstacles::BuiltinShape;
+    use mss_core::plane::PlaneObstacle;
+    let in_plane = |what: &str, v: [f64; 3]| {
+        if v[2] == 0.0 {
+            Ok([v[0], v[1]])
+        } else {
+            Err(format!(
+                "{what} = {v:?}: a 2D body's obstacles lie in the x-y plane (z = 0)"
+            ))
+        }
+    };
+    match shape {
+        BuiltinShape::Ground { gap } => Ok(PlaneObstacle::HalfPlane {
+            point: [0.0, lowest - gap],
+            normal: [0.0, 1.0],
+        }),
+        BuiltinShape::Plane { point, normal } => {
+            let n = in_plane("normal", normal)?;
+            let len = n[0].hypot(n[1]);
+            if !(len.is_finite() && len > 0.0) {
+                return Err(format!("normal = {normal:?} must be a non-zero direction"));
+            }
+            Ok(PlaneObstacle::HalfPlane {
+                point: in_plane("point", point)?,
+                normal: [n[0] / len, n[1] / len],
+            })
+        }
+        BuiltinShape::Sphere { centre, radius } if radius.is_finite() && radius > 0.0 => {
+            Ok(PlaneObstacle::Disc {
+                centre: in_plane("centre", centre)?,
+                radius,
+            })
+        }
+        // A box's section by the plane z = 0.
+        BuiltinShape::Box { min, max }
+            if (0..2).all(|k| min[k] < max[k]) && min[2] <= 0.0 && max[2] >= 0.0 =>
+        {
+            Ok(PlaneObstacle::Rect {
+                min: [min[0], min[1]],
+                max: [max[0], max[1]],
+            })
+        }
+
+        BuiltinShape::Sphere { radius, .. } => {
+            Err(format!("radius = {radius} must be a positive length"))
+        }
+        BuiltinShape::Box { min, max } => Err(format!(
+            "min = {min:?}, max = {max:?}: a 2D body's box needs min below max in x and y, and to cross z = 0"
+        )),
+        BuiltinShape::Mesh { .. } | BuiltinShape::Capsule { .. } => Err(
+            "a 2D body's obstacles are ground, plane, sphere (a disc) and box (a rectangle)".into(),
+        ),
     }
 }
 

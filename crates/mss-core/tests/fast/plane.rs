@@ -380,3 +380,107 @@ fn a_cantilever_converges_towards_timoshenko_under_refinement() {
     eprintln!("tip sag against Timoshenko's, relative errors at 1, 2, 4 cells through: {errors:?}");
     assert!(errors.iter().all(|e| e.abs() < 0.01), "{errors:?}");
 }
+
+/// A free 8 x 4 block (0.16 x 0.08 m) on the ground line y = 0.
+fn block_on(
+    obstacle: mss_core::plane::PlaneObstacle,
+    friction: f64,
+    gravity: [f64; 2],
+) -> PlaneProblem {
+    let lattice = RectLattice::block([8, 4], [0.02, 0.02], [0.0, 0.0]).unwrap();
+    let material = Material::new(1.0e6, 0.3, 1000.0).unwrap();
+    let m = PlaneModel::new(
+        &lattice,
+        material,
+        0.01,
+        PlaneParameterization::Paper,
+        Some(1.0),
+    )
+    .unwrap();
+    let stiffness = 1.0e5;
+    let mut p = PlaneProblem::new(m);
+    p.gravity = gravity;
+    p.contact = Some(mss_core::plane::PlaneContact {
+        obstacles: vec![obstacle],
+        stiffness,
+        friction,
+    });
+    p
+}
+
+#[test]
+fn a_block_rests_on_the_ground_carrying_its_weight() {
+    use mss_core::plane::PlaneObstacle;
+    let ground = PlaneObstacle::HalfPlane {
+        point: [0.0, 0.0],
+        normal: [0.0, 1.0],
+    };
+    let mut p = block_on(ground, 0.5, [0.0, -9.81]);
+    // Statics has no friction: one roller keeps the block from sliding away.
+    p.held[0] = [true, false];
+    let mut x = p.model.rest_positions().to_vec();
+    p.solve_static(&mut x).unwrap();
+    p.held[0] = [false, false];
+    let weight = p.model.total_mass() * 9.81;
+    let carried: f64 = x.iter().filter(|q| q.y < 0.0).map(|q| -q.y * 1.0e5).sum();
+    assert!(
+        (carried - weight).abs() < 1e-6 * weight,
+        "{carried} vs {weight}"
+    );
+    // The same at rest after a damped fall from 1 cm.
+    p.damping = 30.0;
+    let mut x: Vec<Vec3> = p
+        .model
+        .rest_positions()
+        .iter()
+        .map(|q| q + Vec3::new(0.0, 0.01, 0.0))
+        .collect();
+    let mut v = vec![Vec3::zeros(); x.len()];
+    let dt = p.stable_time_step(0.8);
+    p.step_explicit(&mut x, &mut v, dt, (1.5 / dt) as usize)
+        .unwrap();
+    let carried: f64 = x.iter().filter(|q| q.y < 0.0).map(|q| -q.y * 1.0e5).sum();
+    assert!(
+        (carried - weight).abs() < 1e-3 * weight,
+        "{carried} vs {weight}"
+    );
+}
+
+#[test]
+fn a_block_on_a_slope_slides_at_the_coulomb_rate_or_sticks() {
+    use mss_core::plane::PlaneObstacle;
+    // Gravity turned by the slope's angle; the ground stays y = 0.
+    for (tan, mu, slides) in [(0.8, 0.5, true), (0.3, 0.5, false)] {
+        let angle: f64 = f64::atan(tan);
+        let g = [9.81 * angle.sin(), -9.81 * angle.cos()];
+        let ground = PlaneObstacle::HalfPlane {
+            point: [0.0, 0.0],
+            normal: [0.0, 1.0],
+        };
+        let mut p = block_on(ground, mu, g);
+        p.damping = 0.0;
+        // Start at rest in equilibrium with the ground: settle the normal
+        // load without the slope's pull first.
+        let mut x = p.model.rest_positions().to_vec();
+        let mut settle = p.clone();
+        settle.gravity = [0.0, g[1]];
+        settle.held[0] = [true, false];
+        settle.solve_static(&mut x).unwrap();
+        let x0: f64 = x.iter().map(|q| q.x).sum::<f64>() / x.len() as f64;
+        let mut v = vec![Vec3::zeros(); x.len()];
+        let dt = p.stable_time_step(0.5);
+        let t = 0.3;
+        p.step_explicit(&mut x, &mut v, dt, (t / dt) as usize)
+            .unwrap();
+        let moved = x.iter().map(|q| q.x).sum::<f64>() / x.len() as f64 - x0;
+        let rigid = 0.5 * 9.81 * (angle.sin() - mu * angle.cos()) * t * t;
+        if slides {
+            assert!(
+                (moved / rigid - 1.0).abs() < 0.05,
+                "tan {tan}: moved {moved}, rigid {rigid}"
+            );
+        } else {
+            assert!(moved.abs() < 1e-4, "tan {tan}: moved {moved}");
+        }
+    }
+}

@@ -470,8 +470,19 @@ impl Scene {
         if !self.regions.is_empty() {
             return not_yet("[[regions]]", "a material per region");
         }
-        if !self.obstacles.is_empty() {
-            return not_yet("[[obstacles]]", "contact with obstacles");
+        for (i, o) in self.obstacles.iter().enumerate() {
+            if !o.motion.is_empty() {
+                return not_yet(
+                    &format!("[[obstacles]] #{} motion", i + 1),
+                    "a moving obstacle",
+                );
+            }
+            if o.damping_ratio.is_some() || o.friction_kinetic.is_some() {
+                return not_yet(
+                    &format!("[[obstacles]] #{}", i + 1),
+                    "contact damping or a kinetic friction of its own",
+                );
+            }
         }
         if !self.motions.is_empty() {
             return not_yet("[[motions]]", "a prescribed motion");

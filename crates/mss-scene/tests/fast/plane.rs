@@ -65,6 +65,32 @@ fn the_bracket_settles_where_the_static_solve_puts_it() {
 }
 
 #[test]
+fn the_bracket_dropped_on_the_ground_stays_on_it() {
+    // Its post free, the bracket falls 1 cm onto the ground and settles.
+    let text = bracket_text()
+        .replace("[[fixed]]\nkind = \"face\"\nface = \"x-\"\n", "")
+        .replace("duration = 1.0", "duration = 1.5")
+        + "\n[[obstacles]]\nshape = { kind = \"ground\", gap = 0.01 }\nfriction = 0.5\n";
+    let job = prepare(&text).unwrap();
+    assert!(job.problem.held.iter().all(|h| !h[0] && !h[1]));
+    let dir = tempfile::tempdir().unwrap();
+    let s = job.run(dir.path(), &Cancel::new()).unwrap();
+    // It fell the gap and stopped there (in free fall it would be 11 m
+    // down): the ground holds it (the weight it carries is checked in
+    // mss-core's plane tests).
+    assert!(
+        s.max_displacement > 0.009 && s.max_displacement < 0.03,
+        "{s:?}"
+    );
+    let p = &job.problem;
+    let c = p.contact.as_ref().unwrap();
+    let ground = -0.2 - 0.01;
+    assert!(
+        matches!(c.obstacles[0], mss_core::plane::PlaneObstacle::HalfPlane { point, .. } if (point[1] - ground).abs() < 1e-9)
+    );
+}
+
+#[test]
 fn what_a_2d_body_cannot_take_is_refused_by_key() {
     // Elongated cells: the paper's element needs its hourglass control.
     let text = bracket_text().replace("cell_size = [0.01, 0.01]", "cell_size = [0.02, 0.01]");
@@ -113,9 +139,22 @@ fn what_a_2d_body_cannot_take_is_refused_by_key() {
         let e = prepare(&text.replace(change.0, change.1)).unwrap_err();
         assert!(e.contains(key) && e.contains(words), "{change:?}: {e}");
     }
-    let with_ground = format!("{text}\n[[obstacles]]\nshape = {{ kind = \"ground\" }}\n");
-    let e = prepare(&with_ground).unwrap_err();
-    assert!(e.contains("[[obstacles]]") && e.contains("2D"), "{e}");
+    let moving = format!(
+        "{text}\n[[obstacles]]\nshape = {{ kind = \"ground\" }}\nmotion = [[0.0, 0.0, 0.0, 0.0], [1.0, 0.1, 0.0, 0.0]]\n"
+    );
+    let e = prepare(&moving).unwrap_err();
+    assert!(
+        e.contains("[[obstacles]] #1 motion") && e.contains("2D"),
+        "{e}"
+    );
+    let capsule = format!(
+        "{text}\n[[obstacles]]\nshape = {{ kind = \"capsule\", a = [0.0, 0.0, 0.0], b = [1.0, 0.0, 0.0], radius = 0.1 }}\n"
+    );
+    let e = prepare(&capsule).unwrap_err();
+    assert!(
+        e.contains("[[obstacles]] #1 shape") && e.contains("disc"),
+        "{e}"
+    );
     // Per-axis cell sides are for 2D bodies only.
     let cube = "[mesh]\npath = \"builtin:cube\"\nscale = 0.1\n[voxelize]\ncell_size = [0.01, 0.02]\n\
                 [material]\nyoung = 1e4\npoisson = 0.3\ndensity = 1000.0\n";
