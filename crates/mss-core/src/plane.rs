@@ -714,6 +714,67 @@ impl PlaneContact {
     }
 }
 
+/// A 2D problem's static residual and Jacobian (the penalty's tangent
+/// included), for [`newton`].
+struct StaticSystem<'a>(&'a PlaneProblem);
+
+impl NonlinearSystem for StaticSystem<'_> {
+    fn residual(&mut self, x: &[Vec3], r: &mut [Vec3]) -> f64 {
+        self.0.total_forces(x, r);
+        let p = self.0;
+        let weight: f64 = p
+            .model
+            .masses
+            .iter()
+            .map(|m| m * p.gravity[0].hypot(p.gravity[1]))
+            .sum();
+        let applied: f64 = p.forces.iter().map(|f| f[0].hypot(f[1])).sum();
+        let reactions: f64 = r.iter().map(|v| v.norm()).sum();
+        (weight + applied).max(1e-3 * reactions).max(1e-300)
+    }
+    fn jacobian(&mut self, x: &[Vec3]) -> BlockCsr {
+        let mut j = self.0.model.tangent(x);
+        if let Some(c) = &self.0.contact {
+            // The penalty's tangent along each touching normal
+            // (exact for lines; a disc's turning normal is left out),
+            // for nodes within 1 % of a cell of touching too: a body
+            // that rests on an obstacle at its start is held by it
+            // from the first Newton step.
+            let margin = 0.01 * self.0.model.size[0].min(self.0.model.size[1]);
+            for (i, p) in x.iter().enumerate() {
+                for o in &c.obstacles {
+                    if let Some((_, n)) = o.within([p.x, p.y], margin) {
+                        let k = j.find(i, i).expect("the diagonal is in the pattern");
+                        for e in 0..2 {
+                            for d in 0..2 {
+                                j.blocks[k][(e, d)] -= c.stiffness * n[e] * n[d];
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        j
+    }
+}
+
+/// A Newton failure in words (`step`: of an implicit step).
+fn newton_error(e: NewtonFailure, step: Option<usize>) -> PlaneSolveError {
+    let what = match e {
+        NewtonFailure::Diverged(d) => d.to_string(),
+        NewtonFailure::Singular(nodes) => format!(
+            "the stiffness is singular: the held nodes leave a mechanism (nodes {:?} move freely)",
+            &nodes[..nodes.len().min(8)]
+        ),
+        NewtonFailure::Linear(m) => m,
+        NewtonFailure::Cancelled => "cancelled".into(),
+    };
+    PlaneSolveError::Newton(match step {
+        Some(k) => format!("implicit step {k} did not converge: {what}"),
+        None => format!("the static solve did not converge: {what}"),
+    })
+}
+
 /// Smallest load increment of a 2D static solve, as a fraction of the load.
 pub const MIN_LOAD_STEP: f64 = 1.0 / 1024.0;
 
@@ -738,8 +799,8 @@ pub struct PlaneProblem {
 /// Why a 2D solve failed.
 #[derive(Debug, Error, Clone, PartialEq)]
 pub enum PlaneSolveError {
-    /// Newton's method did not converge.
-    #[error("the static solve did not converge: {0}")]
+    /// Newton's method did not converge (what it was solving, and why).
+    #[error("{0}")]
     Newton(String),
     /// The motion grew without bound.
     #[error("the simulation diverged at step {0} (a position is no longer finite)")]
@@ -832,46 +893,6 @@ impl PlaneProblem {
     }
 
     fn newton_at_full_load(&self, x: &mut [Vec3]) -> Result<u32, PlaneSolveError> {
-        struct System<'a>(&'a PlaneProblem);
-        impl NonlinearSystem for System<'_> {
-            fn residual(&mut self, x: &[Vec3], r: &mut [Vec3]) -> f64 {
-                self.0.total_forces(x, r);
-                let p = self.0;
-                let weight: f64 = p
-                    .model
-                    .masses
-                    .iter()
-                    .map(|m| m * p.gravity[0].hypot(p.gravity[1]))
-                    .sum();
-                let applied: f64 = p.forces.iter().map(|f| f[0].hypot(f[1])).sum();
-                let reactions: f64 = r.iter().map(|v| v.norm()).sum();
-                (weight + applied).max(1e-3 * reactions).max(1e-300)
-            }
-            fn jacobian(&mut self, x: &[Vec3]) -> BlockCsr {
-                let mut j = self.0.model.tangent(x);
-                if let Some(c) = &self.0.contact {
-                    // The penalty's tangent along each touching normal
-                    // (exact for lines; a disc's turning normal is left out),
-                    // for nodes within 1 % of a cell of touching too: a body
-                    // that rests on an obstacle at its start is held by it
-                    // from the first Newton step.
-                    let margin = 0.01 * self.0.model.size[0].min(self.0.model.size[1]);
-                    for (i, p) in x.iter().enumerate() {
-                        for o in &c.obstacles {
-                            if let Some((_, n)) = o.within([p.x, p.y], margin) {
-                                let k = j.find(i, i).expect("the diagonal is in the pattern");
-                                for e in 0..2 {
-                                    for d in 0..2 {
-                                        j.blocks[k][(e, d)] -= c.stiffness * n[e] * n[d];
-                                    }
-                                }
-                            }
-                        }
-                    }
-                }
-                j
-            }
-        }
         let free = self.free_dofs();
         let model = &self.model;
         let size = {
@@ -894,17 +915,112 @@ impl PlaneProblem {
             rtol: 1e-10,
             slope_line_search: false,
         };
-        newton(&mut System(self), x, &free, size, h, opts, &mut linear).map_err(|e| {
-            PlaneSolveError::Newton(match e {
-                NewtonFailure::Diverged(d) => d.to_string(),
-                NewtonFailure::Singular(nodes) => format!(
-                    "the stiffness is singular: the held nodes leave a mechanism (nodes {:?} move freely)",
-                    &nodes[..nodes.len().min(8)]
-                ),
-                NewtonFailure::Linear(m) => m,
-                NewtonFailure::Cancelled => "cancelled".into(),
-            })
-        })
+        newton(
+            &mut StaticSystem(self),
+            x,
+            &free,
+            size,
+            h,
+            opts,
+            &mut linear,
+        )
+        .map_err(|e| newton_error(e, None))
+    }
+
+    /// `steps` implicit (backward Euler) steps of `dt` (s) from `(x, v)`:
+    /// each step solves `M (v' - v) / dt = f(x') - c M v'` with
+    /// `x' = x + dt v'` by Newton's method, so any step is stable (and
+    /// damps the highest modes). Friction acts on the velocity each step
+    /// ends with, as in the explicit step. Returns the Newton iterations.
+    pub fn step_implicit(
+        &self,
+        x: &mut [Vec3],
+        v: &mut [Vec3],
+        dt: f64,
+        steps: usize,
+    ) -> Result<u32, PlaneSolveError> {
+        struct Step<'a> {
+            p: &'a PlaneProblem,
+            x0: Vec<Vec3>,
+            v0: Vec<Vec3>,
+            dt: f64,
+        }
+        impl NonlinearSystem for Step<'_> {
+            fn residual(&mut self, x: &[Vec3], r: &mut [Vec3]) -> f64 {
+                self.p.total_forces(x, r);
+                let (dt, c) = (self.dt, self.p.damping);
+                let mut scale = 0.0;
+                for i in 0..x.len() {
+                    let m = self.p.model.masses[i];
+                    let vel = (x[i] - self.x0[i]) / dt;
+                    let inertia = (vel - self.v0[i]) * (m / dt) + vel * (c * m);
+                    r[i] -= Vec3::new(inertia.x, inertia.y, 0.0);
+                    scale += m * (9.81 + self.v0[i].norm() / dt);
+                }
+                scale
+            }
+            fn jacobian(&mut self, x: &[Vec3]) -> BlockCsr {
+                let mut j = StaticSystem(self.p).jacobian(x);
+                let (dt, c) = (self.dt, self.p.damping);
+                for i in 0..x.len() {
+                    let k = j.find(i, i).expect("the diagonal is in the pattern");
+                    let m = self.p.model.masses[i];
+                    for d in 0..2 {
+                        j.blocks[k][(d, d)] -= m / (dt * dt) + c * m / dt;
+                    }
+                }
+                j
+            }
+        }
+        let free = self.free_dofs();
+        let h = self.model.size[0].min(self.model.size[1]);
+        let mut linear = LinearSolver::for_lattice(
+            &self.model.cells_as_hex(),
+            &self.model.rest,
+            h,
+            LinearSolverKind::Direct,
+        );
+        let opts = NewtonOptions {
+            max_iterations: 30,
+            rtol: 1e-9,
+            slope_line_search: false,
+        };
+        let mut iterations = 0;
+        for step in 0..steps {
+            let mut sys = Step {
+                p: self,
+                x0: x.to_vec(),
+                v0: v.to_vec(),
+                dt,
+            };
+            // Predictor: the current velocity.
+            for i in 0..x.len() {
+                for d in 0..2 {
+                    if !self.held[i][d] {
+                        x[i][d] += dt * v[i][d];
+                    }
+                }
+            }
+            iterations += newton(&mut sys, x, &free, h, h, opts, &mut linear)
+                .map_err(|e| newton_error(e, Some(step)))?;
+            for i in 0..x.len() {
+                v[i] = (x[i] - sys.x0[i]) / dt;
+                if let Some(c) = &self.contact {
+                    self.apply_friction(c, x[i], &mut v[i], dt / self.model.masses[i]);
+                }
+                self.hold_velocity(i, &mut v[i]);
+            }
+        }
+        Ok(iterations)
+    }
+
+    /// Zeroes the held components of node `i`'s velocity.
+    fn hold_velocity(&self, i: usize, v: &mut Vec3) {
+        for (vd, &held) in v.iter_mut().zip(&self.held[i]) {
+            if held {
+                *vd = 0.0;
+            }
+        }
     }
 
     /// Coulomb friction on a touching node's velocity: the impulse
@@ -951,11 +1067,7 @@ impl PlaneProblem {
                 }
                 if let Some(c) = &self.contact {
                     self.apply_friction(c, x[i], &mut v[i], dt * inv_m);
-                    for (vd, &held) in v[i].iter_mut().zip(&self.held[i]) {
-                        if held {
-                            *vd = 0.0;
-                        }
-                    }
+                    self.hold_velocity(i, &mut v[i]);
                 }
                 for d in 0..2 {
                     if !self.held[i][d] {

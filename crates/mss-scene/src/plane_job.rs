@@ -1,7 +1,8 @@
 //! Running a 2D scene (`[model] dimension = 2`): the outline of `[mesh]` (an
 //! SVG drawing or a planar mesh) rasterized into rectangles, the paper's
 //! 2D element on them (`mss_core::plane`), held nodes, in-plane gravity and
-//! forces, the explicit or the static solver, and frames written as VTK
+//! forces, fixed obstacles, the explicit, implicit or static solver, and
+//! frames written as VTK
 //! quads (`lattice_NNNN.vtu`, `lattice.pvd`) with the outline carried by the
 //! lattice as SVG and OBJ (`outline_NNNN.svg`, `outline_NNNN.obj`).
 //!
@@ -101,7 +102,7 @@ pub struct PlaneSummary {
     pub mass: f64,
     /// The 2D variant (`paper`, `springs`, `areal`) and its hourglass factor.
     pub parameterization: String,
-    /// `explicit` or `static`.
+    /// `explicit`, `implicit` or `static`.
     pub solver: String,
     /// Time step (s; 0 for static).
     pub dt: f64,
@@ -320,9 +321,13 @@ impl PlaneJob {
             (0.0, 0, usize::MAX)
         } else {
             let stable = problem.stable_time_step(1.0);
+            let implicit = scene.solver.kind == "implicit";
             let dt = match scene.solver.dt {
+                TimeStep::Auto if implicit => {
+                    scene.solver.duration / crate::scene::IMPLICIT_AUTO_STEPS as f64
+                }
                 TimeStep::Auto => stable * scene.solver.safety,
-                TimeStep::Seconds(dt) if dt > stable => {
+                TimeStep::Seconds(dt) if dt > stable && !implicit => {
                     return Err(setting(
                         "[solver] dt",
                         format!(
@@ -394,8 +399,13 @@ impl PlaneJob {
                     break;
                 }
                 let chunk = self.frame_every.min(self.steps - done);
-                p.step_explicit(&mut x, &mut v, self.dt, chunk)
-                    .map_err(solver_error)?;
+                if self.input.scene.solver.kind == "implicit" {
+                    p.step_implicit(&mut x, &mut v, self.dt, chunk)
+                        .map_err(solver_error)?;
+                } else {
+                    p.step_explicit(&mut x, &mut v, self.dt, chunk)
+                        .map_err(solver_error)?;
+                }
                 done += chunk;
                 let t = done as f64 * self.dt;
                 let d = displacement(&x);

@@ -208,7 +208,8 @@ fn check_plane(input: mss_scene::SceneInput, global: &GlobalArgs) -> anyhow::Res
         crate::outln!("time stepping    static");
     } else {
         crate::outln!(
-            "time stepping    explicit, dt = {:.3e} s, {} steps",
+            "time stepping    {}, dt = {:.3e} s, {} steps",
+            job.input.scene.solver.kind,
             job.dt,
             job.steps
         );

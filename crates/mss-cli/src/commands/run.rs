@@ -164,7 +164,8 @@ fn run_plane(input: SceneInput, global: &GlobalArgs) -> anyhow::Result<()> {
             crate::outln!("solver           static, {} Newton iterations", s.steps);
         } else {
             crate::outln!(
-                "solver           explicit, time step {:.3e} s, {} steps, {:.4} s simulated",
+                "solver           {}, time step {:.3e} s, {} steps, {:.4} s simulated",
+                s.solver,
                 s.dt,
                 s.steps,
                 s.time

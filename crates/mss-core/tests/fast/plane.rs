@@ -484,3 +484,20 @@ fn a_block_on_a_slope_slides_at_the_coulomb_rate_or_sticks() {
         }
     }
 }
+
+#[test]
+fn the_implicit_step_settles_at_the_static_equilibrium_with_large_steps() {
+    let mut p = cantilever([8, 2], [0.02, 0.02], 1.0e7, PlaneParameterization::Paper);
+    p.damping = 5.0;
+    let mut xs = p.model.rest_positions().to_vec();
+    p.solve_static(&mut xs).unwrap();
+    let mut x = p.model.rest_positions().to_vec();
+    let mut v = vec![Vec3::zeros(); x.len()];
+    // 100 times the explicit limit: stable, and damped to rest.
+    let dt = 100.0 * p.model.stable_time_step(1.0);
+    let iterations = p.step_implicit(&mut x, &mut v, dt, 400).unwrap();
+    assert!(iterations > 0);
+    let (s, d) = (tip_sag(&p, &xs), tip_sag(&p, &x));
+    assert!((s - d).abs() < 1e-3 * s, "static {s}, implicit {d}");
+    assert!(v.iter().all(|v| v.norm() < 1e-3), "not at rest");
+}

@@ -518,11 +518,14 @@ impl Scene {
                 ),
             ));
         }
-        if !(self.solver.is_static() || self.solver.kind == "explicit") {
+        if !(self.solver.is_static()
+            || self.solver.kind == "explicit"
+            || self.solver.kind == "implicit")
+        {
             return Err(invalid(
                 "[solver] kind".into(),
                 format!(
-                    "= {:?}; a 2D body runs with \"explicit\" or \"static\"",
+                    "= {:?}; a 2D body runs with \"explicit\", \"implicit\" or \"static\"",
                     self.solver.kind
                 ),
             ));

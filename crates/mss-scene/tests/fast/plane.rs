@@ -62,6 +62,23 @@ fn the_bracket_settles_where_the_static_solve_puts_it() {
     assert_eq!(svg.matches("<path").count(), 2, "the outline and its hole");
     assert!(dir.path().join("dyn/lattice.pvd").exists());
     assert!(dir.path().join("static/summary.json").exists());
+    // Implicit steps of 10 ms reach the same rest.
+    let implicit = prepare(
+        &bracket_text()
+            .replace("kind = \"explicit\"", "kind = \"implicit\"\ndt = 0.01")
+            .replace("duration = 1.0", "duration = 2.0"),
+    )
+    .unwrap();
+    let i = implicit
+        .run(&dir.path().join("implicit"), &Cancel::new())
+        .unwrap();
+    assert_eq!(i.steps, 200);
+    assert!(
+        (i.max_displacement - s.max_displacement).abs() < 1e-3 * s.max_displacement,
+        "implicit {} static {}",
+        i.max_displacement,
+        s.max_displacement
+    );
 }
 
 #[test]
@@ -116,9 +133,9 @@ fn what_a_2d_body_cannot_take_is_refused_by_key() {
             "in the plane",
         ),
         (
-            ("kind = \"explicit\"", "kind = \"implicit\""),
+            ("kind = \"explicit\"", "kind = \"newmark\""),
             "[solver] kind",
-            "\"explicit\" or \"static\"",
+            "\"explicit\", \"implicit\" or \"static\"",
         ),
         (
             ("paper+hg", "volumetric"),
