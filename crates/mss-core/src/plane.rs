@@ -714,33 +714,36 @@ impl PlaneContact {
     }
 }
 
-/// A 2D problem's static residual and Jacobian (the penalty's tangent
-/// included), for [`newton`].
-struct StaticSystem<'a>(&'a PlaneProblem);
+/// A 2D problem's static residual under a fraction `load` of its loads,
+/// and its Jacobian (the penalty's tangent included), for [`newton`].
+struct StaticSystem<'a> {
+    p: &'a PlaneProblem,
+    load: f64,
+}
 
 impl NonlinearSystem for StaticSystem<'_> {
     fn residual(&mut self, x: &[Vec3], r: &mut [Vec3]) -> f64 {
-        self.0.total_forces(x, r);
-        let p = self.0;
+        let p = self.p;
+        p.forces_under(x, self.load, r);
         let weight: f64 = p
             .model
             .masses
             .iter()
-            .map(|m| m * p.gravity[0].hypot(p.gravity[1]))
+            .map(|m| self.load * m * p.gravity[0].hypot(p.gravity[1]))
             .sum();
-        let applied: f64 = p.forces.iter().map(|f| f[0].hypot(f[1])).sum();
+        let applied: f64 = p.forces.iter().map(|f| self.load * f[0].hypot(f[1])).sum();
         let reactions: f64 = r.iter().map(|v| v.norm()).sum();
         (weight + applied).max(1e-3 * reactions).max(1e-300)
     }
     fn jacobian(&mut self, x: &[Vec3]) -> BlockCsr {
-        let mut j = self.0.model.tangent(x);
-        if let Some(c) = &self.0.contact {
+        let mut j = self.p.model.tangent(x);
+        if let Some(c) = &self.p.contact {
             // The penalty's tangent along each touching normal
             // (exact for lines; a disc's turning normal is left out),
             // for nodes within 1 % of a cell of touching too: a body
             // that rests on an obstacle at its start is held by it
             // from the first Newton step.
-            let margin = 0.01 * self.0.model.size[0].min(self.0.model.size[1]);
+            let margin = 0.01 * self.p.model.size[0].min(self.p.model.size[1]);
             for (i, p) in x.iter().enumerate() {
                 for o in &c.obstacles {
                     if let Some((_, n)) = o.within([p.x, p.y], margin) {
@@ -839,11 +842,17 @@ impl PlaneProblem {
 
     /// Internal plus external forces at `x` (N).
     pub fn total_forces(&self, x: &[Vec3], out: &mut [Vec3]) {
+        self.forces_under(x, 1.0, out);
+    }
+
+    /// Internal and contact forces plus `load` times gravity and the
+    /// nodal forces, at `x` (N).
+    fn forces_under(&self, x: &[Vec3], load: f64, out: &mut [Vec3]) {
         self.model.internal_forces(x, out);
         for (i, f) in out.iter_mut().enumerate() {
             let m = self.model.masses[i];
-            f.x += m * self.gravity[0] + self.forces[i][0];
-            f.y += m * self.gravity[1] + self.forces[i][1];
+            f.x += load * (m * self.gravity[0] + self.forces[i][0]);
+            f.y += load * (m * self.gravity[1] + self.forces[i][1]);
             if let Some(c) = &self.contact {
                 let (g, _) = c.force([x[i].x, x[i].y]);
                 f.x += g[0];
@@ -865,17 +874,19 @@ impl PlaneProblem {
     /// (large deformation), in increments that halve on failure and grow
     /// on success. Returns the Newton iterations.
     pub fn solve_static(&self, x: &mut [Vec3]) -> Result<u32, PlaneSolveError> {
-        let mut scaled = self.clone();
+        let h = self.model.size[0].min(self.model.size[1]);
+        let mut linear = LinearSolver::for_lattice(
+            &self.model.cells_as_hex(),
+            &self.model.rest,
+            h,
+            LinearSolverKind::Direct,
+        );
         let (mut done, mut step) = (0.0f64, 1.0f64);
         let mut iterations = 0;
         while done < 1.0 {
             let target = (done + step).min(1.0);
-            scaled.gravity = self.gravity.map(|g| g * target);
-            for (s, f) in scaled.forces.iter_mut().zip(&self.forces) {
-                *s = f.map(|c| c * target);
-            }
             let mut trial = x.to_vec();
-            match scaled.newton_at_full_load(&mut trial) {
+            match self.newton_under(target, &mut trial, &mut linear) {
                 Ok(n) => {
                     iterations += n;
                     x.copy_from_slice(&trial);
@@ -892,7 +903,13 @@ impl PlaneProblem {
         Ok(iterations)
     }
 
-    fn newton_at_full_load(&self, x: &mut [Vec3]) -> Result<u32, PlaneSolveError> {
+    /// Newton's method for the equilibrium under `load` times the loads.
+    fn newton_under(
+        &self,
+        load: f64,
+        x: &mut [Vec3],
+        linear: &mut LinearSolver,
+    ) -> Result<u32, PlaneSolveError> {
         let free = self.free_dofs();
         let model = &self.model;
         let size = {
@@ -904,25 +921,19 @@ impl PlaneProblem {
             (hi[0] - lo[0]).max(hi[1] - lo[1])
         };
         let h = model.size[0].min(model.size[1]);
-        let mut linear = LinearSolver::for_lattice(
-            &model.cells_as_hex(),
-            &model.rest,
-            h,
-            LinearSolverKind::Direct,
-        );
         let opts = NewtonOptions {
             max_iterations: 60,
             rtol: 1e-10,
             slope_line_search: false,
         };
         newton(
-            &mut StaticSystem(self),
+            &mut StaticSystem { p: self, load },
             x,
             &free,
             size,
             h,
             opts,
-            &mut linear,
+            linear,
         )
         .map_err(|e| newton_error(e, None))
     }
@@ -960,7 +971,11 @@ impl PlaneProblem {
                 scale
             }
             fn jacobian(&mut self, x: &[Vec3]) -> BlockCsr {
-                let mut j = StaticSystem(self.p).jacobian(x);
+                let mut j = StaticSystem {
+                    p: self.p,
+                    load: 1.0,
+                }
+                .jacobian(x);
                 let (dt, c) = (self.dt, self.p.damping);
                 for i in 0..x.len() {
                     let k = j.find(i, i).expect("the diagonal is in the pattern");

@@ -235,13 +235,34 @@ impl LabelImage {
         affine: [[f64; 4]; 3],
         name: &str,
     ) -> Result<Self, ImageError> {
+        Self::from_reader(
+            dims,
+            labels,
+            affine,
+            None,
+            Space::Other(String::new()),
+            ImageFormat::Nifti,
+            name,
+        )
+    }
+
+    /// What a reader assembles: checked as [`LabelImage::new`] is.
+    pub(crate) fn from_reader(
+        dims: [usize; 3],
+        labels: Vec<i32>,
+        affine: [[f64; 4]; 3],
+        unit_metres: Option<f64>,
+        space: Space,
+        format: ImageFormat,
+        name: &str,
+    ) -> Result<Self, ImageError> {
         let image = LabelImage {
             dims,
             labels,
             affine,
-            unit_metres: None,
-            space: Space::Other(String::new()),
-            format: ImageFormat::Nifti,
+            unit_metres,
+            space,
+            format,
         };
         image.check(name)?;
         Ok(image)

@@ -436,14 +436,6 @@ fn parse_header(b: &[u8], name: &str) -> Result<Header, ImageError> {
     })
 }
 
-fn finish(header: Header, labels: Vec<i32>, name: &str) -> Result<LabelImage, ImageError> {
-    let mut image = LabelImage::new(header.layout.dims, labels, header.affine, name)?;
-    image.unit_metres = header.unit_metres;
-    image.space = header.space;
-    image.format = ImageFormat::Nifti;
-    Ok(image)
-}
-
 pub(super) fn read_bytes(
     bytes: &[u8],
     name: &str,
@@ -483,7 +475,15 @@ pub(super) fn read_bytes(
         name,
     )?;
     let labels = header.layout.read_labels(&mut reader, name, compressed)?;
-    finish(header, labels, name)
+    LabelImage::from_reader(
+        header.layout.dims,
+        labels,
+        header.affine,
+        header.unit_metres,
+        header.space,
+        ImageFormat::Nifti,
+        name,
+    )
 }
 
 /// Opens `path`, gunzipping it if it is compressed. Returns the reader and
@@ -557,5 +557,13 @@ pub(super) fn read_file(
     let labels = header
         .layout
         .read_labels(&mut data, &data_name, data_len.is_none())?;
-    finish(header, labels, name)
+    LabelImage::from_reader(
+        header.layout.dims,
+        labels,
+        header.affine,
+        header.unit_metres,
+        header.space,
+        ImageFormat::Nifti,
+        name,
+    )
 }

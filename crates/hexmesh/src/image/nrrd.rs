@@ -492,14 +492,6 @@ fn split_vectors(text: &str) -> Option<Vec<Option<Vec<f64>>>> {
     Some(out)
 }
 
-fn finish(header: Header, labels: Vec<i32>, name: &str) -> Result<LabelImage, ImageError> {
-    let mut image = LabelImage::new(header.layout.dims, labels, header.affine, name)?;
-    image.unit_metres = header.unit_metres;
-    image.space = header.space;
-    image.format = ImageFormat::Nrrd;
-    Ok(image)
-}
-
 /// Reads the voxels from `reader`, positioned at the data's first byte
 /// (before line and byte skips); `len` is what is left of it when known
 /// (an attached or detached file, not a stream).
@@ -643,7 +635,15 @@ pub(super) fn read_bytes(
     header.layout.check_memory(name, limits)?;
     let left = cursor.len() as u64;
     let labels = read_data(&header, Box::new(cursor), Some(left), name)?;
-    finish(header, labels, name)
+    LabelImage::from_reader(
+        header.layout.dims,
+        labels,
+        header.affine,
+        header.unit_metres,
+        header.space,
+        ImageFormat::Nrrd,
+        name,
+    )
 }
 
 pub(super) fn read_file(
@@ -675,5 +675,13 @@ pub(super) fn read_file(
             )?
         }
     };
-    finish(header, labels, name)
+    LabelImage::from_reader(
+        header.layout.dims,
+        labels,
+        header.affine,
+        header.unit_metres,
+        header.space,
+        ImageFormat::Nrrd,
+        name,
+    )
 }

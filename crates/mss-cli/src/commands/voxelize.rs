@@ -73,6 +73,26 @@ pub struct VoxelizeArgs {
     pub springs: bool,
 }
 
+impl VoxelizeArgs {
+    /// How the `.vtu` files store their arrays (`--compression`).
+    fn encoding(&self) -> VtuEncoding {
+        if self.compression == "none" {
+            VtuEncoding::Base64
+        } else {
+            VtuEncoding::Base64Zlib
+        }
+    }
+
+    /// The files written besides `stats.json`.
+    fn files(&self) -> Vec<String> {
+        ["lattice.vtu", "skin.obj", "surface.obj"]
+            .into_iter()
+            .chain(self.springs.then_some("springs.vtu"))
+            .map(str::to_owned)
+            .collect()
+    }
+}
+
 /// The folder `mss voxelize MESH` writes into without `--out`: the mesh's
 /// file stem and `_lattice`, in the working folder (`bunny.obj` ->
 /// `bunny_lattice`, `builtin:critter` -> `critter_lattice`).
@@ -239,11 +259,7 @@ pub fn run(args: &VoxelizeArgs, global: &GlobalArgs) -> anyhow::Result<()> {
     let loaded = placed;
     let t2 = Instant::now();
     let lattice = &vox.lattice;
-    let encoding = if args.compression == "none" {
-        VtuEncoding::Base64
-    } else {
-        VtuEncoding::Base64Zlib
-    };
+    let encoding = args.encoding();
     write_outputs(
         &out_dir,
         lattice,
@@ -269,11 +285,7 @@ pub fn run(args: &VoxelizeArgs, global: &GlobalArgs) -> anyhow::Result<()> {
         voxelize_seconds,
         write_seconds: t2.elapsed().as_secs_f64(),
         output_folder: out_dir.display().to_string(),
-        files: ["lattice.vtu", "skin.obj", "surface.obj"]
-            .into_iter()
-            .chain(args.springs.then_some("springs.vtu"))
-            .map(str::to_owned)
-            .collect(),
+        files: args.files(),
         image: None,
     };
     finish(&summary, &out_dir, global)
@@ -328,11 +340,7 @@ fn run_image(
     )?;
     let voxelize_seconds = t0.elapsed().as_secs_f64();
     let t2 = Instant::now();
-    let encoding = if args.compression == "none" {
-        VtuEncoding::Base64
-    } else {
-        VtuEncoding::Base64Zlib
-    };
+    let encoding = args.encoding();
     let image = &placed.lattice;
     let lattice = &image.lattice;
     write_outputs(
@@ -364,11 +372,7 @@ fn run_image(
         voxelize_seconds,
         write_seconds: t2.elapsed().as_secs_f64(),
         output_folder: out_dir.display().to_string(),
-        files: ["lattice.vtu", "skin.obj", "surface.obj"]
-            .into_iter()
-            .chain(args.springs.then_some("springs.vtu"))
-            .map(str::to_owned)
-            .collect(),
+        files: args.files(),
         image: Some(ImageSummary {
             dims: placed.dims,
             spacing: placed.spacing,
