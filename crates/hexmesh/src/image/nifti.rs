@@ -21,6 +21,21 @@ use super::{
 const V1_LEN: usize = 348;
 const V2_LEN: usize = 540;
 
+impl Header {
+    fn into_image(self, labels: Vec<i32>, name: &str) -> Result<LabelImage, ImageError> {
+        let h = self;
+        LabelImage::from_reader(
+            h.layout.dims,
+            labels,
+            h.affine,
+            h.unit_metres,
+            h.space,
+            ImageFormat::Nifti,
+            name,
+        )
+    }
+}
+
 struct Header {
     layout: VoxelLayout,
     affine: [[f64; 4]; 3],
@@ -475,15 +490,7 @@ pub(super) fn read_bytes(
         name,
     )?;
     let labels = header.layout.read_labels(&mut reader, name, compressed)?;
-    LabelImage::from_reader(
-        header.layout.dims,
-        labels,
-        header.affine,
-        header.unit_metres,
-        header.space,
-        ImageFormat::Nifti,
-        name,
-    )
+    header.into_image(labels, name)
 }
 
 /// Opens `path`, gunzipping it if it is compressed. Returns the reader and
@@ -557,13 +564,5 @@ pub(super) fn read_file(
     let labels = header
         .layout
         .read_labels(&mut data, &data_name, data_len.is_none())?;
-    LabelImage::from_reader(
-        header.layout.dims,
-        labels,
-        header.affine,
-        header.unit_metres,
-        header.space,
-        ImageFormat::Nifti,
-        name,
-    )
+    header.into_image(labels, name)
 }

@@ -28,6 +28,21 @@ enum Encoding {
     Ascii,
 }
 
+impl Header {
+    fn into_image(self, labels: Vec<i32>, name: &str) -> Result<LabelImage, ImageError> {
+        let h = self;
+        LabelImage::from_reader(
+            h.layout.dims,
+            labels,
+            h.affine,
+            h.unit_metres,
+            h.space,
+            ImageFormat::Nrrd,
+            name,
+        )
+    }
+}
+
 struct Header {
     layout: VoxelLayout,
     affine: [[f64; 4]; 3],
@@ -635,15 +650,7 @@ pub(super) fn read_bytes(
     header.layout.check_memory(name, limits)?;
     let left = cursor.len() as u64;
     let labels = read_data(&header, Box::new(cursor), Some(left), name)?;
-    LabelImage::from_reader(
-        header.layout.dims,
-        labels,
-        header.affine,
-        header.unit_metres,
-        header.space,
-        ImageFormat::Nrrd,
-        name,
-    )
+    header.into_image(labels, name)
 }
 
 pub(super) fn read_file(
@@ -675,13 +682,5 @@ pub(super) fn read_file(
             )?
         }
     };
-    LabelImage::from_reader(
-        header.layout.dims,
-        labels,
-        header.affine,
-        header.unit_metres,
-        header.space,
-        ImageFormat::Nrrd,
-        name,
-    )
+    header.into_image(labels, name)
 }
