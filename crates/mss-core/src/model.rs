@@ -469,14 +469,58 @@ pub struct CellDiagnostics {
 /// the signature so that a future pass may keep scratch without an API change.
 #[derive(Debug, Clone, Default)]
 pub struct ForceWorkspace {
-    _reserved: (),
+    /// The stretch `1 - L0 / l` of each lattice edge, by the node it starts
+    /// from and its axis: computed once per force pass and shared by the up
+    /// to four cells around the edge.
+    edge_stretch: Vec<[f64; 3]>,
 }
 
 impl ForceWorkspace {
-    /// Bytes held (none).
+    /// Bytes held.
     pub fn memory_bytes(&self) -> usize {
-        0
+        self.edge_stretch.capacity() * 24
     }
+}
+
+/// A lattice edge that is not at corner 0 of any cell (on the lattice's `+`
+/// faces): the force pass computes its stretch apart from the pass over the
+/// cells' corner-0 edges.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct LeftoverEdge {
+    node: u32,
+    end: u32,
+    axis: u32,
+    rest: f64,
+}
+
+/// The [`LeftoverEdge`]s of `cells` on `nodes` nodes, in (cell, edge) order,
+/// each once; `rest(c)` is the rest edge length of cell `c`.
+fn leftover_edges(
+    cells: &[[u32; 8]],
+    nodes: usize,
+    rest: impl Fn(usize) -> f64,
+) -> Vec<LeftoverEdge> {
+    // Bit `axis` of `covered[n]`: node n's edge along +axis is known.
+    let mut covered = vec![0u8; nodes];
+    for cell in cells {
+        covered[cell[0] as usize] = 0b111;
+    }
+    let mut out = Vec::new();
+    for (c, cell) in cells.iter().enumerate() {
+        for &(a, b, axis) in &hexmesh::CELL_EDGES {
+            let node = cell[a] as usize;
+            if covered[node] & (1 << axis) == 0 {
+                covered[node] |= 1 << axis;
+                out.push(LeftoverEdge {
+                    node: cell[a],
+                    end: cell[b],
+                    axis: axis as u32,
+                    rest: rest(c),
+                });
+            }
+        }
+    }
+    out
 }
 
 /// The cells of a lattice by layer along z: the lattice sorts its cells
@@ -521,6 +565,14 @@ struct SharedForces(*mut Vec3);
 unsafe impl Send for SharedForces {}
 unsafe impl Sync for SharedForces {}
 
+/// Edge stretches by node written from several threads at once: each cell
+/// writes the node at its corner 0, which no other cell has there.
+#[derive(Clone, Copy)]
+struct SharedEdges(*mut [f64; 3]);
+// SAFETY: every node is corner 0 of at most one cell.
+unsafe impl Send for SharedEdges {}
+unsafe impl Sync for SharedEdges {}
+
 /// Cells whose corner forces are computed together before being added to
 /// the nodes (the buffer stays in L1).
 const FORCE_BATCH: usize = 32;
@@ -561,6 +613,8 @@ pub struct Model {
     /// The bodies the model is made of, in node and cell order (one for a
     /// model built from a lattice; see [`Model::union`]).
     bodies: Vec<BodySpan>,
+    /// The lattice edges at corner 0 of no cell.
+    leftover_edges: Vec<LeftoverEdge>,
 }
 
 /// Where one body of a [`Model`] lies in its node and cell arrays.
@@ -731,6 +785,7 @@ impl Model {
         let layers = Layers::of(lattice.cell_coords());
         let num_cells = cells.len();
         let num_springs = lattice.num_unique_edges() + 4 * num_cells;
+        let leftover_edges = leftover_edges(&cells, n, |_| h);
         Ok(Self {
             rest,
             cells,
@@ -753,6 +808,7 @@ impl Model {
                 h,
                 parameterization: param.name(),
             }],
+            leftover_edges,
         })
     }
 
@@ -781,6 +837,7 @@ impl Model {
         let mut cell_material = Vec::new();
         let mut offsets = vec![0u32];
         let mut spans = Vec::new();
+        let mut leftovers = Vec::new();
         let mut num_springs = 0;
         let mut omega_max_sq = 0.0f64;
         for body in bodies {
@@ -796,6 +853,11 @@ impl Model {
             let node_offset = rest.len() as u32;
             let cell_offset = cells.len() as u32;
             let material_offset = params.len() as u32;
+            leftovers.extend(body.leftover_edges.iter().map(|e| LeftoverEdge {
+                node: e.node + node_offset,
+                end: e.end + node_offset,
+                ..*e
+            }));
             rest.extend_from_slice(&body.rest);
             cells.extend(body.cells.iter().map(|c| c.map(|v| v + node_offset)));
             masses.extend_from_slice(&body.masses);
@@ -837,6 +899,7 @@ impl Model {
             omega_max_sq,
             omega_max_sq_estimate: std::sync::OnceLock::new(),
             bodies: spans,
+            leftover_edges: leftovers,
         })
     }
 
@@ -950,6 +1013,7 @@ impl Model {
             + self.volumetric_share.capacity() * 8
             + self.cell_material.capacity() * 4
             + self.layers.offsets.capacity() * 4
+            + self.leftover_edges.capacity() * std::mem::size_of::<LeftoverEdge>()
     }
 
     #[inline(always)]
@@ -990,7 +1054,9 @@ impl Model {
 
     /// A workspace sized for this model.
     pub fn workspace(&self) -> ForceWorkspace {
-        ForceWorkspace::default()
+        ForceWorkspace {
+            edge_stretch: vec![[0.0; 3]; self.num_nodes()],
+        }
     }
 
     /// Internal forces at positions `x` (N), written to `out` (allocating
@@ -1019,14 +1085,51 @@ impl Model {
         self.forces_impl(x, ws, out, false);
     }
 
+    /// The stretch of every lattice edge at `xs`, into `edges` by the node it
+    /// starts from and its axis: the cells' corner-0 edges in parallel, then
+    /// the leftovers. Each value is computed as [`kernel::cell_forces`] does.
+    fn edge_pass(&self, xs: &[[f64; 3]], edges: &mut [[f64; 3]], batched: bool) {
+        let shared = SharedEdges(edges.as_mut_ptr());
+        for body in &self.bodies {
+            // The cells of a body all rest at its cell size.
+            let rest = self.params[body.materials.start].rest_edge;
+            self.cells[body.cells.clone()]
+                .par_chunks(CHUNK)
+                .for_each(|chunk| {
+                    let mut buf = [[0.0f64; 3]; FORCE_BATCH];
+                    for group in chunk.chunks(FORCE_BATCH) {
+                        let w = &mut buf[..group.len()];
+                        if batched {
+                            kernel::edge_stretches_batch(rest, group, xs, w);
+                        } else {
+                            kernel::edge_stretches_scalar(rest, group, xs, w);
+                        }
+                        let s = shared;
+                        for (cell, w) in group.iter().zip(w.iter()) {
+                            // SAFETY: a node is corner 0 of one cell at
+                            // most, and `edges` has one entry per node.
+                            unsafe { *s.0.add(cell[0] as usize) = *w };
+                        }
+                    }
+                });
+        }
+        for e in &self.leftover_edges {
+            let (a, b) = (xs[e.node as usize], xs[e.end as usize]);
+            let d = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+            edges[e.node as usize][e.axis as usize] = kernel::stretch(e.rest, d);
+        }
+    }
+
     fn forces_impl(&self, x: &[Vec3], ws: &mut ForceWorkspace, out: &mut [Vec3], batched: bool) {
-        let _ = ws;
         assert_eq!(x.len(), self.num_nodes(), "positions: one per node");
         assert_eq!(out.len(), self.num_nodes(), "forces: one per node");
         // SAFETY: Vector3<f64> is a repr(C) wrapper of [[f64; 3]; 1], so the slice
         // has the layout of a slice of [f64; 3] of the same length.
         let xs: &[[f64; 3]] =
             unsafe { std::slice::from_raw_parts(x.as_ptr().cast::<[f64; 3]>(), x.len()) };
+        ws.edge_stretch.resize(self.num_nodes(), [0.0; 3]);
+        self.edge_pass(xs, &mut ws.edge_stretch, batched);
+        let edges = &ws.edge_stretch;
         out.par_chunks_mut(4 * CHUNK)
             .for_each(|c| c.fill(Vec3::zeros()));
         let shared = SharedForces(out.as_mut_ptr());
@@ -1042,7 +1145,7 @@ impl Model {
                 .step_by(2)
                 .for_each(|l| {
                     let range = self.layers.range(l);
-                    let mut buf = [[0.0f64; 3]; 8 * FORCE_BATCH];
+                    let mut buf = [[0.0f64; 4]; 8 * FORCE_BATCH];
                     let mut first = range.start;
                     while first < range.end {
                         let last = (first + FORCE_BATCH).min(range.end);
@@ -1055,14 +1158,19 @@ impl Model {
                             || (first..last)
                                 .all(|c| self.cell_material[c] == self.cell_material[first]);
                         if batched && uniform {
-                            kernel::forces_batch(self.params_of(first), cells, xs, fc);
+                            kernel::forces_batch(self.params_of(first), cells, xs, edges, fc);
                         } else {
                             for (k, f) in fc.chunks_exact_mut(8).enumerate() {
                                 let cell = first + k;
-                                let xc = self.corners(x, cell);
-                                let mut out8 = [[0.0; 3]; 8];
-                                kernel::cell_forces(self.params_of(cell), &xc, &mut out8);
-                                f.copy_from_slice(&out8);
+                                let out8 = kernel::cell_forces_from_edges(
+                                    self.params_of(cell),
+                                    &self.cells[cell],
+                                    xs,
+                                    edges,
+                                );
+                                for (f, o) in f.iter_mut().zip(out8) {
+                                    *f = [o[0], o[1], o[2], 0.0];
+                                }
                             }
                         }
                         let s = shared;

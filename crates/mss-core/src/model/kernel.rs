@@ -257,12 +257,22 @@ fn mul_s<T: Scalar>(v: V3<T>, s: T) -> V3<T> {
     [v[0] * s, v[1] * s, v[2] * s]
 }
 
+/// `1 - L0 / l` of a spring of rest length `rest` along `d`: its force per
+/// unit of stiffness and of `d`. Computed once per lattice edge by the force
+/// pass ([`edge_stretches_batch`]) and once per diagonal by the cell kernel;
+/// these are the kernel's only square roots and divisions besides the cell
+/// axes.
 #[inline(always)]
-fn spring<T: Scalar>(k: f64, rest: f64, d: V3<T>, a: usize, b: usize, f: &mut [V3<T>; 8]) {
+pub(crate) fn stretch<T: Scalar>(rest: f64, d: V3<T>) -> T {
     let l = dot(d, d).sqrt();
-    // k (l - L0) / l, the force on a per unit of d.
-    let s = (T::cst(1.0) - T::cst(rest) / l).scale(k);
-    let fd = mul_s(d, s);
+    T::cst(1.0) - T::cst(rest) / l
+}
+
+/// Adds the forces `k w d` on `a` and `-k w d` on `b` of a spring along
+/// `d = x_b - x_a` with stretch `w` ([`stretch`]).
+#[inline(always)]
+fn spring<T: Scalar>(k: f64, w: T, d: V3<T>, a: usize, b: usize, f: &mut [V3<T>; 8]) {
+    let fd = mul_s(d, w.scale(k));
     add_to(&mut f[a], fd);
     sub_from(&mut f[b], fd);
 }
@@ -450,13 +460,37 @@ fn axis_derivative(a: V3<f64>, inv_len: f64) -> [[f64; 3]; 3] {
 /// and `1 / |axis_sum[i]|`.
 #[inline(always)]
 fn cell_axes<T: Scalar>(axis_sum: &[V3<T>; 3]) -> ([V3<T>; 3], [T; 3]) {
-    let mut inv = [T::cst(0.0); 3];
+    let mut len = [T::cst(0.0); 3];
+    for (l, m) in len.iter_mut().zip(axis_sum) {
+        *l = dot(*m, *m).sqrt();
+    }
+    let inv = inverses3(len);
     let mut axes = [[T::cst(0.0); 3]; 3];
     for i in 0..3 {
-        inv[i] = T::cst(1.0) / dot(axis_sum[i], axis_sum[i]).sqrt();
         axes[i] = mul_s(axis_sum[i], inv[i]);
     }
     (axes, inv)
+}
+
+/// `1 / l_i` of three lengths with one division. Square roots and divisions
+/// share one unit of the core, which limits the kernel; a product of cell
+/// lengths stays far inside the range of `f64` (it would leave it only for
+/// cells below 1e-70 m), and the result is within a few ulps of `1 / l_i`.
+#[inline(always)]
+pub(crate) fn inverses3<T: Scalar>(l: [T; 3]) -> [T; 3] {
+    let p12 = l[1] * l[2];
+    let r = T::cst(1.0) / (l[0] * p12);
+    [p12 * r, l[0] * l[2] * r, l[0] * l[1] * r]
+}
+
+/// `1 / l_i` of four lengths with one division (see [`inverses3`]).
+#[inline(always)]
+fn inverses4<T: Scalar>(l: [T; 4]) -> [T; 4] {
+    let p01 = l[0] * l[1];
+    let p23 = l[2] * l[3];
+    let r = T::cst(1.0) / (p01 * p23);
+    let (r01, r23) = (p23 * r, p01 * r);
+    [l[1] * r01, l[0] * r01, l[3] * r23, l[2] * r23]
 }
 
 /// The hourglass vectors `g_i = 1/8 sum_n s_j s_k(n) x_n` and amplitudes
@@ -541,16 +575,59 @@ pub(crate) fn deformation_gradient<T: Scalar>(x: &[V3<T>; 8], grad_scale: f64) -
 /// volumetric term), the reference implementation.
 #[inline(always)]
 pub(crate) fn cell_forces<T: Scalar>(p: &CellParams, x: &[V3<T>; 8], f: &mut [V3<T>; 8]) {
+    let mut edge_stretch = [T::cst(0.0); 12];
+    for (w, &(a, b, _)) in edge_stretch.iter_mut().zip(&CELL_EDGES) {
+        *w = stretch(p.rest_edge, sub(x[b], x[a]));
+    }
+    cell_forces_with_edges(p, x, &edge_stretch, f);
+}
+
+/// [`cell_forces`] given the stretches of the cell's 12 edges (in
+/// [`CELL_EDGES`] order), which the cells around an edge share: the force
+/// pass computes them once per lattice edge. Bitwise the same forces.
+#[inline(always)]
+pub(crate) fn cell_forces_with_edges<T: Scalar>(
+    p: &CellParams,
+    x: &[V3<T>; 8],
+    edge_stretch: &[T; 12],
+    f: &mut [V3<T>; 8],
+) {
     *f = [[T::cst(0.0); 3]; 8];
     let mut axis_sum = [[T::cst(0.0); 3]; 3];
-    for &(a, b, ax) in &CELL_EDGES {
-        let d = sub(x[b], x[a]);
-        add_to(&mut axis_sum[ax], d);
-        spring(p.k_edge, p.rest_edge, d, a, b, f);
+    // Written out edge by edge rather than as a loop over `CELL_EDGES`: the
+    // loop was kept rolled, its corner indices loaded at run time, and every
+    // force sum went through memory with a dependency between iterations.
+    macro_rules! edge {
+        ($e:literal) => {{
+            let (a, b, ax) = CELL_EDGES[$e];
+            let d = sub(x[b], x[a]);
+            add_to(&mut axis_sum[ax], d);
+            spring(p.k_edge, edge_stretch[$e], d, a, b, f);
+        }};
     }
-    for &(a, b) in &CELL_DIAGONALS {
-        let d = sub(x[b], x[a]);
-        spring(p.k_diag, p.rest_diag, d, a, b, f);
+    edge!(0);
+    edge!(1);
+    edge!(2);
+    edge!(3);
+    edge!(4);
+    edge!(5);
+    edge!(6);
+    edge!(7);
+    edge!(8);
+    edge!(9);
+    edge!(10);
+    edge!(11);
+    // Loops, not `array::map`, here and below: see `finish_cell`.
+    let mut diagonals = [[T::cst(0.0); 3]; 4];
+    let mut len = [T::cst(0.0); 4];
+    for ((d, l), &(a, b)) in diagonals.iter_mut().zip(&mut len).zip(&CELL_DIAGONALS) {
+        *d = sub(x[b], x[a]);
+        *l = dot(*d, *d).sqrt();
+    }
+    let inv = inverses4(len);
+    for ((&(a, b), d), inv) in CELL_DIAGONALS.iter().zip(diagonals).zip(inv) {
+        let w = T::cst(1.0) - inv.scale(p.rest_diag);
+        spring(p.k_diag, w, d, a, b, f);
     }
     finish_cell(p, x, axis_sum, f);
 }
@@ -631,7 +708,7 @@ pub(crate) fn cell_jacobian_closed_form(p: &CellParams, x: &[V3<f64>; 8]) -> [[f
     let mut spring_block = |k: f64, rest: f64, a: usize, b: usize| {
         let d = sub(x[b], x[a]);
         if p.correction.is_some() {
-            spring(k, rest, d, a, b, &mut spring_forces);
+            spring(k, stretch(rest, d), d, a, b, &mut spring_forces);
         }
         let l2 = dot(d, d);
         let l = l2.sqrt();
@@ -856,6 +933,7 @@ pub(crate) fn cell_jacobian_dual(p: &CellParams, x: &[V3<f64>; 8]) -> [[f64; 24]
 /// lane performs exactly the scalar operations, so results are bitwise equal
 /// to the `f64` kernel.
 #[derive(Clone, Copy, Debug)]
+#[repr(C, align(32))]
 pub(crate) struct Lanes<const L: usize>(pub [f64; L]);
 
 macro_rules! lanes_op {
@@ -935,59 +1013,123 @@ impl<const L: usize> Scalar for Lanes<L> {
     }
 }
 
+/// A scalar type holding several cells' values: [`Lanes`] on the portable
+/// path, explicit AVX2 vectors on x86_64.
+pub(crate) trait Pack: Scalar {
+    /// Cells per value.
+    const WIDTH: usize;
+    /// The value of cell `l`.
+    fn lane(self, l: usize) -> f64;
+}
+
+impl<const L: usize> Pack for Lanes<L> {
+    const WIDTH: usize = L;
+    #[inline(always)]
+    fn lane(self, l: usize) -> f64 {
+        self.0[l]
+    }
+}
+
 /// Cells evaluated together by [`forces_batch`] with AVX2.
 pub(crate) const LANES: usize = 4;
 
-/// Forces of consecutive cells `cells` (all with parameters `p`) at positions
-/// `x`, into `out` (8 corner forces per cell), `L` cells per pass.
+/// The lattice edges whose stretch the pass over cells computes: the three
+/// at each cell's corner 0 (`+x`, `+y`, `+z` from it), stored at that corner's
+/// node. Every other edge is a leftover of the model ([`crate::Model`]'s edge
+/// list), on the lattice's `+` faces.
+pub(crate) const CORNER_EDGES: [(usize, usize); 3] = [(1, 0), (3, 1), (4, 2)];
+
+/// The stretches ([`stretch`]) of the edges at corner 0 of each cell of
+/// `cells`, `L` cells per pass, into `out` (one `[x, y, z]` per cell); the
+/// lanes are filled by `gather` (corners 0, 1, 3 and 4 of `L` cells).
 #[inline(always)]
-fn forces_batch_body<const L: usize>(
-    p: &CellParams,
+fn edge_stretches_body<P: Pack>(
+    rest: f64,
     cells: &[[u32; 8]],
     x: &[[f64; 3]],
     out: &mut [[f64; 3]],
+    gather: impl Fn(&[[u32; 8]], &[[f64; 3]]) -> [V3<P>; 4],
 ) {
-    let groups = cells.len() / L;
-    for (cg, og) in cells.chunks_exact(L).zip(out.chunks_exact_mut(8 * L)) {
-        let mut xl: [V3<Lanes<L>>; 8] = [[Lanes::cst(0.0); 3]; 8];
-        for (k, xk) in xl.iter_mut().enumerate() {
-            for (l, cell) in cg.iter().enumerate() {
-                let p = x[cell[k] as usize];
-                xk[0].0[l] = p[0];
-                xk[1].0[l] = p[1];
-                xk[2].0[l] = p[2];
-            }
-        }
-        let mut f = [[Lanes::cst(0.0); 3]; 8];
-        cell_forces(p, &xl, &mut f);
-        for l in 0..L {
-            for k in 0..8 {
-                og[8 * l + k] = [f[k][0].0[l], f[k][1].0[l], f[k][2].0[l]];
-            }
-        }
-    }
-    for (c, o) in cells[groups * L..]
-        .iter()
-        .zip(out[8 * groups * L..].chunks_exact_mut(8))
+    let groups = cells.len() / P::WIDTH;
+    for (cg, og) in cells
+        .chunks_exact(P::WIDTH)
+        .zip(out.chunks_exact_mut(P::WIDTH))
     {
-        let xc: [V3<f64>; 8] = std::array::from_fn(|k| x[c[k] as usize]);
-        let mut f = [[0.0; 3]; 8];
-        cell_forces(p, &xc, &mut f);
-        o.copy_from_slice(&f);
+        let [origin, ends @ ..] = gather(cg, x);
+        let w = corner_stretches(rest, origin, ends);
+        for (l, o) in og.iter_mut().enumerate() {
+            *o = [w[0].lane(l), w[1].lane(l), w[2].lane(l)];
+        }
     }
+    for (c, o) in cells[groups * P::WIDTH..]
+        .iter()
+        .zip(&mut out[groups * P::WIDTH..])
+    {
+        let mut ends = [[0.0; 3]; 3];
+        for (e, &(corner, _)) in ends.iter_mut().zip(&CORNER_EDGES) {
+            *e = x[c[corner] as usize];
+        }
+        *o = corner_stretches(rest, x[c[0] as usize], ends);
+    }
+}
+
+/// The stretches of the three edges from `origin` to `ends` (along x, y, z),
+/// with one division for the three ([`inverses3`]).
+#[inline(always)]
+fn corner_stretches<T: Scalar>(rest: f64, origin: V3<T>, ends: [V3<T>; 3]) -> [T; 3] {
+    let mut len = [T::cst(0.0); 3];
+    for (l, e) in len.iter_mut().zip(ends) {
+        let d = sub(e, origin);
+        *l = dot(d, d).sqrt();
+    }
+    let mut w = inverses3(len);
+    for w in &mut w {
+        *w = T::cst(1.0) - w.scale(rest);
+    }
+    w
+}
+
+/// Corners 0, 1, 3 and 4 of `L` cells: the ends of their corner-0 edges.
+#[inline(always)]
+fn gather_edge_ends<const L: usize>(cells: &[[u32; 8]], x: &[[f64; 3]]) -> [V3<Lanes<L>>; 4] {
+    let mut xl: [V3<Lanes<L>>; 4] = [[Lanes::cst(0.0); 3]; 4];
+    for (&k, xk) in [0, 1, 3, 4].iter().zip(xl.iter_mut()) {
+        for (l, cell) in cells.iter().enumerate() {
+            let p = x[cell[k] as usize];
+            xk[0].0[l] = p[0];
+            xk[1].0[l] = p[1];
+            xk[2].0[l] = p[2];
+        }
+    }
+    xl
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn forces_batch_avx2(p: &CellParams, cells: &[[u32; 8]], x: &[[f64; 3]], out: &mut [[f64; 3]]) {
-    forces_batch_body::<LANES>(p, cells, x, out);
+fn edge_stretches_avx2(rest: f64, cells: &[[u32; 8]], x: &[[f64; 3]], out: &mut [[f64; 3]]) {
+    // The closure inherits this function's AVX2, so may call the AVX2
+    // helpers safely.
+    edge_stretches_body(rest, cells, x, out, |c, x| {
+        avx2::gather4(c, x, [0, 1, 3, 4])
+    });
 }
 
-/// Forces of consecutive cells sharing the parameters `p`, several cells per
-/// SIMD pass (AVX2 when the CPU has it; never FMA, so results do not depend on
-/// the path taken).
-pub(crate) fn forces_batch(
-    p: &CellParams,
+/// [`edge_stretches_batch`] one cell at a time, without SIMD: the same
+/// operations per cell, so the same bits.
+pub(crate) fn edge_stretches_scalar(
+    rest: f64,
+    cells: &[[u32; 8]],
+    x: &[[f64; 3]],
+    out: &mut [[f64; 3]],
+) {
+    edge_stretches_body(rest, cells, x, out, gather_edge_ends::<1>);
+}
+
+/// The stretches of the edges at corner 0 of consecutive cells whose edges
+/// rest at `rest`, several cells per SIMD pass (AVX2 when the CPU has it):
+/// bitwise what [`cell_forces`] computes for the same edges.
+pub(crate) fn edge_stretches_batch(
+    rest: f64,
     cells: &[[u32; 8]],
     x: &[[f64; 3]],
     out: &mut [[f64; 3]],
@@ -996,11 +1138,371 @@ pub(crate) fn forces_batch(
     {
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU supports AVX2 (checked just above).
-            unsafe { forces_batch_avx2(p, cells, x, out) };
+            unsafe { edge_stretches_avx2(rest, cells, x, out) };
             return;
         }
     }
-    forces_batch_body::<LANES>(p, cells, x, out);
+    edge_stretches_body(rest, cells, x, out, gather_edge_ends::<LANES>);
+}
+
+/// Gathers the 8 corners of `L` cells into lanes (portable path).
+#[inline(always)]
+fn gather_corners<const L: usize>(cells: &[[u32; 8]], x: &[[f64; 3]]) -> [V3<Lanes<L>>; 8] {
+    let mut xl: [V3<Lanes<L>>; 8] = [[Lanes::cst(0.0); 3]; 8];
+    for (k, xk) in xl.iter_mut().enumerate() {
+        for (l, cell) in cells.iter().enumerate() {
+            let p = x[cell[k] as usize];
+            xk[0].0[l] = p[0];
+            xk[1].0[l] = p[1];
+            xk[2].0[l] = p[2];
+        }
+    }
+    xl
+}
+
+/// The stretches of the 12 edges of `L` cells (in [`CELL_EDGES`] order) from
+/// the lattice's edge stretches by node (portable path).
+#[inline(always)]
+fn gather_edges<const L: usize>(cells: &[[u32; 8]], edges: &[[f64; 3]]) -> [Lanes<L>; 12] {
+    let mut wl = [Lanes::cst(0.0); 12];
+    for (w, &(a, _, ax)) in wl.iter_mut().zip(&CELL_EDGES) {
+        for (l, cell) in cells.iter().enumerate() {
+            w.0[l] = edges[cell[a] as usize][ax];
+        }
+    }
+    wl
+}
+
+/// The corners an edge of a cell starts from (all but corner 6), and where
+/// each corner is in that list.
+const EDGE_STARTS: [usize; 7] = [0, 1, 2, 3, 4, 5, 7];
+const EDGE_START_INDEX: [usize; 8] = [0, 1, 2, 3, 4, 5, 99, 6];
+
+/// The forces of one cell of parameters `p` given the lattice's edge
+/// stretches by node: what the batched kernel computes for it.
+pub(crate) fn cell_forces_from_edges(
+    p: &CellParams,
+    cell: &[u32; 8],
+    x: &[[f64; 3]],
+    edges: &[[f64; 3]],
+) -> [[f64; 3]; 8] {
+    let xc: [V3<f64>; 8] = std::array::from_fn(|k| x[cell[k] as usize]);
+    let w: [f64; 12] = std::array::from_fn(|e| {
+        let (a, _, ax) = CELL_EDGES[e];
+        edges[cell[a] as usize][ax]
+    });
+    let mut f = [[0.0; 3]; 8];
+    cell_forces_with_edges(p, &xc, &w, &mut f);
+    f
+}
+
+/// Writes the lanes' corner forces out cell by cell, `out[8 l + k]` for
+/// corner `k` of cell `l` (portable path).
+#[inline(always)]
+fn scatter_corners<const L: usize>(f: &[V3<Lanes<L>>; 8], out: &mut [[f64; 4]]) {
+    for l in 0..L {
+        for k in 0..8 {
+            out[8 * l + k] = [f[k][0].0[l], f[k][1].0[l], f[k][2].0[l], 0.0];
+        }
+    }
+}
+
+/// The same data movement as [`gather_corners`] and [`scatter_corners`] for
+/// four cells with AVX2 shuffles: a corner of the four cells is four 32-byte
+/// loads and a 4 x 4 transpose instead of twelve scalar loads and stores
+/// through memory, which were most of the kernel's time.
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    use super::{Pack, Scalar, V3};
+    use std::arch::x86_64::*;
+    use std::ops::{Add, AddAssign, Div, Mul, Neg, Sub, SubAssign};
+
+    /// Four cells' values in one AVX register, with every operation an
+    /// explicit AVX instruction: written as plain loops over `[f64; 4]`
+    /// ([`super::Lanes`]), the compiler vectorized some passes across the
+    /// wrong dimension (the three edges of a node, in 2-wide halves, with
+    /// shuffles) and left others scalar.
+    ///
+    /// Values of this type are made only inside this module's
+    /// `#[target_feature(enable = "avx2")]` functions, reached only after
+    /// the CPU was checked: that is what makes the intrinsics below sound
+    /// (each operation is inlined into those functions).
+    #[derive(Clone, Copy)]
+    pub(super) struct F64x4(__m256d);
+
+    macro_rules! binary {
+        ($tr:ident, $f:ident, $intr:ident) => {
+            impl $tr for F64x4 {
+                type Output = Self;
+                #[inline(always)]
+                fn $f(self, o: Self) -> Self {
+                    // SAFETY: AVX is available (see `F64x4`).
+                    Self(unsafe { $intr(self.0, o.0) })
+                }
+            }
+        };
+    }
+    binary!(Add, add, _mm256_add_pd);
+    binary!(Sub, sub, _mm256_sub_pd);
+    binary!(Mul, mul, _mm256_mul_pd);
+    binary!(Div, div, _mm256_div_pd);
+
+    impl Neg for F64x4 {
+        type Output = Self;
+        #[inline(always)]
+        fn neg(self) -> Self {
+            // Flips the sign bit, as scalar negation does (0 - x would turn
+            // +0 into +0 instead of -0).
+            // SAFETY: AVX is available (see `F64x4`).
+            Self(unsafe { _mm256_xor_pd(self.0, _mm256_set1_pd(-0.0)) })
+        }
+    }
+    impl AddAssign for F64x4 {
+        #[inline(always)]
+        fn add_assign(&mut self, o: Self) {
+            *self = *self + o;
+        }
+    }
+    impl SubAssign for F64x4 {
+        #[inline(always)]
+        fn sub_assign(&mut self, o: Self) {
+            *self = *self - o;
+        }
+    }
+    impl Scalar for F64x4 {
+        #[inline(always)]
+        fn cst(v: f64) -> Self {
+            // SAFETY: AVX is available (see `F64x4`).
+            Self(unsafe { _mm256_set1_pd(v) })
+        }
+        #[inline(always)]
+        fn scale(self, k: f64) -> Self {
+            self * Self::cst(k)
+        }
+        #[inline(always)]
+        fn sqrt(self) -> Self {
+            // SAFETY: AVX is available (see `F64x4`).
+            Self(unsafe { _mm256_sqrt_pd(self.0) })
+        }
+        #[inline(always)]
+        fn apply(self, f: fn(f64) -> (f64, f64)) -> Self {
+            let mut r = [0.0; 4];
+            // SAFETY: AVX is available (see `F64x4`); `r` holds 4 f64.
+            unsafe { _mm256_storeu_pd(r.as_mut_ptr(), self.0) };
+            for v in &mut r {
+                *v = f(*v).0;
+            }
+            // SAFETY: as above.
+            Self(unsafe { _mm256_loadu_pd(r.as_ptr()) })
+        }
+    }
+    impl Pack for F64x4 {
+        const WIDTH: usize = 4;
+        #[inline(always)]
+        fn lane(self, l: usize) -> f64 {
+            let mut r = [0.0; 4];
+            // SAFETY: AVX is available (see `F64x4`); `r` holds 4 f64.
+            unsafe { _mm256_storeu_pd(r.as_mut_ptr(), self.0) };
+            r[l]
+        }
+    }
+
+    /// `[x, y, z, *]` of node `i` (the fourth value is the next node's `x`,
+    /// or 0 for the last node, which has no next).
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn load_node(x: &[[f64; 3]], i: usize) -> __m256d {
+        if i + 1 < x.len() {
+            // SAFETY: nodes i and i + 1 exist, so the 32 bytes from node i
+            // lie within `x`.
+            unsafe { _mm256_loadu_pd(x.as_ptr().add(i).cast::<f64>()) }
+        } else {
+            let p = x[i];
+            _mm256_set_pd(0.0, p[2], p[1], p[0])
+        }
+    }
+
+    /// Corners `corners` of four cells into vectors: lane `l` of coordinate
+    /// `c` of entry `i` is `x[cells[l][corners[i]]][c]`. Four 32-byte loads
+    /// and a 4 x 4 transpose per corner, instead of twelve scalar loads and
+    /// inserts.
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    pub(super) fn gather4<const K: usize>(
+        cells: &[[u32; 8]],
+        x: &[[f64; 3]],
+        corners: [usize; K],
+    ) -> [V3<F64x4>; K] {
+        let zero = F64x4(_mm256_setzero_pd());
+        let mut xl = [[zero; 3]; K];
+        for (&k, xk) in corners.iter().zip(xl.iter_mut()) {
+            let r = [
+                load_node(x, cells[0][k] as usize),
+                load_node(x, cells[1][k] as usize),
+                load_node(x, cells[2][k] as usize),
+                load_node(x, cells[3][k] as usize),
+            ];
+            let t0 = _mm256_unpacklo_pd(r[0], r[1]); // x0 x1 z0 z1
+            let t1 = _mm256_unpackhi_pd(r[0], r[1]); // y0 y1 * *
+            let t2 = _mm256_unpacklo_pd(r[2], r[3]); // x2 x3 z2 z3
+            let t3 = _mm256_unpackhi_pd(r[2], r[3]); // y2 y3 * *
+            xk[0] = F64x4(_mm256_permute2f128_pd(t0, t2, 0x20));
+            xk[1] = F64x4(_mm256_permute2f128_pd(t1, t3, 0x20));
+            xk[2] = F64x4(_mm256_permute2f128_pd(t0, t2, 0x31));
+        }
+        xl
+    }
+
+    /// The stretches of the 12 edges of four cells from the edge stretches
+    /// by node, gathered like positions (7 corners, one transpose each).
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    pub(super) fn gather_edges4(cells: &[[u32; 8]], edges: &[[f64; 3]]) -> [F64x4; 12] {
+        let starts = gather4(cells, edges, super::EDGE_STARTS);
+        let mut w = [F64x4(_mm256_setzero_pd()); 12];
+        for (w, &(a, _, ax)) in w.iter_mut().zip(&super::CELL_EDGES) {
+            *w = starts[super::EDGE_START_INDEX[a]][ax];
+        }
+        w
+    }
+
+    /// Corner forces of four cells out of vectors, `out[8 l + k] = [fx, fy,
+    /// fz, 0]` of corner `k` of cell `l`.
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    pub(super) fn scatter4(f: &[V3<F64x4>; 8], out: &mut [[f64; 4]]) {
+        assert!(out.len() >= 32);
+        let zero = _mm256_setzero_pd();
+        for (k, fk) in f.iter().enumerate() {
+            let (fx, fy, fz) = (fk[0].0, fk[1].0, fk[2].0);
+            let t0 = _mm256_unpacklo_pd(fx, fy); // x0 y0 x2 y2
+            let t1 = _mm256_unpackhi_pd(fx, fy); // x1 y1 x3 y3
+            let t2 = _mm256_unpacklo_pd(fz, zero); // z0 0 z2 0
+            let t3 = _mm256_unpackhi_pd(fz, zero); // z1 0 z3 0
+            let rows = [
+                _mm256_permute2f128_pd(t0, t2, 0x20),
+                _mm256_permute2f128_pd(t1, t3, 0x20),
+                _mm256_permute2f128_pd(t0, t2, 0x31),
+                _mm256_permute2f128_pd(t1, t3, 0x31),
+            ];
+            for (l, row) in rows.into_iter().enumerate() {
+                // SAFETY: `8 l + k < 32 <= out.len()`, and each entry holds 4 f64.
+                unsafe { _mm256_storeu_pd(out[8 * l + k].as_mut_ptr(), row) };
+            }
+        }
+    }
+}
+
+/// Forces of consecutive cells `cells` (all with parameters `p`) at positions
+/// `x`, given the lattice's edge stretches by node (`edges[n][axis]` for the
+/// edge from node `n` along `+axis`), into `out` (8 corner forces per cell,
+/// `[fx, fy, fz, 0]`), `P::WIDTH` cells per pass, the packs filled and
+/// emptied by `moves`.
+#[inline(always)]
+fn forces_batch_body<P: Pack, G, W, S>(
+    p: &CellParams,
+    cells: &[[u32; 8]],
+    x: &[[f64; 3]],
+    edges: &[[f64; 3]],
+    out: &mut [[f64; 4]],
+    moves: Moves<G, W, S>,
+) where
+    G: Fn(&[[u32; 8]], &[[f64; 3]]) -> [V3<P>; 8],
+    W: Fn(&[[u32; 8]], &[[f64; 3]]) -> [P; 12],
+    S: Fn(&[V3<P>; 8], &mut [[f64; 4]]),
+{
+    let Moves {
+        gather,
+        gather_edges: gather_w,
+        scatter,
+    } = moves;
+    let width = P::WIDTH;
+    let groups = cells.len() / width;
+    for (cg, og) in cells
+        .chunks_exact(width)
+        .zip(out.chunks_exact_mut(8 * width))
+    {
+        let xl = gather(cg, x);
+        let wl = gather_w(cg, edges);
+        let mut f = [[P::cst(0.0); 3]; 8];
+        cell_forces_with_edges(p, &xl, &wl, &mut f);
+        scatter(&f, og);
+    }
+    for (c, o) in cells[groups * width..]
+        .iter()
+        .zip(out[8 * groups * width..].chunks_exact_mut(8))
+    {
+        let f = cell_forces_from_edges(p, c, x, edges);
+        for (o, f) in o.iter_mut().zip(f) {
+            *o = [f[0], f[1], f[2], 0.0];
+        }
+    }
+}
+
+/// How the batched kernel moves a batch's values into packs and out:
+/// corners, edge stretches, corner forces.
+struct Moves<G, W, S> {
+    gather: G,
+    gather_edges: W,
+    scatter: S,
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn forces_batch_avx2(
+    p: &CellParams,
+    cells: &[[u32; 8]],
+    x: &[[f64; 3]],
+    edges: &[[f64; 3]],
+    out: &mut [[f64; 4]],
+) {
+    forces_batch_body(
+        p,
+        cells,
+        x,
+        edges,
+        out,
+        // The closures inherit this function's AVX2.
+        Moves {
+            gather: |c: &[[u32; 8]], x: &[[f64; 3]]| avx2::gather4(c, x, [0, 1, 2, 3, 4, 5, 6, 7]),
+            gather_edges: |c: &[[u32; 8]], e: &[[f64; 3]]| avx2::gather_edges4(c, e),
+            scatter: |f: &[V3<avx2::F64x4>; 8], o: &mut [[f64; 4]]| avx2::scatter4(f, o),
+        },
+    );
+}
+
+/// Forces of consecutive cells sharing the parameters `p`, given the
+/// lattice's edge stretches by node ([`edge_stretches_batch`] and the
+/// model's leftover edges), several cells per SIMD pass (AVX2 when the CPU
+/// has it; never FMA, so results do not depend on the path taken), into
+/// `out` as `[fx, fy, fz, 0]` per corner, cell by cell.
+pub(crate) fn forces_batch(
+    p: &CellParams,
+    cells: &[[u32; 8]],
+    x: &[[f64; 3]],
+    edges: &[[f64; 3]],
+    out: &mut [[f64; 4]],
+) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU supports AVX2 (checked just above).
+            unsafe { forces_batch_avx2(p, cells, x, edges, out) };
+            return;
+        }
+    }
+    forces_batch_body(
+        p,
+        cells,
+        x,
+        edges,
+        out,
+        Moves {
+            gather: gather_corners::<LANES>,
+            gather_edges: gather_edges::<LANES>,
+            scatter: scatter_corners::<LANES>,
+        },
+    );
 }
 
 #[cfg(test)]
