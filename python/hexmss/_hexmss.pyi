@@ -384,9 +384,11 @@ class Integrator:
         rtol: Optional[float] = None,
         max_newton: Optional[int] = None,
         linear_solver: Literal["auto", "direct", "iterative"] = "auto",
+        precision: Literal["f64", "f32"] = "f64",
     ) -> None:
         """``kind``: one of integrators(). Explicit schemes step at the stable
-        limit times ``safety`` unless ``dt`` (s) is given."""
+        limit times ``safety`` unless ``dt`` (s) is given; ``precision="f32"``
+        runs their force pass in single precision."""
     @property
     def dt(self) -> float:
         """(s)."""
@@ -401,6 +403,11 @@ class Simulation:
 
     def __init__(self, problem: Problem, surface: Optional[Embedding] = None) -> None:
         """A simulation of a fresh copy of ``problem`` from rest."""
+    @property
+    def precision(self) -> Literal["f64", "f32"]:
+        """Precision of the force pass ("f32": faster, for interactive use)."""
+    @precision.setter
+    def precision(self, value: Literal["f64", "f32"]) -> None: ...
     def step(self, dt: float) -> int:
         """Advances by dt (s) in as many sub-steps as stability asks; returns them."""
     @property

@@ -12,7 +12,7 @@ use mss_scene::mss_core::solver::{
     Integrator, IntegratorSettings, Integrators, LinearSolverKind, Problem, Stability, State,
     StaticOptions, solve_static,
 };
-use mss_scene::mss_core::{LoadSpec, Material, Model, Parameterizations, Vec3};
+use mss_scene::mss_core::{LoadSpec, Material, Model, Parameterizations, Precision, Vec3};
 use mss_scene::obstacles::ObstacleSpec;
 use mss_scene::scene::{LoadsSection, MotionSpec};
 use mss_scene::stages;
@@ -720,6 +720,15 @@ impl PyState {
 
 /// The linear solver called `name`, read as the scene's `[solver]
 /// linear_solver` key is (the library type names its choices).
+fn precision_named(name: &str) -> PyResult<Precision> {
+    Precision::from_name(name).ok_or_else(|| {
+        raise(
+            Kind::Scene,
+            format!("precision = {name:?}: use \"f64\" or \"f32\""),
+        )
+    })
+}
+
 fn linear_kind(name: &str) -> PyResult<LinearSolverKind> {
     use serde::Deserialize;
     let value = serde::de::value::StrDeserializer::<serde::de::value::Error>::new(name);
@@ -811,14 +820,15 @@ pub struct PyIntegrator {
 
 #[pymethods]
 impl PyIntegrator {
-    /// Integrator(problem, kind="explicit", *, dt=None, safety=0.9, substep=False, rtol=None, max_newton=None, linear_solver="auto")
+    /// Integrator(problem, kind="explicit", *, dt=None, safety=0.9, substep=False, rtol=None, max_newton=None, linear_solver="auto", precision="f64")
     ///
     /// `kind` is one of `integrators()`. Explicit schemes step at the stable
     /// limit times `safety` unless `dt` is given (refused above the limit
     /// unless `substep`); `"implicit"` needs no stability limit (default
-    /// dt 0.01 s).
+    /// dt 0.01 s). `precision="f32"` runs the explicit force pass in single
+    /// precision (faster; Newton solvers refuse it).
     #[new]
-    #[pyo3(signature = (problem, kind = "explicit", *, dt = None, safety = None, substep = false, rtol = None, max_newton = None, linear_solver = "auto"))]
+    #[pyo3(signature = (problem, kind = "explicit", *, dt = None, safety = None, substep = false, rtol = None, max_newton = None, linear_solver = "auto", precision = "f64"))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -830,6 +840,7 @@ impl PyIntegrator {
         rtol: Option<f64>,
         max_newton: Option<u32>,
         linear_solver: &str,
+        precision: &str,
     ) -> PyResult<Self> {
         let d = IntegratorSettings::default();
         let settings = IntegratorSettings {
@@ -839,6 +850,7 @@ impl PyIntegrator {
             rtol: rtol.unwrap_or(d.rtol),
             max_newton: max_newton.unwrap_or(d.max_newton),
             linear_solver: linear_kind(linear_solver)?,
+            precision: precision_named(precision)?,
         };
         let p = Arc::clone(&problem.problem);
         let kind = kind.to_owned();
@@ -953,6 +965,20 @@ impl PySimulation {
                 ""
             }
         )
+    }
+
+    /// The precision of the force pass, "f64" (default) or "f32" (faster,
+    /// for interactive use).
+    #[getter]
+    fn get_precision(&self) -> &'static str {
+        self.lock().precision().name()
+    }
+
+    #[setter]
+    fn set_precision(&self, precision: &str) -> PyResult<()> {
+        let p = precision_named(precision)?;
+        self.lock().set_precision(p);
+        Ok(())
     }
 
     /// step(dt)

@@ -133,6 +133,35 @@ def test_simulation_drag_and_surface():
     assert sim.positions[:, 2].min() > -0.002
 
 
+def test_single_precision_force_pass_is_close_to_double():
+    def run(precision, through_simulation):
+        lattice, model = bar(cells=(4, 4, 2))
+        problem = hexmss.Problem(
+            model, gravity=[0, 0, -9.81], damping=5.0, fixed=[{"kind": "lowest_layer"}]
+        )
+        if through_simulation:
+            sim = hexmss.Simulation(problem)
+            sim.precision = precision
+            assert sim.precision == precision
+            for _ in range(10):
+                sim.step(1 / 60)
+            return sim.positions
+        state = hexmss.State(problem)
+        hexmss.Integrator(problem, "explicit", precision=precision).step(state, n=300)
+        return state.x
+
+    for through_simulation in (True, False):
+        double = run("f64", through_simulation)
+        single = run("f32", through_simulation)
+        moved = np.abs(double - run("f64", through_simulation)).max()
+        assert moved == 0.0
+        diff = np.abs(single - double).max()
+        assert 0.0 < diff < 1e-6
+    with pytest.raises(hexmss.SceneError, match="f32"):
+        sim = hexmss.Simulation(hexmss.Problem(bar()[1]))
+        sim.precision = "f16"
+
+
 def test_job_simulation_deforms_the_scene_mesh():
     scene = hexmss.Scene.default()
     job = hexmss.prepare(scene)

@@ -4,7 +4,7 @@
 //!
 //!     cargo run --release -p mss-core --example explicit_speed [CELLS_PER_SIDE] [REPEATS]
 //!
-//! For each model: the force pass alone and a whole explicit step (velocity
+//! For each model, in f64 and in f32: the force pass alone and a whole explicit step (velocity
 //! Verlet at the stable step, one sub-step), on 1 and 2 threads, as the
 //! minimum over REPEATS timings (noise only adds time; CPU time on one
 //! thread, wall time on two), with the ratio to
@@ -22,7 +22,7 @@ use baseline::{merged_springs, perturbed, spring_loop};
 use hexmesh::Lattice;
 use mss_core::model::{HourglassControl, PaperModel, SpringsOnly, Volumetric, VolumetricBarrier};
 use mss_core::solver::{Explicit, ExplicitOptions, Integrator, Problem, State};
-use mss_core::{Material, Model, Parameterization, Vec3};
+use mss_core::{Material, Model, Parameterization, Precision, Vec3};
 
 /// CPU time of the process so far (s): on a shared machine, time the
 /// process was not running (other tenants, steal) is not counted.
@@ -110,6 +110,13 @@ fn main() {
         bound * 1e3,
         step_bytes / cells as f64
     );
+    for precision in [Precision::F64, Precision::F32] {
+        let (isa, lanes) = precision.kernel_vectors();
+        println!(
+            "force kernel in {}: {isa}, {lanes} cells per vector",
+            precision.name()
+        );
+    }
     for threads in [1usize, 2] {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
@@ -129,26 +136,34 @@ fn main() {
                 cells as f64 / baseline / 1e6
             );
             println!(
-                "{:<22} {:>10} {:>10} {:>10} {:>10} {:>12}",
+                "{:<26} {:>10} {:>10} {:>10} {:>10} {:>12}",
                 "model", "force ms", "/baseline", "step ms", "/baseline", "/bandwidth"
             );
-            for (name, param) in &models {
+            let runs = models.iter().flat_map(|(name, param)| {
+                [Precision::F64, Precision::F32].map(|precision| (*name, param, precision))
+            });
+            for (name, param, precision) in runs {
                 let model = Model::new(&lattice, material, param.as_ref()).expect("model");
                 let x = perturbed(&model);
                 let mut ws = model.workspace();
                 let mut f = vec![Vec3::zeros(); nodes];
-                let force = best(repeats, || model.internal_forces_with(&x, &mut ws, &mut f));
+                let force = best(repeats, || {
+                    model.internal_forces_in(precision, &x, &mut ws, &mut f)
+                });
                 let problem = Problem::new(model);
-                let mut integ =
-                    Explicit::new(&problem, ExplicitOptions::default()).expect("explicit");
+                let options = ExplicitOptions {
+                    precision,
+                    ..ExplicitOptions::default()
+                };
+                let mut integ = Explicit::new(&problem, options).expect("explicit");
                 let mut state = State::at_rest(problem.model());
                 state.x = x.clone();
                 let step = best(repeats, || {
                     integ.step(&problem, &mut state).expect("step");
                 }) / f64::from(integ.substeps());
                 println!(
-                    "{:<22} {:>10.2} {:>10.2} {:>10.2} {:>10.2} {:>12.2}",
-                    name,
+                    "{:<26} {:>10.2} {:>10.2} {:>10.2} {:>10.2} {:>12.2}",
+                    format!("{name} {}", precision.name()),
                     force * 1e3,
                     force / baseline,
                     step * 1e3,

@@ -3,7 +3,7 @@
 //! prints the frame time (with its explicit sub-steps) on the threads rayon
 //! is given (`RAYON_NUM_THREADS=1` for one).
 //!
-//!     cargo run --release -p mss-core --example interactive [CELLS_PER_SIDE] [YOUNG]
+//!     cargo run --release -p mss-core --example interactive [CELLS_PER_SIDE] [YOUNG] [f64|f32]
 
 use std::time::Instant;
 
@@ -15,12 +15,16 @@ use mss_core::loads::{Damping, LoadSpec};
 use mss_core::model::{HourglassControl, VolumetricBarrier};
 use mss_core::simulation::Simulation;
 use mss_core::solver::Problem;
-use mss_core::{Material, Model, Vec3};
+use mss_core::{Material, Model, Precision, Vec3};
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let n: u32 = args.get(1).and_then(|a| a.parse().ok()).unwrap_or(22);
     let young: f64 = args.get(2).and_then(|a| a.parse().ok()).unwrap_or(2.0e4);
+    let precision = args
+        .get(3)
+        .map(|a| Precision::from_name(a).expect("precision: f64 or f32"))
+        .unwrap_or_default();
     let side = 0.2;
     let h = side / n as f64;
     let lattice = hexmesh::Lattice::block([n, n, n], h, [0.0; 3]).expect("block");
@@ -52,6 +56,7 @@ fn main() {
     let model_limit = 0.9 * problem.model().critical_time_step();
     println!("stable step {limit:.3e} s (the lattice alone: {model_limit:.3e} s)");
     let mut sim = Simulation::new(problem).expect("simulation");
+    sim.set_precision(precision);
     let corner = sim.nearest_node(Vec3::new(side, side / 2.0, side));
     sim.pick(&[corner], 5.0).expect("pick");
     let start = sim.positions()[corner as usize];
@@ -78,9 +83,10 @@ fn main() {
     times.sort_by(f64::total_cmp);
     let mean = times.iter().sum::<f64>() / times.len() as f64;
     println!(
-        "{cells} cells, E = {young} Pa, {} threads: frame of 1/60 s in {substeps} sub-steps; \
+        "{cells} cells, E = {young} Pa, {} threads, {}: frame of 1/60 s in {substeps} sub-steps; \
          frame time mean {mean:.1} ms, median {:.1} ms, max {:.1} ms; CPU {cpu_per_frame:.1} ms per frame (target 16 ms)",
         rayon::current_num_threads(),
+        precision.name(),
         times[times.len() / 2],
         times[times.len() - 1]
     );

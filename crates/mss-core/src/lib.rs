@@ -50,7 +50,7 @@ pub use material::{Material, MaterialError};
 pub use model::{
     BodySpan, CellCoefficients, CellDiagnostics, ForceWorkspace, HourglassControl, HourglassError,
     Model, ModelError, PaperModel, Parameterization, ParameterizationError, Parameterizations,
-    SpringsOnly, UnknownParameterization, Volumetric, VolumetricBarrier,
+    Precision, SpringsOnly, UnknownParameterization, Volumetric, VolumetricBarrier,
 };
 pub use solver::{
     Integrator, Integrators, Problem, SolverError, State, StaticOptions, solve_static,

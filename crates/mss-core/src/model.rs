@@ -467,6 +467,67 @@ pub struct CellDiagnostics {
 /// writes each cell's corner forces straight into the nodes' sums (see
 /// [`Model::internal_forces_with`]), so it holds nothing today; it stays in
 /// the signature so that a future pass may keep scratch without an API change.
+/// The floating-point precision of the internal force pass.
+///
+/// `F32` runs the cell kernel in single precision, 8 cells per AVX2 pass
+/// instead of 4, for interactive use; positions, velocities and the force
+/// sums stay in `f64` (a sub-step moves a node by far less than the `f32`
+/// spacing of its coordinates, which `f32` positions would lose), and each
+/// cell's corners are taken relative to its corner 0 before rounding, so a
+/// body far from the origin loses nothing to its placement. Each force
+/// carries a relative error of about `1e-7 / strain` (the springs' and the
+/// volume's `1 - L0 / l` and `J - 1` cancel digits); docs/solvers.md gives
+/// what that costs on the cantilever and the bunny. Newton solvers need
+/// `f64` and refuse `F32`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Precision {
+    /// Double precision (the default).
+    #[default]
+    F64,
+    /// Single precision for the cell kernel.
+    F32,
+}
+
+impl Precision {
+    /// `"f64"` or `"f32"`, the scene key's values.
+    pub fn name(self) -> &'static str {
+        match self {
+            Precision::F64 => "f64",
+            Precision::F32 => "f32",
+        }
+    }
+
+    /// The precision named `name` (`"f64"` or `"f32"`).
+    pub fn from_name(name: &str) -> Option<Self> {
+        match name {
+            "f64" => Some(Precision::F64),
+            "f32" => Some(Precision::F32),
+            _ => None,
+        }
+    }
+
+    /// The instruction set the force pass runs on this CPU in this
+    /// precision (`"avx2"`, or `"portable"` where the compiler vectorizes
+    /// plain lane loops) and how many cells it evaluates together, for
+    /// benchmark reports.
+    pub fn kernel_vectors(self) -> (&'static str, usize) {
+        let lanes = match self {
+            Precision::F64 => kernel::LANES,
+            Precision::F32 => kernel::LANES_F32,
+        };
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx2") {
+                return ("avx2", lanes);
+            }
+        }
+        ("portable", lanes)
+    }
+}
+
+/// Scratch space of the force pass, kept between passes so that a step
+/// allocates nothing ([`Model::workspace`]).
 #[derive(Debug, Clone, Default)]
 pub struct ForceWorkspace {
     /// The stretch `1 - L0 / l` of each lattice edge, by the node it starts
@@ -573,8 +634,13 @@ struct SharedEdges(*mut [f64; 3]);
 unsafe impl Send for SharedEdges {}
 unsafe impl Sync for SharedEdges {}
 
+/// The batched force kernel of a precision ([`kernel::forces_batch`]).
+type BatchKernel = fn(&CellParams, &[[u32; 8]], &[[f64; 3]], &[[f64; 3]], &mut [[f64; 4]]);
+/// The one-cell force kernel of a precision ([`kernel::cell_forces_from_edges`]).
+type CellKernel = fn(&CellParams, &[u32; 8], &[[f64; 3]], &[[f64; 3]]) -> [[f64; 3]; 8];
+
 /// Cells whose corner forces are computed together before being added to
-/// the nodes (the buffer stays in L1).
+/// the nodes (the buffer stays in L1; a multiple of both SIMD widths).
 const FORCE_BATCH: usize = 32;
 
 /// Cells per parallel task: large enough to amortize scheduling, small enough
@@ -1071,7 +1137,18 @@ impl Model {
     ///
     /// Panics if `x` or `out` does not have one entry per node.
     pub fn internal_forces_with(&self, x: &[Vec3], ws: &mut ForceWorkspace, out: &mut [Vec3]) {
-        self.forces_impl(x, ws, out, true);
+        self.forces_impl(x, ws, out, true, Precision::F64);
+    }
+
+    /// [`Model::internal_forces_with`] in the given [`Precision`].
+    pub fn internal_forces_in(
+        &self,
+        precision: Precision,
+        x: &[Vec3],
+        ws: &mut ForceWorkspace,
+        out: &mut [Vec3],
+    ) {
+        self.forces_impl(x, ws, out, true, precision);
     }
 
     /// As [`Model::internal_forces_with`] but one cell at a time, without SIMD
@@ -1082,7 +1159,19 @@ impl Model {
         ws: &mut ForceWorkspace,
         out: &mut [Vec3],
     ) {
-        self.forces_impl(x, ws, out, false);
+        self.forces_impl(x, ws, out, false, Precision::F64);
+    }
+
+    /// [`Model::internal_forces_scalar_with`] in the given [`Precision`]:
+    /// bitwise equal to [`Model::internal_forces_in`].
+    pub fn internal_forces_scalar_in(
+        &self,
+        precision: Precision,
+        x: &[Vec3],
+        ws: &mut ForceWorkspace,
+        out: &mut [Vec3],
+    ) {
+        self.forces_impl(x, ws, out, false, precision);
     }
 
     /// The stretch of every lattice edge at `xs`, into `edges` by the node it
@@ -1120,7 +1209,18 @@ impl Model {
         }
     }
 
-    fn forces_impl(&self, x: &[Vec3], ws: &mut ForceWorkspace, out: &mut [Vec3], batched: bool) {
+    fn forces_impl(
+        &self,
+        x: &[Vec3],
+        ws: &mut ForceWorkspace,
+        out: &mut [Vec3],
+        batched: bool,
+        precision: Precision,
+    ) {
+        let (batch_kernel, cell_kernel): (BatchKernel, CellKernel) = match precision {
+            Precision::F64 => (kernel::forces_batch, kernel::cell_forces_from_edges),
+            Precision::F32 => (kernel::forces_batch_f32, kernel::cell_forces_from_edges_f32),
+        };
         assert_eq!(x.len(), self.num_nodes(), "positions: one per node");
         assert_eq!(out.len(), self.num_nodes(), "forces: one per node");
         // SAFETY: Vector3<f64> is a repr(C) wrapper of [[f64; 3]; 1], so the slice
@@ -1158,16 +1258,12 @@ impl Model {
                             || (first..last)
                                 .all(|c| self.cell_material[c] == self.cell_material[first]);
                         if batched && uniform {
-                            kernel::forces_batch(self.params_of(first), cells, xs, edges, fc);
+                            batch_kernel(self.params_of(first), cells, xs, edges, fc);
                         } else {
                             for (k, f) in fc.chunks_exact_mut(8).enumerate() {
                                 let cell = first + k;
-                                let out8 = kernel::cell_forces_from_edges(
-                                    self.params_of(cell),
-                                    &self.cells[cell],
-                                    xs,
-                                    edges,
-                                );
+                                let out8 =
+                                    cell_kernel(self.params_of(cell), &self.cells[cell], xs, edges);
                                 for (f, o) in f.iter_mut().zip(out8) {
                                     *f = [o[0], o[1], o[2], 0.0];
                                 }

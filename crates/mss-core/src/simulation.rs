@@ -34,7 +34,7 @@ use std::sync::{Arc, RwLock};
 
 use crate::loads::Load;
 use crate::solver::{Explicit, ExplicitOptions, Integrator, Problem, SolverError, State, StepInfo};
-use crate::{BlockCsr, Mat3, Model, Vec3};
+use crate::{BlockCsr, Mat3, Model, Precision, Vec3};
 
 /// What a pick holds: nodes, their offsets from the target, the stiffness.
 #[derive(Debug, Clone, Default)]
@@ -79,6 +79,7 @@ pub struct Simulation {
     state: State,
     integrator: Option<Explicit>,
     grab: Arc<RwLock<Option<Grab>>>,
+    precision: Precision,
 }
 
 impl std::fmt::Debug for Simulation {
@@ -118,6 +119,7 @@ impl Simulation {
             state,
             integrator: None,
             grab,
+            precision: Precision::F64,
         })
     }
 
@@ -134,6 +136,7 @@ impl Simulation {
                 ExplicitOptions {
                     dt: Some(dt),
                     substep: true,
+                    precision: self.precision,
                     ..ExplicitOptions::default()
                 },
             )?);
@@ -143,6 +146,20 @@ impl Simulation {
             .as_mut()
             .ok_or(SolverError::BadTimeStep(dt))?;
         integrator.step(&self.problem, &mut self.state)
+    }
+
+    /// Runs the internal force pass in `precision` from the next step on
+    /// ([`Precision::F32`] for interactive rates; the default is `F64`).
+    pub fn set_precision(&mut self, precision: Precision) {
+        if precision != self.precision {
+            self.precision = precision;
+            self.integrator = None;
+        }
+    }
+
+    /// The precision of the internal force pass.
+    pub fn precision(&self) -> Precision {
+        self.precision
     }
 
     /// Holds `nodes` by springs of `stiffness` (N/m each) at their current

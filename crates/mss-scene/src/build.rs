@@ -435,6 +435,7 @@ impl SceneInput {
             rtol: s.tolerance,
             max_newton: s.max_iterations,
             linear_solver: s.linear_solver,
+            precision: s.precision,
         };
         if !registry.integrators.contains(&s.kind) {
             return Err(self.setting(

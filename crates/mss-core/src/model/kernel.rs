@@ -25,22 +25,70 @@ pub(crate) trait Scalar:
     fn apply(self, f: fn(f64) -> (f64, f64)) -> Self;
 }
 
-impl Scalar for f64 {
+/// A floating-point number the kernel can run on: `f64`, or `f32` for the
+/// single-precision force pass (constants and the volumetric law are given
+/// in `f64` and rounded).
+pub(crate) trait Element:
+    Copy
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Div<Output = Self>
+    + Neg<Output = Self>
+    + AddAssign
+    + SubAssign
+{
+    fn from_f64(v: f64) -> Self;
+    fn to_f64(self) -> f64;
+    fn square_root(self) -> Self;
+}
+
+impl Element for f64 {
     #[inline(always)]
-    fn cst(v: f64) -> Self {
+    fn from_f64(v: f64) -> Self {
         v
     }
     #[inline(always)]
+    fn to_f64(self) -> f64 {
+        self
+    }
+    #[inline(always)]
+    fn square_root(self) -> Self {
+        self.sqrt()
+    }
+}
+
+impl Element for f32 {
+    #[inline(always)]
+    fn from_f64(v: f64) -> Self {
+        v as f32
+    }
+    #[inline(always)]
+    fn to_f64(self) -> f64 {
+        f64::from(self)
+    }
+    #[inline(always)]
+    fn square_root(self) -> Self {
+        self.sqrt()
+    }
+}
+
+impl<E: Element> Scalar for E {
+    #[inline(always)]
+    fn cst(v: f64) -> Self {
+        E::from_f64(v)
+    }
+    #[inline(always)]
     fn scale(self, k: f64) -> Self {
-        self * k
+        self * E::from_f64(k)
     }
     #[inline(always)]
     fn sqrt(self) -> Self {
-        f64::sqrt(self)
+        self.square_root()
     }
     #[inline(always)]
     fn apply(self, f: fn(f64) -> (f64, f64)) -> Self {
-        f(self).0
+        E::from_f64(f(self.to_f64()).0)
     }
 }
 
@@ -928,25 +976,22 @@ pub(crate) fn cell_jacobian_dual(p: &CellParams, x: &[V3<f64>; 8]) -> [[f64; 24]
     std::array::from_fn(|r| f[r / 3][r % 3].g)
 }
 
-/// `L` independent `f64` lanes: the kernel evaluated on `L` cells at once, so
-/// that the compiler emits SIMD (sqrt and division dominate the cost). Every
-/// lane performs exactly the scalar operations, so results are bitwise equal
-/// to the `f64` kernel.
+/// `L` independent lanes of `E`: the kernel evaluated on `L` cells at once
+/// on the portable path. Every lane performs exactly the scalar operations,
+/// so results are bitwise equal to the scalar kernel and to the AVX2 one.
 #[derive(Clone, Copy, Debug)]
-#[repr(C, align(32))]
-pub(crate) struct Lanes<const L: usize>(pub [f64; L]);
+pub(crate) struct Lanes<E, const L: usize>(pub [E; L]);
 
 macro_rules! lanes_op {
     ($tr:ident, $f:ident, $op:tt) => {
-        impl<const L: usize> $tr for Lanes<L> {
+        impl<E: Element, const L: usize> $tr for Lanes<E, L> {
             type Output = Self;
             #[inline(always)]
             fn $f(self, o: Self) -> Self {
                 // Plain loops, not `array::from_fn`/`map`: their closures are
-                // separate functions that the AVX2 entry point does not
-                // inline, which costs calls and copies per operation.
-                let mut r = [0.0; L];
-                for ((r, a), b) in r.iter_mut().zip(self.0).zip(o.0) {
+                // separate functions that are not always inlined.
+                let mut r = self.0;
+                for (r, (a, b)) in r.iter_mut().zip(self.0.into_iter().zip(o.0)) {
                     *r = a $op b;
                 }
                 Self(r)
@@ -959,7 +1004,7 @@ lanes_op!(Sub, sub, -);
 lanes_op!(Mul, mul, *);
 lanes_op!(Div, div, /);
 
-impl<const L: usize> Neg for Lanes<L> {
+impl<E: Element, const L: usize> Neg for Lanes<E, L> {
     type Output = Self;
     #[inline(always)]
     fn neg(self) -> Self {
@@ -970,36 +1015,32 @@ impl<const L: usize> Neg for Lanes<L> {
         Self(r)
     }
 }
-impl<const L: usize> AddAssign for Lanes<L> {
+impl<E: Element, const L: usize> AddAssign for Lanes<E, L> {
     #[inline(always)]
     fn add_assign(&mut self, o: Self) {
         *self = *self + o;
     }
 }
-impl<const L: usize> SubAssign for Lanes<L> {
+impl<E: Element, const L: usize> SubAssign for Lanes<E, L> {
     #[inline(always)]
     fn sub_assign(&mut self, o: Self) {
         *self = *self - o;
     }
 }
-impl<const L: usize> Scalar for Lanes<L> {
+impl<E: Element, const L: usize> Scalar for Lanes<E, L> {
     #[inline(always)]
     fn cst(v: f64) -> Self {
-        Self([v; L])
+        Self([E::from_f64(v); L])
     }
     #[inline(always)]
     fn scale(self, k: f64) -> Self {
-        let mut r = self.0;
-        for v in &mut r {
-            *v *= k;
-        }
-        Self(r)
+        self * Self::cst(k)
     }
     #[inline(always)]
     fn sqrt(self) -> Self {
         let mut r = self.0;
         for v in &mut r {
-            *v = v.sqrt();
+            *v = v.square_root();
         }
         Self(r)
     }
@@ -1007,7 +1048,7 @@ impl<const L: usize> Scalar for Lanes<L> {
     fn apply(self, f: fn(f64) -> (f64, f64)) -> Self {
         let mut r = self.0;
         for v in &mut r {
-            *v = f(*v).0;
+            *v = E::from_f64(f(v.to_f64()).0);
         }
         Self(r)
     }
@@ -1022,11 +1063,11 @@ pub(crate) trait Pack: Scalar {
     fn lane(self, l: usize) -> f64;
 }
 
-impl<const L: usize> Pack for Lanes<L> {
+impl<E: Element, const L: usize> Pack for Lanes<E, L> {
     const WIDTH: usize = L;
     #[inline(always)]
     fn lane(self, l: usize) -> f64 {
-        self.0[l]
+        self.0[l].to_f64()
     }
 }
 
@@ -1091,8 +1132,8 @@ fn corner_stretches<T: Scalar>(rest: f64, origin: V3<T>, ends: [V3<T>; 3]) -> [T
 
 /// Corners 0, 1, 3 and 4 of `L` cells: the ends of their corner-0 edges.
 #[inline(always)]
-fn gather_edge_ends<const L: usize>(cells: &[[u32; 8]], x: &[[f64; 3]]) -> [V3<Lanes<L>>; 4] {
-    let mut xl: [V3<Lanes<L>>; 4] = [[Lanes::cst(0.0); 3]; 4];
+fn gather_edge_ends<const L: usize>(cells: &[[u32; 8]], x: &[[f64; 3]]) -> [V3<Lanes<f64, L>>; 4] {
+    let mut xl: [V3<Lanes<f64, L>>; 4] = [[Lanes::cst(0.0); 3]; 4];
     for (&k, xk) in [0, 1, 3, 4].iter().zip(xl.iter_mut()) {
         for (l, cell) in cells.iter().enumerate() {
             let p = x[cell[k] as usize];
@@ -1110,7 +1151,8 @@ fn edge_stretches_avx2(rest: f64, cells: &[[u32; 8]], x: &[[f64; 3]], out: &mut 
     // The closure inherits this function's AVX2, so may call the AVX2
     // helpers safely.
     edge_stretches_body(rest, cells, x, out, |c, x| {
-        avx2::gather4(c, x, [0, 1, 3, 4])
+        // SAFETY: this closure runs inside an AVX2 function.
+        unsafe { avx2::gather4(c, x, [0, 1, 3, 4]) }
     });
 }
 
@@ -1147,8 +1189,8 @@ pub(crate) fn edge_stretches_batch(
 
 /// Gathers the 8 corners of `L` cells into lanes (portable path).
 #[inline(always)]
-fn gather_corners<const L: usize>(cells: &[[u32; 8]], x: &[[f64; 3]]) -> [V3<Lanes<L>>; 8] {
-    let mut xl: [V3<Lanes<L>>; 8] = [[Lanes::cst(0.0); 3]; 8];
+fn gather_corners<const L: usize>(cells: &[[u32; 8]], x: &[[f64; 3]]) -> [V3<Lanes<f64, L>>; 8] {
+    let mut xl: [V3<Lanes<f64, L>>; 8] = [[Lanes::cst(0.0); 3]; 8];
     for (k, xk) in xl.iter_mut().enumerate() {
         for (l, cell) in cells.iter().enumerate() {
             let p = x[cell[k] as usize];
@@ -1163,7 +1205,7 @@ fn gather_corners<const L: usize>(cells: &[[u32; 8]], x: &[[f64; 3]]) -> [V3<Lan
 /// The stretches of the 12 edges of `L` cells (in [`CELL_EDGES`] order) from
 /// the lattice's edge stretches by node (portable path).
 #[inline(always)]
-fn gather_edges<const L: usize>(cells: &[[u32; 8]], edges: &[[f64; 3]]) -> [Lanes<L>; 12] {
+fn gather_edges<const L: usize>(cells: &[[u32; 8]], edges: &[[f64; 3]]) -> [Lanes<f64, L>; 12] {
     let mut wl = [Lanes::cst(0.0); 12];
     for (w, &(a, _, ax)) in wl.iter_mut().zip(&CELL_EDGES) {
         for (l, cell) in cells.iter().enumerate() {
@@ -1199,7 +1241,7 @@ pub(crate) fn cell_forces_from_edges(
 /// Writes the lanes' corner forces out cell by cell, `out[8 l + k]` for
 /// corner `k` of cell `l` (portable path).
 #[inline(always)]
-fn scatter_corners<const L: usize>(f: &[V3<Lanes<L>>; 8], out: &mut [[f64; 4]]) {
+fn scatter_corners<const L: usize>(f: &[V3<Lanes<f64, L>>; 8], out: &mut [[f64; 4]]) {
     for l in 0..L {
         for k in 0..8 {
             out[8 * l + k] = [f[k][0].0[l], f[k][1].0[l], f[k][2].0[l], 0.0];
@@ -1217,108 +1259,209 @@ mod avx2 {
     use std::arch::x86_64::*;
     use std::ops::{Add, AddAssign, Div, Mul, Neg, Sub, SubAssign};
 
-    /// Four cells' values in one AVX register, with every operation an
-    /// explicit AVX instruction: written as plain loops over `[f64; 4]`
-    /// ([`super::Lanes`]), the compiler vectorized some passes across the
-    /// wrong dimension (the three edges of a node, in 2-wide halves, with
-    /// shuffles) and left others scalar.
+    /// Defines one AVX register type of `$n` lanes of `$e`, with every
+    /// operation an explicit AVX instruction: written as plain loops over
+    /// arrays ([`super::Lanes`]), the compiler vectorized some passes across
+    /// the wrong dimension (the three edges of a node, in 2-wide halves,
+    /// with shuffles) and left others scalar.
     ///
-    /// Values of this type are made only inside this module's
+    /// Values of these types are made only inside this module's
     /// `#[target_feature(enable = "avx2")]` functions, reached only after
-    /// the CPU was checked: that is what makes the intrinsics below sound
-    /// (each operation is inlined into those functions).
-    #[derive(Clone, Copy)]
-    pub(super) struct F64x4(__m256d);
+    /// the CPU was checked: that is what makes the intrinsics sound (each
+    /// operation is inlined into those functions).
+    macro_rules! avx_vector {
+        (
+            $(#[$doc:meta])* $name:ident($reg:ty, $e:ty, $n:literal),
+            add $add:ident, sub $sub:ident, mul $mul:ident, div $div:ident,
+            xor $xor:ident, set1 $set1:ident, sqrt $sqrt:ident,
+            load $load:ident, store $store:ident
+        ) => {
+            $(#[$doc])*
+            #[derive(Clone, Copy)]
+            pub(super) struct $name($reg);
 
-    macro_rules! binary {
-        ($tr:ident, $f:ident, $intr:ident) => {
-            impl $tr for F64x4 {
+            avx_vector!(@binary $name, Add, add, $add);
+            avx_vector!(@binary $name, Sub, sub, $sub);
+            avx_vector!(@binary $name, Mul, mul, $mul);
+            avx_vector!(@binary $name, Div, div, $div);
+
+            impl Neg for $name {
+                type Output = Self;
+                #[inline(always)]
+                fn neg(self) -> Self {
+                    // Flips the sign bit, as scalar negation does (0 - x
+                    // would turn +0 into +0 instead of -0).
+                    // SAFETY: AVX is available (see `avx_vector`).
+                    Self(unsafe { $xor(self.0, $set1(-0.0)) })
+                }
+            }
+            impl AddAssign for $name {
+                #[inline(always)]
+                fn add_assign(&mut self, o: Self) {
+                    *self = *self + o;
+                }
+            }
+            impl SubAssign for $name {
+                #[inline(always)]
+                fn sub_assign(&mut self, o: Self) {
+                    *self = *self - o;
+                }
+            }
+            impl $name {
+                #[inline(always)]
+                fn to_array(self) -> [$e; $n] {
+                    let mut r = [0.0; $n];
+                    // SAFETY: AVX is available (see `avx_vector`); `r`
+                    // holds one register's worth of lanes.
+                    unsafe { $store(r.as_mut_ptr(), self.0) };
+                    r
+                }
+            }
+            impl Scalar for $name {
+                #[inline(always)]
+                fn cst(v: f64) -> Self {
+                    // SAFETY: AVX is available (see `avx_vector`).
+                    Self(unsafe { $set1(v as $e) })
+                }
+                #[inline(always)]
+                fn scale(self, k: f64) -> Self {
+                    self * Self::cst(k)
+                }
+                #[inline(always)]
+                fn sqrt(self) -> Self {
+                    // SAFETY: AVX is available (see `avx_vector`).
+                    Self(unsafe { $sqrt(self.0) })
+                }
+                #[inline(always)]
+                fn apply(self, f: fn(f64) -> (f64, f64)) -> Self {
+                    let mut r = self.to_array();
+                    for v in &mut r {
+                        *v = f(f64::from(*v)).0 as $e;
+                    }
+                    // SAFETY: AVX is available (see `avx_vector`); `r`
+                    // holds one register's worth of lanes.
+                    Self(unsafe { $load(r.as_ptr()) })
+                }
+            }
+            impl Pack for $name {
+                const WIDTH: usize = $n;
+                #[inline(always)]
+                fn lane(self, l: usize) -> f64 {
+                    f64::from(self.to_array()[l])
+                }
+            }
+        };
+        (@binary $name:ident, $tr:ident, $f:ident, $intr:ident) => {
+            impl $tr for $name {
                 type Output = Self;
                 #[inline(always)]
                 fn $f(self, o: Self) -> Self {
-                    // SAFETY: AVX is available (see `F64x4`).
+                    // SAFETY: AVX is available (see `avx_vector`).
                     Self(unsafe { $intr(self.0, o.0) })
                 }
             }
         };
     }
-    binary!(Add, add, _mm256_add_pd);
-    binary!(Sub, sub, _mm256_sub_pd);
-    binary!(Mul, mul, _mm256_mul_pd);
-    binary!(Div, div, _mm256_div_pd);
 
-    impl Neg for F64x4 {
-        type Output = Self;
-        #[inline(always)]
-        fn neg(self) -> Self {
-            // Flips the sign bit, as scalar negation does (0 - x would turn
-            // +0 into +0 instead of -0).
-            // SAFETY: AVX is available (see `F64x4`).
-            Self(unsafe { _mm256_xor_pd(self.0, _mm256_set1_pd(-0.0)) })
-        }
+    avx_vector!(
+        /// Four cells' values in double precision, one AVX register.
+        F64x4(__m256d, f64, 4),
+        add _mm256_add_pd, sub _mm256_sub_pd, mul _mm256_mul_pd, div _mm256_div_pd,
+        xor _mm256_xor_pd, set1 _mm256_set1_pd, sqrt _mm256_sqrt_pd,
+        load _mm256_loadu_pd, store _mm256_storeu_pd
+    );
+    avx_vector!(
+        /// Eight cells' values in single precision, one AVX register.
+        F32x8(__m256, f32, 8),
+        add _mm256_add_ps, sub _mm256_sub_ps, mul _mm256_mul_ps, div _mm256_div_ps,
+        xor _mm256_xor_ps, set1 _mm256_set1_ps, sqrt _mm256_sqrt_ps,
+        load _mm256_loadu_ps, store _mm256_storeu_ps
+    );
+
+    /// Two halves of four `f64` lanes rounded into eight `f32` lanes.
+    #[inline(always)]
+    unsafe fn narrow(lo: __m256d, hi: __m256d) -> F32x8 {
+        // SAFETY: the caller runs where AVX2 is available (this function's
+        // contract); memory accesses are justified where they are made.
+        unsafe { F32x8(_mm256_set_m128(_mm256_cvtpd_ps(hi), _mm256_cvtpd_ps(lo))) }
     }
-    impl AddAssign for F64x4 {
-        #[inline(always)]
-        fn add_assign(&mut self, o: Self) {
-            *self = *self + o;
-        }
-    }
-    impl SubAssign for F64x4 {
-        #[inline(always)]
-        fn sub_assign(&mut self, o: Self) {
-            *self = *self - o;
-        }
-    }
-    impl Scalar for F64x4 {
-        #[inline(always)]
-        fn cst(v: f64) -> Self {
-            // SAFETY: AVX is available (see `F64x4`).
-            Self(unsafe { _mm256_set1_pd(v) })
-        }
-        #[inline(always)]
-        fn scale(self, k: f64) -> Self {
-            self * Self::cst(k)
-        }
-        #[inline(always)]
-        fn sqrt(self) -> Self {
-            // SAFETY: AVX is available (see `F64x4`).
-            Self(unsafe { _mm256_sqrt_pd(self.0) })
-        }
-        #[inline(always)]
-        fn apply(self, f: fn(f64) -> (f64, f64)) -> Self {
-            let mut r = [0.0; 4];
-            // SAFETY: AVX is available (see `F64x4`); `r` holds 4 f64.
-            unsafe { _mm256_storeu_pd(r.as_mut_ptr(), self.0) };
-            for v in &mut r {
-                *v = f(*v).0;
+
+    /// The 8 corners of eight cells relative to each cell's corner 0, in
+    /// `f32` (differences taken in `f64`).
+    #[inline(always)]
+    pub(super) unsafe fn gather8_relative(cells: &[[u32; 8]], x: &[[f64; 3]]) -> [V3<F32x8>; 8] {
+        // SAFETY: the caller runs where AVX2 is available (this function's
+        // contract); memory accesses are justified where they are made.
+        unsafe {
+            let lo = gather4(&cells[..4], x, [0, 1, 2, 3, 4, 5, 6, 7]);
+            let hi = gather4(&cells[4..], x, [0, 1, 2, 3, 4, 5, 6, 7]);
+            let zero = F32x8(_mm256_setzero_ps());
+            let mut xl = [[zero; 3]; 8];
+            for (k, xk) in xl.iter_mut().enumerate() {
+                for (c, v) in xk.iter_mut().enumerate() {
+                    *v = narrow(
+                        _mm256_sub_pd(lo[k][c].0, lo[0][c].0),
+                        _mm256_sub_pd(hi[k][c].0, hi[0][c].0),
+                    );
+                }
             }
-            // SAFETY: as above.
-            Self(unsafe { _mm256_loadu_pd(r.as_ptr()) })
+            xl
         }
     }
-    impl Pack for F64x4 {
-        const WIDTH: usize = 4;
-        #[inline(always)]
-        fn lane(self, l: usize) -> f64 {
-            let mut r = [0.0; 4];
-            // SAFETY: AVX is available (see `F64x4`); `r` holds 4 f64.
-            unsafe { _mm256_storeu_pd(r.as_mut_ptr(), self.0) };
-            r[l]
+
+    /// The 12 edge stretches of eight cells, in `f32`.
+    #[inline(always)]
+    pub(super) unsafe fn gather_edges8(cells: &[[u32; 8]], edges: &[[f64; 3]]) -> [F32x8; 12] {
+        // SAFETY: the caller runs where AVX2 is available (this function's
+        // contract); memory accesses are justified where they are made.
+        unsafe {
+            let lo = gather_edges4(&cells[..4], edges);
+            let hi = gather_edges4(&cells[4..], edges);
+            let mut w = [F32x8(_mm256_setzero_ps()); 12];
+            for ((w, lo), hi) in w.iter_mut().zip(lo).zip(hi) {
+                *w = narrow(lo.0, hi.0);
+            }
+            w
+        }
+    }
+
+    /// Corner forces of eight cells out of `f32` vectors, as `f64`.
+    #[inline(always)]
+    pub(super) unsafe fn scatter8(f: &[V3<F32x8>; 8], out: &mut [[f64; 4]]) {
+        // SAFETY: the caller runs where AVX2 is available (this function's
+        // contract); memory accesses are justified where they are made.
+        unsafe {
+            assert!(out.len() >= 64);
+            let zero = F64x4(_mm256_setzero_pd());
+            let (mut lo, mut hi) = ([[zero; 3]; 8], [[zero; 3]; 8]);
+            for k in 0..8 {
+                for c in 0..3 {
+                    let v = f[k][c].0;
+                    lo[k][c] = F64x4(_mm256_cvtps_pd(_mm256_castps256_ps128(v)));
+                    hi[k][c] = F64x4(_mm256_cvtps_pd(_mm256_extractf128_ps(v, 1)));
+                }
+            }
+            let (first, second) = out.split_at_mut(32);
+            scatter4(&lo, first);
+            scatter4(&hi, second);
         }
     }
 
     /// `[x, y, z, *]` of node `i` (the fourth value is the next node's `x`,
     /// or 0 for the last node, which has no next).
-    #[target_feature(enable = "avx2")]
-    #[inline]
-    fn load_node(x: &[[f64; 3]], i: usize) -> __m256d {
-        if i + 1 < x.len() {
-            // SAFETY: nodes i and i + 1 exist, so the 32 bytes from node i
-            // lie within `x`.
-            unsafe { _mm256_loadu_pd(x.as_ptr().add(i).cast::<f64>()) }
-        } else {
-            let p = x[i];
-            _mm256_set_pd(0.0, p[2], p[1], p[0])
+    #[inline(always)]
+    unsafe fn load_node(x: &[[f64; 3]], i: usize) -> __m256d {
+        // SAFETY: the caller runs where AVX2 is available (this function's
+        // contract); memory accesses are justified where they are made.
+        unsafe {
+            if i + 1 < x.len() {
+                // SAFETY: nodes i and i + 1 exist, so the 32 bytes from node i
+                // lie within `x`.
+                _mm256_loadu_pd(x.as_ptr().add(i).cast::<f64>())
+            } else {
+                let p = x[i];
+                _mm256_set_pd(0.0, p[2], p[1], p[0])
+            }
         }
     }
 
@@ -1326,68 +1469,77 @@ mod avx2 {
     /// `c` of entry `i` is `x[cells[l][corners[i]]][c]`. Four 32-byte loads
     /// and a 4 x 4 transpose per corner, instead of twelve scalar loads and
     /// inserts.
-    #[target_feature(enable = "avx2")]
-    #[inline]
-    pub(super) fn gather4<const K: usize>(
+    #[inline(always)]
+    pub(super) unsafe fn gather4<const K: usize>(
         cells: &[[u32; 8]],
         x: &[[f64; 3]],
         corners: [usize; K],
     ) -> [V3<F64x4>; K] {
-        let zero = F64x4(_mm256_setzero_pd());
-        let mut xl = [[zero; 3]; K];
-        for (&k, xk) in corners.iter().zip(xl.iter_mut()) {
-            let r = [
-                load_node(x, cells[0][k] as usize),
-                load_node(x, cells[1][k] as usize),
-                load_node(x, cells[2][k] as usize),
-                load_node(x, cells[3][k] as usize),
-            ];
-            let t0 = _mm256_unpacklo_pd(r[0], r[1]); // x0 x1 z0 z1
-            let t1 = _mm256_unpackhi_pd(r[0], r[1]); // y0 y1 * *
-            let t2 = _mm256_unpacklo_pd(r[2], r[3]); // x2 x3 z2 z3
-            let t3 = _mm256_unpackhi_pd(r[2], r[3]); // y2 y3 * *
-            xk[0] = F64x4(_mm256_permute2f128_pd(t0, t2, 0x20));
-            xk[1] = F64x4(_mm256_permute2f128_pd(t1, t3, 0x20));
-            xk[2] = F64x4(_mm256_permute2f128_pd(t0, t2, 0x31));
+        // SAFETY: the caller runs where AVX2 is available (this function's
+        // contract); memory accesses are justified where they are made.
+        unsafe {
+            let zero = F64x4(_mm256_setzero_pd());
+            let mut xl = [[zero; 3]; K];
+            for (&k, xk) in corners.iter().zip(xl.iter_mut()) {
+                let r = [
+                    load_node(x, cells[0][k] as usize),
+                    load_node(x, cells[1][k] as usize),
+                    load_node(x, cells[2][k] as usize),
+                    load_node(x, cells[3][k] as usize),
+                ];
+                let t0 = _mm256_unpacklo_pd(r[0], r[1]); // x0 x1 z0 z1
+                let t1 = _mm256_unpackhi_pd(r[0], r[1]); // y0 y1 * *
+                let t2 = _mm256_unpacklo_pd(r[2], r[3]); // x2 x3 z2 z3
+                let t3 = _mm256_unpackhi_pd(r[2], r[3]); // y2 y3 * *
+                xk[0] = F64x4(_mm256_permute2f128_pd(t0, t2, 0x20));
+                xk[1] = F64x4(_mm256_permute2f128_pd(t1, t3, 0x20));
+                xk[2] = F64x4(_mm256_permute2f128_pd(t0, t2, 0x31));
+            }
+            xl
         }
-        xl
     }
 
     /// The stretches of the 12 edges of four cells from the edge stretches
     /// by node, gathered like positions (7 corners, one transpose each).
-    #[target_feature(enable = "avx2")]
-    #[inline]
-    pub(super) fn gather_edges4(cells: &[[u32; 8]], edges: &[[f64; 3]]) -> [F64x4; 12] {
-        let starts = gather4(cells, edges, super::EDGE_STARTS);
-        let mut w = [F64x4(_mm256_setzero_pd()); 12];
-        for (w, &(a, _, ax)) in w.iter_mut().zip(&super::CELL_EDGES) {
-            *w = starts[super::EDGE_START_INDEX[a]][ax];
+    #[inline(always)]
+    pub(super) unsafe fn gather_edges4(cells: &[[u32; 8]], edges: &[[f64; 3]]) -> [F64x4; 12] {
+        // SAFETY: the caller runs where AVX2 is available (this function's
+        // contract); memory accesses are justified where they are made.
+        unsafe {
+            let starts = gather4(cells, edges, super::EDGE_STARTS);
+            let mut w = [F64x4(_mm256_setzero_pd()); 12];
+            for (w, &(a, _, ax)) in w.iter_mut().zip(&super::CELL_EDGES) {
+                *w = starts[super::EDGE_START_INDEX[a]][ax];
+            }
+            w
         }
-        w
     }
 
     /// Corner forces of four cells out of vectors, `out[8 l + k] = [fx, fy,
     /// fz, 0]` of corner `k` of cell `l`.
-    #[target_feature(enable = "avx2")]
-    #[inline]
-    pub(super) fn scatter4(f: &[V3<F64x4>; 8], out: &mut [[f64; 4]]) {
-        assert!(out.len() >= 32);
-        let zero = _mm256_setzero_pd();
-        for (k, fk) in f.iter().enumerate() {
-            let (fx, fy, fz) = (fk[0].0, fk[1].0, fk[2].0);
-            let t0 = _mm256_unpacklo_pd(fx, fy); // x0 y0 x2 y2
-            let t1 = _mm256_unpackhi_pd(fx, fy); // x1 y1 x3 y3
-            let t2 = _mm256_unpacklo_pd(fz, zero); // z0 0 z2 0
-            let t3 = _mm256_unpackhi_pd(fz, zero); // z1 0 z3 0
-            let rows = [
-                _mm256_permute2f128_pd(t0, t2, 0x20),
-                _mm256_permute2f128_pd(t1, t3, 0x20),
-                _mm256_permute2f128_pd(t0, t2, 0x31),
-                _mm256_permute2f128_pd(t1, t3, 0x31),
-            ];
-            for (l, row) in rows.into_iter().enumerate() {
-                // SAFETY: `8 l + k < 32 <= out.len()`, and each entry holds 4 f64.
-                unsafe { _mm256_storeu_pd(out[8 * l + k].as_mut_ptr(), row) };
+    #[inline(always)]
+    pub(super) unsafe fn scatter4(f: &[V3<F64x4>; 8], out: &mut [[f64; 4]]) {
+        // SAFETY: the caller runs where AVX2 is available (this function's
+        // contract); memory accesses are justified where they are made.
+        unsafe {
+            assert!(out.len() >= 32);
+            let zero = _mm256_setzero_pd();
+            for (k, fk) in f.iter().enumerate() {
+                let (fx, fy, fz) = (fk[0].0, fk[1].0, fk[2].0);
+                let t0 = _mm256_unpacklo_pd(fx, fy); // x0 y0 x2 y2
+                let t1 = _mm256_unpackhi_pd(fx, fy); // x1 y1 x3 y3
+                let t2 = _mm256_unpacklo_pd(fz, zero); // z0 0 z2 0
+                let t3 = _mm256_unpackhi_pd(fz, zero); // z1 0 z3 0
+                let rows = [
+                    _mm256_permute2f128_pd(t0, t2, 0x20),
+                    _mm256_permute2f128_pd(t1, t3, 0x20),
+                    _mm256_permute2f128_pd(t0, t2, 0x31),
+                    _mm256_permute2f128_pd(t1, t3, 0x31),
+                ];
+                for (l, row) in rows.into_iter().enumerate() {
+                    // SAFETY: `8 l + k < 32 <= out.len()`, and each entry holds 4 f64.
+                    _mm256_storeu_pd(out[8 * l + k].as_mut_ptr(), row);
+                }
             }
         }
     }
@@ -1415,6 +1567,7 @@ fn forces_batch_body<P: Pack, G, W, S>(
         gather,
         gather_edges: gather_w,
         scatter,
+        tail,
     } = moves;
     let width = P::WIDTH;
     let groups = cells.len() / width;
@@ -1432,7 +1585,7 @@ fn forces_batch_body<P: Pack, G, W, S>(
         .iter()
         .zip(out[8 * groups * width..].chunks_exact_mut(8))
     {
-        let f = cell_forces_from_edges(p, c, x, edges);
+        let f = tail(p, c, x, edges);
         for (o, f) in o.iter_mut().zip(f) {
             *o = [f[0], f[1], f[2], 0.0];
         }
@@ -1440,12 +1593,17 @@ fn forces_batch_body<P: Pack, G, W, S>(
 }
 
 /// How the batched kernel moves a batch's values into packs and out:
-/// corners, edge stretches, corner forces.
+/// corners, edge stretches, corner forces; and the kernel of the cells left
+/// over after the last whole pack.
 struct Moves<G, W, S> {
     gather: G,
     gather_edges: W,
     scatter: S,
+    tail: CellKernel,
 }
+
+/// The forces of one cell given the edge stretches by node.
+type CellKernel = fn(&CellParams, &[u32; 8], &[[f64; 3]], &[[f64; 3]]) -> [[f64; 3]; 8];
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
@@ -1462,11 +1620,14 @@ fn forces_batch_avx2(
         x,
         edges,
         out,
-        // The closures inherit this function's AVX2.
+        // SAFETY (each closure): they run inside this AVX2 function.
         Moves {
-            gather: |c: &[[u32; 8]], x: &[[f64; 3]]| avx2::gather4(c, x, [0, 1, 2, 3, 4, 5, 6, 7]),
-            gather_edges: |c: &[[u32; 8]], e: &[[f64; 3]]| avx2::gather_edges4(c, e),
-            scatter: |f: &[V3<avx2::F64x4>; 8], o: &mut [[f64; 4]]| avx2::scatter4(f, o),
+            gather: |c: &[[u32; 8]], x: &[[f64; 3]]| unsafe {
+                avx2::gather4(c, x, [0, 1, 2, 3, 4, 5, 6, 7])
+            },
+            gather_edges: |c: &[[u32; 8]], e: &[[f64; 3]]| unsafe { avx2::gather_edges4(c, e) },
+            scatter: |f: &[V3<avx2::F64x4>; 8], o: &mut [[f64; 4]]| unsafe { avx2::scatter4(f, o) },
+            tail: cell_forces_from_edges,
         },
     );
 }
@@ -1501,6 +1662,148 @@ pub(crate) fn forces_batch(
             gather: gather_corners::<LANES>,
             gather_edges: gather_edges::<LANES>,
             scatter: scatter_corners::<LANES>,
+            tail: cell_forces_from_edges,
+        },
+    );
+}
+
+/// Cells evaluated together by [`forces_batch_f32`] (AVX2 holds 8 `f32`).
+pub(crate) const LANES_F32: usize = 8;
+
+/// [`cell_forces_from_edges`] in single precision: the corners relative to
+/// corner 0 and the edge stretches are rounded to `f32` (differences taken
+/// in `f64` first, so that a cell far from the origin loses nothing to its
+/// placement), the kernel runs in `f32`, and the forces come back as `f64`.
+/// Every term of the kernel depends on differences of positions only.
+pub(crate) fn cell_forces_from_edges_f32(
+    p: &CellParams,
+    cell: &[u32; 8],
+    x: &[[f64; 3]],
+    edges: &[[f64; 3]],
+) -> [[f64; 3]; 8] {
+    let origin = x[cell[0] as usize];
+    let mut xc = [[0.0f32; 3]; 8];
+    for (xk, &v) in xc.iter_mut().zip(cell) {
+        let p = x[v as usize];
+        *xk = [
+            (p[0] - origin[0]) as f32,
+            (p[1] - origin[1]) as f32,
+            (p[2] - origin[2]) as f32,
+        ];
+    }
+    let mut w = [0.0f32; 12];
+    for (w, &(a, _, ax)) in w.iter_mut().zip(&CELL_EDGES) {
+        *w = edges[cell[a] as usize][ax] as f32;
+    }
+    let mut f = [[0.0f32; 3]; 8];
+    cell_forces_with_edges(p, &xc, &w, &mut f);
+    let mut out = [[0.0; 3]; 8];
+    for (o, f) in out.iter_mut().zip(f) {
+        *o = [f64::from(f[0]), f64::from(f[1]), f64::from(f[2])];
+    }
+    out
+}
+
+/// The corners of `L` cells relative to their corner 0, in `f32` lanes
+/// (portable path of [`forces_batch_f32`]).
+#[inline(always)]
+fn gather_corners_f32<const L: usize>(
+    cells: &[[u32; 8]],
+    x: &[[f64; 3]],
+) -> [V3<Lanes<f32, L>>; 8] {
+    let mut xl: [V3<Lanes<f32, L>>; 8] = [[Lanes::cst(0.0); 3]; 8];
+    for (k, xk) in xl.iter_mut().enumerate() {
+        for (l, cell) in cells.iter().enumerate() {
+            let (p, o) = (x[cell[k] as usize], x[cell[0] as usize]);
+            for c in 0..3 {
+                xk[c].0[l] = (p[c] - o[c]) as f32;
+            }
+        }
+    }
+    xl
+}
+
+/// The 12 edge stretches of `L` cells in `f32` lanes (portable path).
+#[inline(always)]
+fn gather_edges_f32<const L: usize>(cells: &[[u32; 8]], edges: &[[f64; 3]]) -> [Lanes<f32, L>; 12] {
+    let mut wl = [Lanes::cst(0.0); 12];
+    for (w, &(a, _, ax)) in wl.iter_mut().zip(&CELL_EDGES) {
+        for (l, cell) in cells.iter().enumerate() {
+            w.0[l] = edges[cell[a] as usize][ax] as f32;
+        }
+    }
+    wl
+}
+
+/// The `f32` lanes' corner forces out as `f64`, cell by cell (portable path).
+#[inline(always)]
+fn scatter_corners_f32<const L: usize>(f: &[V3<Lanes<f32, L>>; 8], out: &mut [[f64; 4]]) {
+    for l in 0..L {
+        for k in 0..8 {
+            out[8 * l + k] = [
+                f64::from(f[k][0].0[l]),
+                f64::from(f[k][1].0[l]),
+                f64::from(f[k][2].0[l]),
+                0.0,
+            ];
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn forces_batch_f32_avx2(
+    p: &CellParams,
+    cells: &[[u32; 8]],
+    x: &[[f64; 3]],
+    edges: &[[f64; 3]],
+    out: &mut [[f64; 4]],
+) {
+    forces_batch_body(
+        p,
+        cells,
+        x,
+        edges,
+        out,
+        // SAFETY (each closure): they run inside this AVX2 function.
+        Moves {
+            gather: |c: &[[u32; 8]], x: &[[f64; 3]]| unsafe { avx2::gather8_relative(c, x) },
+            gather_edges: |c: &[[u32; 8]], e: &[[f64; 3]]| unsafe { avx2::gather_edges8(c, e) },
+            scatter: |f: &[V3<avx2::F32x8>; 8], o: &mut [[f64; 4]]| unsafe { avx2::scatter8(f, o) },
+            tail: cell_forces_from_edges_f32,
+        },
+    );
+}
+
+/// [`forces_batch`] in single precision ([`cell_forces_from_edges_f32`]),
+/// 8 cells per AVX2 pass; the portable path performs the same operations
+/// per lane, so the same bits.
+pub(crate) fn forces_batch_f32(
+    p: &CellParams,
+    cells: &[[u32; 8]],
+    x: &[[f64; 3]],
+    edges: &[[f64; 3]],
+    out: &mut [[f64; 4]],
+) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU supports AVX2 (checked just above).
+            unsafe { forces_batch_f32_avx2(p, cells, x, edges, out) };
+            return;
+        }
+    }
+    forces_batch_body(
+        p,
+        cells,
+        x,
+        edges,
+        out,
+        Moves {
+            gather: gather_corners_f32::<LANES_F32>,
+            gather_edges: gather_edges_f32::<LANES_F32>,
+            scatter: scatter_corners_f32::<LANES_F32>,
+            tail: cell_forces_from_edges_f32,
         },
     );
 }

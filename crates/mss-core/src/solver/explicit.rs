@@ -63,7 +63,7 @@ use super::{
 };
 use crate::contact::Contact;
 use crate::model::ForceWorkspace;
-use crate::{BlockCsr, Model, Vec3};
+use crate::{BlockCsr, Model, Precision, Vec3};
 
 /// Nodes per parallel task.
 const CHUNK: usize = 1024;
@@ -142,6 +142,8 @@ pub struct ExplicitOptions {
     /// Divergence checks (inverted cells, exploding motion) every this many
     /// sub-steps; non-finite values are checked every sub-step.
     pub check_interval: u32,
+    /// Precision of the internal force pass ([`Precision`]).
+    pub precision: Precision,
 }
 
 impl Default for ExplicitOptions {
@@ -153,6 +155,7 @@ impl Default for ExplicitOptions {
             substep: false,
             unchecked: false,
             check_interval: 10,
+            precision: Precision::F64,
         }
     }
 }
@@ -503,7 +506,7 @@ impl Explicit {
     fn conservative_forces(&mut self, problem: &Problem, state: &State) {
         let model = problem.model();
         let (x, t) = (&state.x, state.time);
-        model.internal_forces_with(x, &mut self.ws, &mut self.f_cons);
+        model.internal_forces_in(self.opts.precision, x, &mut self.ws, &mut self.f_cons);
         for l in problem.loads() {
             l.add_forces(model, t, x, 1.0, &mut self.f_cons);
         }

@@ -56,7 +56,7 @@ pub use statics::{
 use crate::constraints::{ConstraintError, ConstraintSpec, Constraints};
 use crate::contact::Contact;
 use crate::loads::{Damping, Load, LoadError, LoadSpec};
-use crate::{BlockCsr, Model, Vec3};
+use crate::{BlockCsr, Model, Precision, Vec3};
 
 /// Why a problem could not be assembled.
 #[derive(Debug, Error, Clone, PartialEq)]
@@ -753,6 +753,8 @@ pub struct IntegratorSettings {
     pub max_newton: u32,
     /// Linear solver of the Newton steps (implicit schemes).
     pub linear_solver: LinearSolverKind,
+    /// Precision of the explicit force pass; Newton solvers refuse `F32`.
+    pub precision: Precision,
 }
 
 impl Default for IntegratorSettings {
@@ -764,6 +766,7 @@ impl Default for IntegratorSettings {
             rtol: DEFAULT_NEWTON_RTOL,
             max_newton: DEFAULT_MAX_NEWTON,
             linear_solver: LinearSolverKind::Auto,
+            precision: Precision::F64,
         }
     }
 }
@@ -803,6 +806,7 @@ fn explicit_factory(scheme: ExplicitScheme) -> IntegratorFactory {
             scheme,
             safety: s.safety,
             substep: s.substep,
+            precision: s.precision,
             ..ExplicitOptions::default()
         };
         Ok(Box::new(Explicit::new(problem, opts)?) as Box<dyn Integrator>)
@@ -823,6 +827,13 @@ impl Default for Integrators {
         known.register(
             "implicit",
             std::sync::Arc::new(|problem: &Problem, s: &IntegratorSettings| {
+                if s.precision != Precision::F64 {
+                    return Err(SolverError::BadOption(format!(
+                        "precision \"{}\" is for explicit solvers: Newton's method needs f64 \
+                         forces and tangents",
+                        s.precision.name()
+                    )));
+                }
                 let opts = ImplicitOptions {
                     dt: s.dt.unwrap_or(ImplicitOptions::default().dt),
                     max_newton: s.max_newton,

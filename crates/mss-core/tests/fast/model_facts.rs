@@ -4,7 +4,7 @@
 use hexmesh::Lattice;
 use mss_core::model::{HourglassControl, PaperModel, SpringsOnly, Volumetric, VolumetricBarrier};
 use mss_core::{
-    BlockCsr, CellCoefficients, Material, MaterialError, Model, Parameterization, Vec3,
+    BlockCsr, CellCoefficients, Material, MaterialError, Model, Parameterization, Precision, Vec3,
 };
 
 /// Deterministic pseudo-random numbers in [-1, 1) (xorshift).
@@ -703,5 +703,100 @@ fn internal_forces_are_balanced_and_frame_invariant() {
         for (a, b) in f.iter().zip(&g) {
             assert!((r * a - b).norm() < 1e-9 * scale, "{}", param.name());
         }
+    }
+}
+
+/// The single-precision force pass: the same bits on the AVX2 and portable
+/// paths and for any thread count; within `1e-7 / strain` of the `f64`
+/// forces (relative to the largest force), also for a body far from the
+/// origin (each cell is rounded relative to its corner 0).
+#[test]
+fn single_precision_forces_are_close_and_reproducible() {
+    let l = Lattice::from_cells(
+        [0.0; 3],
+        0.05,
+        [9, 7, 6],
+        (0..9u32)
+            .flat_map(|i| (0..7u32).flat_map(move |j| (0..6u32).map(move |k| [i, j, k])))
+            .filter(|&[i, j, k]| (i * 3 + j * 5 + k) % 11 != 4),
+    )
+    .unwrap();
+    let volumetric_hg = with_hourglass(Box::new(VolumetricBarrier));
+    for param in [
+        &PaperModel as &dyn Parameterization,
+        &SpringsOnly,
+        &volumetric_hg,
+    ] {
+        let model = Model::new(&l, mat(1.0e5, 0.3, 1000.0), param).unwrap();
+        // A homogeneous strain of about 1 % and a little noise.
+        let x: Vec<Vec3> = model
+            .rest_positions()
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                let s = ((i as f64) * 0.618).fract() - 0.5;
+                Vec3::new(1.01 * p.x + 0.002 * p.y, 0.995 * p.y, p.z + 0.01 * p.x)
+                    + Vec3::new(s, -s, 0.5 * s) * 0.002 * model.h()
+            })
+            .collect();
+        let run = |x: &[Vec3], precision: Precision, threads: usize, scalar: bool| {
+            crate::on_threads(threads, || {
+                let mut ws = model.workspace();
+                let mut f = vec![Vec3::zeros(); x.len()];
+                if scalar {
+                    model.internal_forces_scalar_in(precision, x, &mut ws, &mut f);
+                } else {
+                    model.internal_forces_in(precision, x, &mut ws, &mut f);
+                }
+                f
+            })
+        };
+        let bits = |a: &[Vec3], b: &[Vec3]| {
+            a.iter()
+                .zip(b)
+                .all(|(p, q)| (0..3).all(|d| p[d].to_bits() == q[d].to_bits()))
+        };
+        let exact = run(&x, Precision::F64, 1, false);
+        let single = run(&x, Precision::F32, 1, false);
+        assert!(
+            bits(&single, &run(&x, Precision::F32, 1, true)),
+            "{}",
+            param.name()
+        );
+        assert!(
+            bits(&single, &run(&x, Precision::F32, 3, false)),
+            "{}",
+            param.name()
+        );
+        let scale = exact.iter().map(|f| f.norm()).fold(0.0, f64::max);
+        let err = |f: &[Vec3]| {
+            exact
+                .iter()
+                .zip(f)
+                .map(|(a, b)| (a - b).norm())
+                .fold(0.0, f64::max)
+                / scale
+        };
+        // f32 rounds at 6e-8; the strains here are about 0.5 %.
+        assert!(
+            err(&single) < 1e-7 / 5e-3 * 4.0,
+            "{}: {:e}",
+            param.name(),
+            err(&single)
+        );
+        assert!(err(&single) > 0.0, "the f32 path ran in f64");
+        // Far from the origin the f64 forces lose a little to the
+        // placement, the f32 ones nothing more.
+        let far: Vec<Vec3> = x
+            .iter()
+            .map(|p| p + Vec3::new(1.0e3, -2.0e3, 5.0e2))
+            .collect();
+        let far_single = run(&far, Precision::F32, 1, false);
+        assert!(
+            err(&far_single) < 1e-7 / 5e-3 * 4.0,
+            "{}: {:e}",
+            param.name(),
+            err(&far_single)
+        );
     }
 }

@@ -10,7 +10,7 @@ use mss_core::solver::{
     IntegratorSettings, Integrators, Problem, SolverError, State, StaticOptions,
     explicit_time_step_limit, solve_static,
 };
-use mss_core::{Mat3, Material, Model, Parameterization, Vec3};
+use mss_core::{Mat3, Material, Model, Parameterization, Precision, Vec3};
 
 fn free_block(param: &dyn Parameterization) -> Model {
     let lattice = Lattice::block([4, 4, 4], 0.25, [0.0; 3]).unwrap();
@@ -640,4 +640,54 @@ fn large_deflection_static_solve_takes_few_newton_iterations() {
         .fold(0.0, f64::min);
     // Measured 0.10811 m (also with the former line search).
     assert!((tip - 0.10811).abs() < 1e-4, "tip {tip}");
+}
+
+/// A damped explicit run with the single-precision force pass settles where
+/// the `f64` one does (the cantilever sags to its static deflection in
+/// both), and the Newton solvers refuse `f32` by name.
+#[test]
+fn single_precision_explicit_run_matches_double() {
+    let p = damped_cantilever(20.0);
+    let run = |precision: Precision| {
+        let mut ex = Explicit::new(
+            &p,
+            ExplicitOptions {
+                precision,
+                ..ExplicitOptions::default()
+            },
+        )
+        .unwrap();
+        let mut s = State::at_rest(p.model());
+        while s.time < 1.5 {
+            ex.step(&p, &mut s).unwrap();
+        }
+        s
+    };
+    let (double, single) = (run(Precision::F64), run(Precision::F32));
+    let diff = rel_diff(p.model(), &single, &double);
+    // The error of f32 forces is about 1e-7 / strain relative (positions
+    // rounded at 6e-8 of a cell against strains of 1e-4 here).
+    let umax = double
+        .displacements(p.model())
+        .iter()
+        .map(|u| u.norm())
+        .fold(0.0, f64::max);
+    // The bar is 0.4 m long: its bending strain is of the order of umax / L.
+    let strain = umax / 0.4;
+    println!("f32 against f64: {diff:.2e} of the largest displacement (strain ~ {strain:.1e})");
+    assert!(diff > 0.0 && diff < 20.0 * 6e-8 / strain, "{diff:e}");
+    let settings = IntegratorSettings {
+        precision: Precision::F32,
+        ..IntegratorSettings::default()
+    };
+    let err = Integrators::default()
+        .build("implicit", &p, &settings)
+        .err()
+        .expect("implicit refuses f32");
+    assert!(err.to_string().contains("f32"), "{err}");
+    assert!(
+        Integrators::default()
+            .build("explicit", &p, &settings)
+            .is_ok()
+    );
 }

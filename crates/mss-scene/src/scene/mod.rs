@@ -487,6 +487,9 @@ impl Scene {
         if !self.motions.is_empty() {
             return not_yet("[[motions]]", "a prescribed motion");
         }
+        if self.solver.precision != mss_core::Precision::F64 {
+            return not_yet("[solver] precision", "a single-precision force pass");
+        }
         if !(self.loads.tractions.is_empty()
             && self.loads.drags.is_empty()
             && self.loads.custom.is_empty())

@@ -2,6 +2,7 @@
 
 use std::fmt;
 
+use mss_core::Precision;
 use mss_core::loads::Damping;
 use mss_core::solver::{
     DEFAULT_MAX_NEWTON, DEFAULT_NEWTON_RTOL, ExplicitOptions, Integrators, LinearSolverKind,
@@ -125,6 +126,12 @@ pub struct SolverSection {
     /// (default false).
     #[serde(default)]
     pub accept_unstable: bool,
+    /// Explicit solvers: precision of the internal force pass, `"f64"`
+    /// (default) or `"f32"` (faster, for interactive use; positions and
+    /// velocities stay `f64`; see [`Precision`]). Newton solvers (implicit,
+    /// static) refuse `"f32"`.
+    #[serde(default)]
+    pub precision: Precision,
 }
 
 fn default_load_steps() -> u32 {
@@ -163,6 +170,7 @@ impl Default for SolverSection {
             load_steps: default_load_steps(),
             linear: false,
             accept_unstable: false,
+            precision: Precision::F64,
         }
     }
 }
@@ -219,6 +227,16 @@ impl SolverSection {
             return bad(
                 "load_steps",
                 format!("= {}; use 1 to 1000000 increments", s.load_steps),
+            );
+        }
+        if s.precision != Precision::F64 && s.is_static() {
+            return bad(
+                "precision",
+                format!(
+                    "= \"{}\" with kind = \"static\"; Newton's method needs f64 forces and \
+                     tangents: remove the key, or use an explicit solver",
+                    s.precision.name()
+                ),
             );
         }
         Ok(())

@@ -915,3 +915,49 @@ fn the_summary_carries_the_peak_displacement_and_its_time() {
         s.peak_displacement_time
     );
 }
+
+/// `[solver] precision = "f32"` reaches the explicit force pass (the run
+/// ends within f32's accuracy of the f64 one, not on its bits) and the
+/// Newton solvers refuse it with the key named.
+#[test]
+fn solver_precision_reaches_the_explicit_run_and_newton_refuses_it() {
+    let run = |extra: &str| {
+        let text =
+            format!("[solver]\nduration = 0.1\ndamping = 5.0\n{extra}[output]\nlast_only = true\n");
+        let job = Job::prepare(input(&text), Registry::default(), &no_progress).unwrap();
+        let out = tempfile::tempdir().unwrap();
+        job.run(out.path(), &no_progress, &Cancel::new())
+            .unwrap()
+            .max_displacement
+    };
+    let double = run("");
+    let single = run("precision = \"f32\"\n");
+    assert_eq!(double, run("precision = \"f64\"\n"));
+    assert!(single != double, "the f32 pass ran in f64");
+    assert!(
+        (single - double).abs() < 1e-3 * double,
+        "{single} vs {double}"
+    );
+    let err = SceneInput::from_toml(
+        &scene("[solver]\nkind = \"static\"\nprecision = \"f32\"\n"),
+        "s.toml",
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("[solver] precision"), "{err}");
+    let text = "[solver]\nkind = \"implicit\"\nprecision = \"f32\"\nduration = 0.01\n";
+    let err = match Job::prepare(input(text), Registry::default(), &no_progress) {
+        Err(e) => e.to_string(),
+        Ok(job) => {
+            let out = tempfile::tempdir().unwrap();
+            job.run(out.path(), &no_progress, &Cancel::new())
+                .unwrap_err()
+                .to_string()
+        }
+    };
+    assert!(err.contains("f32") && err.contains("[solver]"), "{err}");
+    let err = SceneInput::from_toml(&scene("[solver]\nprecision = \"f16\"\n"), "s.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("precision") && err.contains("f32"), "{err}");
+}

@@ -152,6 +152,14 @@ fn what_a_2d_body_cannot_take_is_refused_by_key() {
             "[[fixed]] #1",
             "no z faces",
         ),
+        (
+            (
+                "kind = \"explicit\"",
+                "kind = \"explicit\"\nprecision = \"f32\"",
+            ),
+            "[solver] precision",
+            "2D",
+        ),
     ] {
         let e = prepare(&text.replace(change.0, change.1)).unwrap_err();
         assert!(e.contains(key) && e.contains(words), "{change:?}: {e}");
