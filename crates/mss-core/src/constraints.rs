@@ -538,10 +538,20 @@ impl ConstraintSpec {
 
 /// Resolved constraints: for every node and component, whether it is held and
 /// by which motion.
+///
+/// Stored as one byte per node (the explicit step reads every node's mask
+/// twice per sub-step, and most nodes are free) and a list of the held nodes
+/// with their motions, instead of a motion slot per component of every node
+/// (24 bytes per node).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Constraints {
-    /// Per node, per component: `None` free, `Some(k)` held by `motions[k]`.
-    held: Vec<[Option<u32>; 3]>,
+    /// Per node: bit `d` set when component `d` is held.
+    held_bits: Vec<u8>,
+    /// The nodes with a held component, in increasing order.
+    held_nodes: Vec<u32>,
+    /// For each of `held_nodes`, per component: `None` free, `Some(k)` held
+    /// by `motions[k]`.
+    held_by: Vec<[Option<u32>; 3]>,
     motions: Vec<Motion>,
     num_held: usize,
 }
@@ -550,7 +560,9 @@ impl Constraints {
     /// No constraint on any of `num_nodes` nodes.
     pub fn none(num_nodes: usize) -> Self {
         Self {
-            held: vec![[None; 3]; num_nodes],
+            held_bits: vec![0; num_nodes],
+            held_nodes: Vec::new(),
+            held_by: Vec::new(),
             motions: Vec::new(),
             num_held: 0,
         }
@@ -579,22 +591,37 @@ impl Constraints {
         motion: Motion,
     ) -> Result<(), ConstraintError> {
         motion.validate()?;
-        if let Some(&index) = nodes.iter().find(|&&i| i as usize >= self.held.len()) {
+        if let Some(&index) = nodes.iter().find(|&&i| i as usize >= self.held_bits.len()) {
             return Err(ConstraintError::NodeIndex {
                 index,
-                count: self.held.len(),
+                count: self.held_bits.len(),
             });
         }
         let k = self.motions.len() as u32;
         self.motions.push(motion);
+        let mut by_node: std::collections::BTreeMap<u32, [Option<u32>; 3]> = self
+            .held_nodes
+            .iter()
+            .copied()
+            .zip(self.held_by.iter().copied())
+            .collect();
         for &n in nodes {
-            for d in 0..3 {
-                if dofs.0[d] {
-                    self.held[n as usize][d] = Some(k);
+            let entry = by_node.entry(n).or_insert([None; 3]);
+            for (d, (by, &held)) in entry.iter_mut().zip(&dofs.0).enumerate() {
+                if held {
+                    *by = Some(k);
+                    self.held_bits[n as usize] |= 1 << d;
                 }
             }
         }
-        self.num_held = self.held.iter().flatten().filter(|h| h.is_some()).count();
+        by_node.retain(|_, by| by.iter().any(Option::is_some));
+        (self.held_nodes, self.held_by) = by_node.into_iter().unzip();
+        self.num_held = self
+            .held_by
+            .iter()
+            .flatten()
+            .filter(|h| h.is_some())
+            .count();
         Ok(())
     }
 
@@ -604,9 +631,16 @@ impl Constraints {
     pub fn union(parts: &[Constraints]) -> Self {
         let mut out = Self::none(0);
         for part in parts {
-            let shift = out.motions.len() as u32;
-            out.held
-                .extend(part.held.iter().map(|h| h.map(|k| k.map(|k| k + shift))));
+            let motion_shift = out.motions.len() as u32;
+            let node_shift = out.held_bits.len() as u32;
+            out.held_bits.extend_from_slice(&part.held_bits);
+            out.held_nodes
+                .extend(part.held_nodes.iter().map(|n| n + node_shift));
+            out.held_by.extend(
+                part.held_by
+                    .iter()
+                    .map(|h| h.map(|k| k.map(|k| k + motion_shift))),
+            );
             out.motions.extend_from_slice(&part.motions);
             out.num_held += part.num_held;
         }
@@ -620,7 +654,7 @@ impl Constraints {
 
     /// Number of nodes this applies to.
     pub fn num_nodes(&self) -> usize {
-        self.held.len()
+        self.held_bits.len()
     }
 
     /// Number of held dofs (components).
@@ -631,20 +665,33 @@ impl Constraints {
     /// Whether component `d` of node `n` is held.
     #[inline]
     pub fn is_held(&self, n: usize, d: usize) -> bool {
-        self.held[n][d].is_some()
+        self.held_bits[n] & (1 << d) != 0
     }
 
     /// The per-component held mask of node `n`.
     #[inline]
     pub fn mask(&self, n: usize) -> [bool; 3] {
-        self.held[n].map(|h| h.is_some())
+        let bits = self.held_bits[n];
+        [bits & 1 != 0, bits & 2 != 0, bits & 4 != 0]
+    }
+
+    /// Every node's held components as bits (bit `d` for component `d`),
+    /// for loops over all nodes.
+    pub fn mask_bits(&self) -> &[u8] {
+        &self.held_bits
+    }
+
+    /// The nodes with at least one held component, in increasing order.
+    pub fn held_nodes(&self) -> &[u32] {
+        &self.held_nodes
     }
 
     /// Nodes with every component held.
     pub fn fully_fixed_nodes(&self) -> Vec<u32> {
-        (0..self.held.len())
-            .filter(|&n| self.held[n].iter().all(|h| h.is_some()))
-            .map(|n| n as u32)
+        self.held_nodes
+            .iter()
+            .copied()
+            .filter(|&n| self.held_bits[n as usize] == 0b111)
             .collect()
     }
 
@@ -661,8 +708,36 @@ impl Constraints {
     /// whose kinks fall on step boundaries).
     #[inline]
     pub fn prescribe(&self, n: usize, t: f64, dt: f64, rest: &Vec3, x: &mut Vec3, v: &mut Vec3) {
+        if self.held_bits[n] == 0 {
+            return;
+        }
+        let Ok(slot) = self.held_nodes.binary_search(&(n as u32)) else {
+            return;
+        };
+        self.prescribe_slot(slot, t, dt, rest, x, v);
+    }
+
+    /// [`Constraints::prescribe`] for every held node of `x` and `v` (one
+    /// entry per node), visiting only the held ones.
+    pub fn prescribe_all(&self, t: f64, dt: f64, rest: &[Vec3], x: &mut [Vec3], v: &mut [Vec3]) {
+        for (slot, &n) in self.held_nodes.iter().enumerate() {
+            let n = n as usize;
+            self.prescribe_slot(slot, t, dt, &rest[n], &mut x[n], &mut v[n]);
+        }
+    }
+
+    #[inline]
+    fn prescribe_slot(
+        &self,
+        slot: usize,
+        t: f64,
+        dt: f64,
+        rest: &Vec3,
+        x: &mut Vec3,
+        v: &mut Vec3,
+    ) {
         for d in 0..3 {
-            if let Some(k) = self.held[n][d] {
+            if let Some(k) = self.held_by[slot][d] {
                 match &self.motions[k as usize] {
                     Motion::Fixed => v[d] = 0.0,
                     m => {
@@ -799,6 +874,49 @@ mod tests {
         assert_eq!(x, Vec3::new(2.0, 0.0, 0.0));
         assert_eq!(v, Vec3::new(1.0, 0.0, 0.0));
         assert_eq!(c.fully_fixed_nodes(), vec![0]);
+    }
+
+    #[test]
+    fn union_keeps_each_bodys_holds_and_prescribe_all_matches_each_node() {
+        let p = grid(1);
+        let mut a = Constraints::none(p.len());
+        a.hold(
+            &[3, 1],
+            Dofs([false, true, false]),
+            Motion::Velocity([0.0, 2.0, 0.0]),
+        )
+        .unwrap();
+        a.fix(&[1]).unwrap();
+        let mut b = Constraints::none(p.len());
+        b.hold(&[0], Dofs::ALL, Motion::Velocity([1.0, 0.0, 0.0]))
+            .unwrap();
+        // Holding nothing new leaves the lists as they were.
+        b.hold(&[], Dofs::ALL, Motion::Fixed).unwrap();
+        let u = Constraints::union(&[a.clone(), b]);
+        assert_eq!(u.num_nodes(), 2 * p.len());
+        assert_eq!(u.held_nodes(), &[1, 3, p.len() as u32]);
+        assert_eq!(u.num_held_dofs(), 3 + 1 + 3);
+        assert_eq!(u.mask(3), [false, true, false]);
+        assert_eq!(u.mask(1), [true, true, true]);
+        assert_eq!(u.mask(p.len()), [true, true, true]);
+        assert_eq!(u.mask(p.len() + 3), [false; 3]);
+        assert_eq!(u.fully_fixed_nodes(), vec![1, p.len() as u32]);
+
+        let rest: Vec<Vec3> = p.iter().chain(&p).copied().collect();
+        let x0: Vec<Vec3> = rest.iter().map(|r| r + Vec3::new(0.1, 0.2, 0.3)).collect();
+        let v0 = vec![Vec3::new(7.0, 8.0, 9.0); rest.len()];
+        let (mut x_all, mut v_all) = (x0.clone(), v0.clone());
+        u.prescribe_all(1.5, 0.5, &rest, &mut x_all, &mut v_all);
+        for n in 0..rest.len() {
+            let (mut x, mut v) = (x0[n], v0[n]);
+            u.prescribe(n, 1.5, 0.5, &rest[n], &mut x, &mut v);
+            assert_eq!((x, v), (x_all[n], v_all[n]), "node {n}");
+        }
+        // The second body's node 0 follows its own motion, not the first's.
+        assert_eq!(x_all[p.len()], rest[p.len()] + Vec3::new(1.5, 0.0, 0.0));
+        assert_eq!(x_all[3].y, rest[3].y + 3.0);
+        assert_eq!(v_all[1], Vec3::zeros());
+        assert_eq!(x_all[2], x0[2]);
     }
 
     #[test]

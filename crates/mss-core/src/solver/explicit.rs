@@ -522,61 +522,72 @@ impl Explicit {
     /// contact forces and damping, on free components only. Returns false on
     /// non-finite values.
     fn kick(&self, problem: &Problem, v: &mut [Vec3], h: f64) -> bool {
-        let model = problem.model();
-        let masses = model.masses();
-        let cons = problem.constraints();
+        let masses = problem.model().masses();
+        let held = problem.constraints().mask_bits();
         let d = problem.damping();
-        let f = &self.f_cons;
-        let fc = &self.f_contact;
-        let kv = &self.kv;
+        // The optional terms are decided once per kick, not per node, so
+        // that the common loop (no contact, no stiffness damping) is a
+        // straight pass over four arrays.
+        let extra = match (self.f_contact.is_empty(), self.kv.is_empty()) {
+            (true, true) => Extra::None,
+            (false, true) => Extra::Contact,
+            _ => Extra::All,
+        };
         v.par_chunks_mut(CHUNK)
             .enumerate()
             .map(|(ci, vc)| {
-                let mut ok = true;
-                for (k, vi) in vc.iter_mut().enumerate() {
-                    let i = ci * CHUNK + k;
-                    let mut force = f[i] - *vi * (d.alpha * masses[i]);
-                    if !fc.is_empty() {
-                        force += fc[i];
+                let range = ci * CHUNK..ci * CHUNK + vc.len();
+                let kick = ChunkKick {
+                    f: &self.f_cons[range.clone()],
+                    masses: &masses[range.clone()],
+                    held: &held[range.clone()],
+                    alpha: d.alpha,
+                    h,
+                };
+                match extra {
+                    Extra::None => kick.apply(vc, |_, force| force),
+                    Extra::Contact => {
+                        let fc = &self.f_contact[range];
+                        kick.apply(vc, |k, force| force + fc[k])
                     }
-                    if !kv.is_empty() {
-                        force -= kv[i] * d.beta;
+                    Extra::All => {
+                        let start = range.start;
+                        kick.apply(vc, |k, mut force| {
+                            let i = start + k;
+                            if !self.f_contact.is_empty() {
+                                force += self.f_contact[i];
+                            }
+                            if !self.kv.is_empty() {
+                                force -= self.kv[i] * d.beta;
+                            }
+                            force
+                        })
                     }
-                    let dv = force * (h / masses[i]);
-                    let mask = cons.mask(i);
-                    for c in 0..3 {
-                        if !mask[c] {
-                            vi[c] += dv[c];
-                        }
-                    }
-                    ok &= all_finite(vi);
                 }
-                ok
             })
             .reduce(|| true, |a, b| a && b)
     }
 
     /// `x += dt v`, then held components prescribed at `t1`.
     fn drift(problem: &Problem, state: &mut State, dt: f64, t1: f64) -> bool {
-        let model = problem.model();
-        let rest = model.rest_positions();
-        let cons = problem.constraints();
-        state
+        let ok = state
             .x
             .par_chunks_mut(CHUNK)
-            .zip(state.v.par_chunks_mut(CHUNK))
-            .enumerate()
-            .map(|(ci, (xc, vc))| {
+            .zip(state.v.par_chunks(CHUNK))
+            .map(|(xc, vc)| {
                 let mut ok = true;
-                for (k, (xi, vi)) in xc.iter_mut().zip(vc.iter_mut()).enumerate() {
-                    let i = ci * CHUNK + k;
+                for (xi, vi) in xc.iter_mut().zip(vc) {
                     *xi += *vi * dt;
-                    cons.prescribe(i, t1, dt, &rest[i], xi, vi);
                     ok &= all_finite(xi);
                 }
                 ok
             })
-            .reduce(|| true, |a, b| a && b)
+            .reduce(|| true, |a, b| a && b);
+        let rest = problem.model().rest_positions();
+        problem
+            .constraints()
+            .prescribe_all(t1, dt, rest, &mut state.x, &mut state.v);
+        ok
     }
 
     fn substep(&mut self, problem: &Problem, state: &mut State) -> bool {
@@ -1088,6 +1099,50 @@ impl Explicit {
             substeps,
             newton_iterations: 0,
         })
+    }
+}
+
+/// The terms a kick adds beyond the conservative force and mass damping.
+#[derive(Clone, Copy)]
+enum Extra {
+    None,
+    Contact,
+    /// Contact (when there is any) and stiffness damping.
+    All,
+}
+
+/// One chunk's share of a kick.
+struct ChunkKick<'a> {
+    f: &'a [Vec3],
+    masses: &'a [f64],
+    held: &'a [u8],
+    alpha: f64,
+    h: f64,
+}
+
+impl ChunkKick<'_> {
+    /// `v += h F / m` on the free components of the chunk's nodes, with
+    /// `F = complete(k, f - alpha m v)` (`k`: index in the chunk). Returns
+    /// false on non-finite values.
+    #[inline(always)]
+    fn apply(&self, v: &mut [Vec3], complete: impl Fn(usize, Vec3) -> Vec3) -> bool {
+        let mut ok = true;
+        let nodes = v.iter_mut().zip(self.f).zip(self.masses).zip(self.held);
+        for (k, (((vi, &f), &m), &held)) in nodes.enumerate() {
+            let force = complete(k, f - *vi * (self.alpha * m));
+            let dv = force * (self.h / m);
+            if held == 0 {
+                *vi += dv;
+            } else {
+                for c in 0..3 {
+                    if held & (1 << c) == 0 {
+                        vi[c] += dv[c];
+                    }
+                }
+            }
+            ok &= all_finite(vi);
+        }
+        ok
     }
 }
 

@@ -316,10 +316,8 @@ impl Problem {
     /// `state.time` (fixed ones keep their position and get zero velocity).
     pub fn apply_constraints(&self, state: &mut State) {
         let rest = self.model.rest_positions();
-        let t = state.time;
-        for (n, ((r, x), v)) in rest.iter().zip(&mut state.x).zip(&mut state.v).enumerate() {
-            self.constraints.prescribe(n, t, 0.0, r, x, v);
-        }
+        self.constraints
+            .prescribe_all(state.time, 0.0, rest, &mut state.x, &mut state.v);
     }
 }
 
