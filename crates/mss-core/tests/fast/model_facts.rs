@@ -639,13 +639,21 @@ fn simd_and_scalar_paths_agree_bitwise() {
             &Volumetric,
             &SpringsOnly,
             &volumetric_hg,
+            &VolumetricBarrier,
         ]
         .map(|p| (l, p))
     }) {
         let m = mat(100.0, 0.3, 1.0);
         let single = Model::new(l, m, param).unwrap();
         let multi = Model::with_cell_materials(l, &[m, m], &vec![1; l.num_cells()], param).unwrap();
-        let x = deformed(&single, 9);
+        let mut x = deformed(&single, 9);
+        if param.name() == VolumetricBarrier.name() {
+            // Crushed along z past the barrier's knee (J < 0.1) in some
+            // cells and not in others: both sides of its law.
+            for (p, r) in x.iter_mut().zip(single.rest_positions()) {
+                p.z = r.z * (0.04 + 0.5 * r.x);
+            }
+        }
         let (a, b) = (forces(&single, &x), forces(&multi, &x));
         assert!(
             a.iter()
