@@ -6,7 +6,7 @@
 use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use hexmesh::image::ImageLattice;
 use mss_core::Model;
@@ -248,6 +248,12 @@ pub struct RunSummary {
     /// Each body's figures (one entry without `[[bodies]]`); the fields
     /// above are the totals, or the first body's for its mesh.
     pub bodies: Vec<BodySummary>,
+    /// What the load check before a dynamic run found, in one line (as
+    /// `mss check` prints it), or that it was stopped after
+    /// [`Limits::load_check_seconds`](crate::limits::Limits::load_check_seconds);
+    /// `None` when no check ran (a static run, a resumed or free body, or
+    /// `accept_unstable`).
+    pub load_check: Option<String>,
 }
 
 /// What a run counts as it goes, kept across a resume by its checkpoint.
@@ -466,6 +472,53 @@ impl Job {
         )
     }
 
+    /// [`Job::load_check`] stopped by `cancel`, or after `budget` seconds
+    /// when one is given; also says whether the budget stopped it.
+    fn load_check_within(
+        &self,
+        mechanisms_at_rest: bool,
+        cancel: &Cancel,
+        budget: Option<f64>,
+    ) -> (LoadCheck, bool) {
+        let Some(budget) = budget else {
+            return (self.load_check(mechanisms_at_rest, &cancel.0), false);
+        };
+        if budget <= 0.0 {
+            let skipped = LoadCheck::Skipped {
+                reason: "no time for it".into(),
+            };
+            return (skipped, true);
+        }
+        let stop = AtomicBool::new(false);
+        let over_budget = AtomicBool::new(false);
+        let done = AtomicBool::new(false);
+        let check = std::thread::scope(|scope| {
+            // A watchdog rather than a deadline inside the solver: the
+            // solver already stops at its cancel flag within an iteration.
+            scope.spawn(|| {
+                let started = Instant::now();
+                while !done.load(Ordering::Relaxed) {
+                    if cancel.is_cancelled() {
+                        stop.store(true, Ordering::Relaxed);
+                        return;
+                    }
+                    if started.elapsed().as_secs_f64() >= budget {
+                        over_budget.store(true, Ordering::Relaxed);
+                        stop.store(true, Ordering::Relaxed);
+                        return;
+                    }
+                    std::thread::sleep(Duration::from_millis(10));
+                }
+            });
+            let check = self.load_check(mechanisms_at_rest, &stop);
+            done.store(true, Ordering::Relaxed);
+            check
+        });
+        let stopped_by_budget =
+            over_budget.load(Ordering::Relaxed) && matches!(check, LoadCheck::Skipped { .. });
+        (check, stopped_by_budget)
+    }
+
     /// Before a dynamic run with a model that is not the default's kind
     /// (hourglass control and the barrier volumetric law): solves the
     /// scene's load statically ([`LoadCheck`]) and refuses the run when that
@@ -475,30 +528,47 @@ impl Job {
     /// cells turned inside out or end zigzagging (docs/robustness.md);
     /// `[solver] accept_unstable = true` runs them anyway.
     /// A cancelled check decides nothing: the run then stops at its first
-    /// step, as interrupted.
+    /// step, as interrupted. Returns the check's verdict in a line
+    /// ([`LoadCheck::describe`]), if it ran.
     fn refuse_if_it_would_fold(
         &self,
         progress: &ProgressFn<'_>,
         cancel: &Cancel,
-    ) -> Result<(), JobError> {
+    ) -> Result<Option<String>, JobError> {
         let model = self.problem.model();
         let barrier = (0..model.num_cells()).all(|c| {
             let co = model.cell_coefficients(c);
             co.volumetric_barrier && co.volumetric_lambda > 0.0
         });
         if self.input.scene.solver.accept_unstable {
-            return Ok(());
+            return Ok(None);
         }
         let default_kind = barrier && mss_core::modes::cells_are_rigid(model);
         // A free body (held by obstacles or by nothing) has no static
         // equilibrium to check: its rigid motions are no defect.
         let free_body = problem_is_free(&self.problem);
         if default_kind && free_body {
-            return Ok(());
+            return Ok(None);
         }
         progress(Progress::Solving);
-        let check = self.load_check(free_body, &cancel.0);
+        // The default model's check only warns: the run does not wait for
+        // it longer than the limits say.
+        let budget = default_kind.then_some(self.limits.load_check_seconds);
+        let (check, over_budget) = self.load_check_within(free_body, cancel, budget);
         progress(Progress::StageDone);
+        if over_budget {
+            log::info!(
+                "{}: the load check was stopped after {} s, before its verdict (the run does \
+                 not wait for it; `mss check` runs it to the end)",
+                self.input.name(),
+                self.limits.load_check_seconds
+            );
+            return Ok(Some(format!(
+                "stopped after {} s, before its verdict",
+                self.limits.load_check_seconds
+            )));
+        }
+        let verdict = Some(check.describe());
         if default_kind {
             // The default model runs whatever the check says (it resists
             // folding and collapse), but the user learns before the run what
@@ -512,7 +582,7 @@ impl Job {
             {
                 log::warn!("{}: {warning}", self.input.name());
             }
-            return Ok(());
+            return Ok(verdict);
         }
         let name = model.parameterization_name();
         let reason = match check {
@@ -533,7 +603,7 @@ impl Job {
                  has no barrier): its cells would be flattened through and turn inside out",
                 100.0 * load_factor
             ),
-            _ => return Ok(()),
+            _ => return Ok(verdict),
         };
         Err(JobError::WouldFold {
             scene: self.input.name(),
@@ -559,9 +629,11 @@ impl Job {
         let plan = self.plan;
         let s = &scene.solver;
         let integrator = self.input.integrator(&self.registry, problem, &plan)?;
-        if integrator.is_some() && resume.is_none() {
-            self.refuse_if_it_would_fold(&progress, cancel)?;
-        }
+        let load_check = if integrator.is_some() && resume.is_none() {
+            self.refuse_if_it_would_fold(&progress, cancel)?
+        } else {
+            None
+        };
         self.check_disk_space(out_dir)?;
         let mut state = State::at_rest(problem.model());
         problem.apply_constraints(&mut state);
@@ -783,6 +855,7 @@ impl Job {
                 0.0
             },
             bodies: body_summaries,
+            load_check,
         })
     }
 

@@ -29,8 +29,12 @@ pub const DEFAULT_MEMORY_FRACTION: f64 = 0.75;
 /// Memory assumed when the physical memory cannot be read (bytes).
 pub const FALLBACK_MEMORY_BYTES: u64 = 8 << 30;
 
+/// [`Limits::load_check_seconds`] unless a front end says otherwise: the
+/// bundled scenes' checks take well under a second.
+pub const DEFAULT_LOAD_CHECK_SECONDS: f64 = 3.0;
+
 /// What a job may use.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Limits {
     /// Largest estimated memory (bytes).
     pub memory_bytes: u64,
@@ -39,6 +43,15 @@ pub struct Limits {
     /// Largest output a run may write (bytes); `None`: the free space of the
     /// output folder's file system.
     pub output_bytes: Option<u64>,
+    /// Longest a dynamic run of the default kind of model waits for its
+    /// load check (s). For that model the check only warns (the body
+    /// buckles, or has an unstable equilibrium), and a soft body that
+    /// collapses under its load makes the static solve search its load
+    /// limit through many failing increments (a 6,500-cell bunny: 29 s and
+    /// 1 GiB before its first step); past this time the run starts without
+    /// the verdict and says so. `mss check` runs the check in full. Models
+    /// that the check may refuse are always checked in full.
+    pub load_check_seconds: f64,
 }
 
 impl Limits {
@@ -57,6 +70,7 @@ impl Default for Limits {
             memory_bytes: (physical as f64 * DEFAULT_MEMORY_FRACTION) as u64,
             check_disk: true,
             output_bytes: None,
+            load_check_seconds: DEFAULT_LOAD_CHECK_SECONDS,
         }
     }
 }

@@ -244,6 +244,9 @@ fn print_summary(s: &RunSummary) -> Result<(), crate::StdoutError> {
         s.steps,
         s.simulated_time
     );
+    if let Some(verdict) = &s.load_check {
+        crate::outln!("under load       {verdict}");
+    }
     if s.newton_iterations > 0 {
         crate::outln!(
             "newton           {} iterations, {:.2} per step",

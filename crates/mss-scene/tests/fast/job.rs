@@ -961,3 +961,44 @@ fn solver_precision_reaches_the_explicit_run_and_newton_refuses_it() {
         .to_string();
     assert!(err.contains("precision") && err.contains("f32"), "{err}");
 }
+
+/// A dynamic run of the default model reports its load check's verdict in
+/// the summary (as `mss check` words it); without time for the check it
+/// runs anyway and says the check was stopped; a model the check may
+/// refuse is checked whatever the time given.
+#[test]
+fn the_run_reports_its_load_check_and_does_not_wait_past_its_limit() {
+    use mss_scene::limits::Limits;
+    let short = "[solver]\nduration = 0.002\n[output]\nlast_only = true\n";
+    let run = |extra: &str, seconds: f64| {
+        let limits = Limits {
+            load_check_seconds: seconds,
+            ..Limits::default()
+        };
+        let job = Job::prepare_with_limits(input(extra), Registry::default(), limits, &no_progress)
+            .unwrap();
+        let out = tempfile::tempdir().unwrap();
+        job.run(out.path(), &no_progress, &Cancel::new())
+    };
+    let checked = run(short, 60.0).unwrap();
+    let verdict = checked.load_check.expect("a check ran");
+    assert!(verdict.contains("stable static equilibrium"), "{verdict}");
+
+    let hurried = run(short, 0.0).unwrap();
+    assert_eq!(
+        hurried.load_check.as_deref(),
+        Some("stopped after 0 s, before its verdict")
+    );
+    // The same frames: the check never changes the run.
+    assert_eq!(hurried.max_displacement, checked.max_displacement);
+
+    // Springs alone fold under this load: refused, time limit or not.
+    let springs = format!("[model]\nparameterization = \"springs\"\n{short}");
+    assert!(matches!(
+        run(&springs, 0.0),
+        Err(mss_scene::JobError::WouldFold { .. })
+    ));
+    // A static run has no check before it; accept_unstable skips it.
+    let accepted = short.replace("[solver]\n", "[solver]\naccept_unstable = true\n");
+    assert_eq!(run(&accepted, 60.0).unwrap().load_check, None);
+}
