@@ -12,12 +12,20 @@
 //! lattice edge and body diagonal once, 7 springs per cell, f64). The second
 //! ratio is to the bandwidth bound: the bytes a step's arrays move, divided
 //! by the copy bandwidth measured here.
+//!
+//! Then, in the same run and on one thread, the interactive and haptic
+//! frames (examples `interactive` and `haptic`), and a last table of the
+//! figures the speed issue sets targets for.
 
 use std::time::Instant;
 
 #[path = "common/baseline.rs"]
 mod baseline;
 use baseline::{merged_springs, perturbed, spring_loop};
+// The frame examples print every figure of a run; the table here some.
+#[allow(dead_code)]
+#[path = "common/frames.rs"]
+mod frames;
 
 use hexmesh::Lattice;
 use mss_core::model::{HourglassControl, PaperModel, SpringsOnly, Volumetric, VolumetricBarrier};
@@ -117,6 +125,9 @@ fn main() {
             precision.name()
         );
     }
+    // (threads, model, precision) -> step time (s), and the baseline.
+    let mut steps: Vec<(usize, &str, Precision, f64)> = Vec::new();
+    let mut baseline_one_thread = f64::NAN;
     for threads in [1usize, 2] {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
@@ -128,6 +139,9 @@ fn main() {
             let x = perturbed(&base_model);
             let mut f = vec![Vec3::zeros(); nodes];
             let baseline = best_serial(repeats, || spring_loop(&springs, &x, &mut f));
+            if threads == 1 {
+                baseline_one_thread = baseline;
+            }
             println!(
                 "\n{threads} thread(s): baseline (naive merged springs, {} springs, 1 thread) {:.2} ms \
                  = {:.0} Mcell/s",
@@ -161,6 +175,7 @@ fn main() {
                 let step = best(repeats, || {
                     integ.step(&problem, &mut state).expect("step");
                 }) / f64::from(integ.substeps());
+                steps.push((threads, name, precision, step));
                 println!(
                     "{:<26} {:>10.2} {:>10.2} {:>10.2} {:>10.2} {:>12.2}",
                     format!("{name} {}", precision.name()),
@@ -172,5 +187,97 @@ fn main() {
                 );
             }
         });
+    }
+
+    frame_table(n, cells, &steps, baseline_one_thread);
+}
+
+/// The interactive and haptic frames on one thread, and the figures the
+/// speed issue sets targets for, all from this run.
+fn frame_table(n: u32, cells: usize, steps: &[(usize, &str, Precision, f64)], baseline: f64) {
+    let step = |threads: usize, name: &str, precision: Precision| {
+        steps
+            .iter()
+            .find(|s| s.0 == threads && s.1 == name && s.2 == precision)
+            .map_or(f64::NAN, |s| s.3)
+    };
+    let one = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("pool");
+    let (inter, hapt) = one.install(|| {
+        let inter =
+            [Precision::F64, Precision::F32].map(|p| frames::interactive(22, 2.0e4, p, 120));
+        let hapt = [Precision::F64, Precision::F32].map(|p| frames::haptic(10, 1.0e4, p, 10_000));
+        (inter, hapt)
+    });
+    let default = "volumetric-barrier+hg";
+    let rate = |s: f64| cells as f64 / s / 1e6;
+    println!("\nfigures with targets (one thread unless said; this run):");
+    println!("{:<64} {:>16} {:>12}", "measure", "value", "target");
+    let rows = [
+        (
+            format!("{n}^3 step / baseline, paper f64 (f32)"),
+            format!(
+                "{:.2} ({:.2})",
+                step(1, "paper", Precision::F64) / baseline,
+                step(1, "paper", Precision::F32) / baseline
+            ),
+            "<= 1.0",
+        ),
+        (
+            format!("{n}^3 step / baseline, default model f64 (f32)"),
+            format!(
+                "{:.2} ({:.2})",
+                step(1, default, Precision::F64) / baseline,
+                step(1, default, Precision::F32) / baseline
+            ),
+            "<= 1.3",
+        ),
+        (
+            format!("{n}^3 step, 2 threads against 1, paper f64 (default f64)"),
+            format!(
+                "{:.2} ({:.2})",
+                step(1, "paper", Precision::F64) / step(2, "paper", Precision::F64),
+                step(1, default, Precision::F64) / step(2, default, Precision::F64)
+            ),
+            ">= 1.8",
+        ),
+        (
+            format!(
+                "interactive frame CPU, {} cells, {} sub-steps, f64 (f32), ms",
+                inter[0].cells, inter[0].substeps
+            ),
+            format!(
+                "{:.1} ({:.1})",
+                inter[0].cpu_per_frame, inter[1].cpu_per_frame
+            ),
+            "<= 8",
+        ),
+        (
+            format!("haptic frame CPU, {} cells, f64 (f32), ms", hapt[0].cells),
+            format!(
+                "{:.3} ({:.3})",
+                hapt[0].cpu_per_frame, hapt[1].cpu_per_frame
+            ),
+            "<= 1",
+        ),
+        (
+            "haptic worst wall frame of 10,000 after the first, f64 (f32), ms".to_owned(),
+            format!("{:.2} ({:.2})", hapt[0].worst, hapt[1].worst),
+            "",
+        ),
+        (
+            "million cell-steps per s, paper f32 (default f64)".to_owned(),
+            format!(
+                "{:.1} ({:.1})",
+                rate(step(1, "paper", Precision::F32)),
+                rate(step(1, default, Precision::F64))
+            ),
+            "72 (Warp x 3)",
+        ),
+    ];
+    for (measure, value, target) in rows {
+        println!("{measure:<64} {value:>16} {target:>12}");
     }
 }

@@ -4,6 +4,8 @@
 // Each example uses only some of these.
 #![allow(dead_code)]
 
+pub mod frames;
+
 /// CPU time of this process so far (user + system, seconds), from
 /// `/proc/self/stat`; NaN where that file does not exist.
 pub fn cpu_seconds() -> f64 {
