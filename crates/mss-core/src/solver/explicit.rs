@@ -1168,10 +1168,13 @@ fn par_mul(a: &BlockCsr, v: &[Vec3], out: &mut [Vec3]) {
 }
 
 /// Largest `dt * max_a |v_a - mean(v)| / h` over cells: how much of its size a
-/// cell deforms in one step.
+/// cell deforms in one step. With the cell: the first of the largest, or
+/// the last cell whose value is NaN, whatever the thread count (the
+/// reduction merges neighbouring ranges in order).
 fn max_cell_velocity_change(model: &Model, v: &[Vec3], dt: f64) -> (u32, f64) {
-    let mut worst = (0u32, 0.0f64);
-    for (c, cell) in model.cells().iter().enumerate() {
+    let cells = model.cells();
+    let of_cell = |c: usize| {
+        let cell = &cells[c];
         let mut mean = Vec3::zeros();
         for &k in cell {
             mean += v[k as usize];
@@ -1181,10 +1184,74 @@ fn max_cell_velocity_change(model: &Model, v: &[Vec3], dt: f64) -> (u32, f64) {
         for &k in cell {
             m = m.max((v[k as usize] - mean).norm());
         }
-        let s = m * dt / model.h();
-        if s.is_nan() || s > worst.1 {
-            worst = (c as u32, s);
+        (c as u32, m * dt / model.h())
+    };
+    // `later` follows `earlier` in cell order: a NaN wins (the later one),
+    // else the larger value (the earlier one on a tie).
+    let merge = |earlier: (u32, f64), later: (u32, f64)| {
+        if later.1.is_nan() || (!earlier.1.is_nan() && later.1 > earlier.1) {
+            later
+        } else {
+            earlier
+        }
+    };
+    (0..cells.len())
+        .into_par_iter()
+        .with_min_len(CHUNK)
+        .map(of_cell)
+        .reduce(|| (0u32, 0.0f64), merge)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The parallel divergence measure names the cell the serial scan
+    /// would (the first of the largest), with the same value, on any pool.
+    #[test]
+    fn cell_velocity_change_is_the_serial_scans_on_any_pool() {
+        let lattice = hexmesh::Lattice::block([20, 12, 10], 0.1, [0.0; 3]).unwrap();
+        let material = crate::Material::new(1e4, 0.3, 1000.0).unwrap();
+        let model = Model::new(&lattice, material, &crate::model::SpringsOnly).unwrap();
+        let serial = |v: &[Vec3]| {
+            let mut worst = (0u32, 0.0f64);
+            for c in 0..model.num_cells() {
+                let cell = &model.cells()[c];
+                let mean = cell.iter().map(|&k| v[k as usize]).sum::<Vec3>() / 8.0;
+                let m = cell
+                    .iter()
+                    .map(|&k| (v[k as usize] - mean).norm())
+                    .fold(0.0, f64::max);
+                let s = m * 0.01 / model.h();
+                if s.is_nan() || s > worst.1 {
+                    worst = (c as u32, s);
+                }
+            }
+            worst
+        };
+        let n = model.num_nodes();
+        // Two equal peaks (the first wins); then NaN velocities in two
+        // places, which the kicks catch (here the measure must only agree).
+        let mut v = vec![Vec3::zeros(); n];
+        for (i, vi) in v.iter_mut().enumerate() {
+            vi.x = ((i * 37) % 11) as f64 * 1e-3;
+        }
+        v[300] = Vec3::new(5.0, 0.0, 0.0);
+        v[1800] = Vec3::new(5.0, 0.0, 0.0);
+        let mut with_nan = v.clone();
+        with_nan[100].y = f64::NAN;
+        with_nan[2500].z = f64::NAN;
+        for v in [&v, &with_nan] {
+            let expected = serial(v);
+            for threads in [1, 2, 3] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                let got = pool.install(|| max_cell_velocity_change(&model, v, 0.01));
+                assert_eq!(got.0, expected.0, "{threads} threads");
+                assert_eq!(got.1.to_bits(), expected.1.to_bits(), "{threads} threads");
+            }
         }
     }
-    worst
 }
