@@ -265,6 +265,9 @@ pub struct Explicit {
     kv: Vec<Vec3>,
     good: State,
     good_valid: bool,
+    /// Whether the step under way has yet to keep its start's positions
+    /// and velocities in `start` (its first kick and drift do).
+    start_pending: bool,
     steps: u64,
     since_check: u32,
     /// Sub-steps between checks: `check_interval`, fewer while the
@@ -374,6 +377,7 @@ impl Explicit {
                 contact: Vec::new(),
             },
             good_valid: false,
+            start_pending: false,
             steps: 0,
             since_check: 0,
             check_every: opts.check_interval,
@@ -519,9 +523,11 @@ impl Explicit {
     }
 
     /// One velocity kick of `h` with the cached conservative force, the
-    /// contact forces and damping, on free components only. Returns false on
+    /// contact forces and damping, on free components only; the velocities
+    /// before it are copied into `save` when given (chunk by chunk, from
+    /// the cache, instead of a pass of their own). Returns false on
     /// non-finite values.
-    fn kick(&self, problem: &Problem, v: &mut [Vec3], h: f64) -> bool {
+    fn kick(&self, problem: &Problem, v: &mut [Vec3], h: f64, save: Option<&mut [Vec3]>) -> bool {
         let masses = problem.model().masses();
         let held = problem.constraints().mask_bits();
         let d = problem.damping();
@@ -533,60 +539,114 @@ impl Explicit {
             (false, true) => Extra::Contact,
             _ => Extra::All,
         };
-        v.par_chunks_mut(CHUNK)
-            .enumerate()
-            .map(|(ci, vc)| {
-                let range = ci * CHUNK..ci * CHUNK + vc.len();
-                let kick = ChunkKick {
-                    f: &self.f_cons[range.clone()],
-                    masses: &masses[range.clone()],
-                    held: &held[range.clone()],
-                    alpha: d.alpha,
-                    h,
-                };
-                match extra {
-                    Extra::None => kick.apply(vc, |_, force| force),
-                    Extra::Contact => {
-                        let fc = &self.f_contact[range];
-                        kick.apply(vc, |k, force| force + fc[k])
-                    }
-                    Extra::All => {
-                        let start = range.start;
-                        kick.apply(vc, |k, mut force| {
-                            let i = start + k;
-                            if !self.f_contact.is_empty() {
-                                force += self.f_contact[i];
-                            }
-                            if !self.kv.is_empty() {
-                                force -= self.kv[i] * d.beta;
-                            }
-                            force
-                        })
-                    }
+        let kick_chunk = |ci: usize, vc: &mut [Vec3], saved: Option<&mut [Vec3]>| {
+            if let Some(saved) = saved {
+                saved.copy_from_slice(vc);
+            }
+            let range = ci * CHUNK..ci * CHUNK + vc.len();
+            let kick = ChunkKick {
+                f: &self.f_cons[range.clone()],
+                masses: &masses[range.clone()],
+                held: &held[range.clone()],
+                alpha: d.alpha,
+                h,
+            };
+            match extra {
+                Extra::None => kick.apply(vc, |_, force| force),
+                Extra::Contact => {
+                    let fc = &self.f_contact[range];
+                    kick.apply(vc, |k, force| force + fc[k])
                 }
-            })
-            .reduce(|| true, |a, b| a && b)
+                Extra::All => {
+                    let start = range.start;
+                    kick.apply(vc, |k, mut force| {
+                        let i = start + k;
+                        if !self.f_contact.is_empty() {
+                            force += self.f_contact[i];
+                        }
+                        if !self.kv.is_empty() {
+                            force -= self.kv[i] * d.beta;
+                        }
+                        force
+                    })
+                }
+            }
+        };
+        match save {
+            Some(save) => v
+                .par_chunks_mut(CHUNK)
+                .zip(save.par_chunks_mut(CHUNK))
+                .enumerate()
+                .map(|(ci, (vc, sc))| kick_chunk(ci, vc, Some(sc)))
+                .reduce(|| true, |a, b| a && b),
+            None => v
+                .par_chunks_mut(CHUNK)
+                .enumerate()
+                .map(|(ci, vc)| kick_chunk(ci, vc, None))
+                .reduce(|| true, |a, b| a && b),
+        }
     }
 
-    /// `x += dt v`, then held components prescribed at `t1`.
-    fn drift(problem: &Problem, state: &mut State, dt: f64, t1: f64) -> bool {
-        let ok = state
-            .x
-            .par_chunks_mut(CHUNK)
-            .zip(state.v.par_chunks(CHUNK))
-            .map(|(xc, vc)| {
-                let mut ok = true;
-                for (xi, vi) in xc.iter_mut().zip(vc) {
-                    *xi += *vi * dt;
-                    ok &= all_finite(xi);
-                }
-                ok
-            })
-            .reduce(|| true, |a, b| a && b);
+    /// `x += dt v`, then held components prescribed at `t1`; the positions
+    /// before it are copied into `save` when given.
+    fn drift(
+        problem: &Problem,
+        state: &mut State,
+        dt: f64,
+        t1: f64,
+        save: Option<&mut [Vec3]>,
+    ) -> bool {
+        let drift_chunk = |xc: &mut [Vec3], vc: &[Vec3], saved: Option<&mut [Vec3]>| {
+            if let Some(saved) = saved {
+                saved.copy_from_slice(xc);
+            }
+            let mut ok = true;
+            for (xi, vi) in xc.iter_mut().zip(vc) {
+                *xi += *vi * dt;
+                ok &= all_finite(xi);
+            }
+            ok
+        };
+        let pairs = state.x.par_chunks_mut(CHUNK).zip(state.v.par_chunks(CHUNK));
+        let ok = match save {
+            Some(save) => pairs
+                .zip(save.par_chunks_mut(CHUNK))
+                .map(|((xc, vc), sc)| drift_chunk(xc, vc, Some(sc)))
+                .reduce(|| true, |a, b| a && b),
+            None => pairs
+                .map(|(xc, vc)| drift_chunk(xc, vc, None))
+                .reduce(|| true, |a, b| a && b),
+        };
         let rest = problem.model().rest_positions();
         problem
             .constraints()
             .prescribe_all(t1, dt, rest, &mut state.x, &mut state.v);
+        ok
+    }
+
+    /// A sub-step's kick of `h` and drift of `dt`; in a step's first
+    /// sub-step they also keep the state the step started from (the
+    /// retry's), each copying what it reads before changing it: that saves
+    /// a pass over the positions and velocities per step.
+    fn first_kick_and_drift(
+        &mut self,
+        problem: &Problem,
+        state: &mut State,
+        h: f64,
+        dt: f64,
+        t1: f64,
+    ) -> bool {
+        if !std::mem::take(&mut self.start_pending) {
+            let ok = self.kick(problem, &mut state.v, h, None);
+            return ok & Self::drift(problem, state, dt, t1, None);
+        }
+        let (mut start_x, mut start_v) = (
+            std::mem::take(&mut self.start.x),
+            std::mem::take(&mut self.start.v),
+        );
+        let ok = self.kick(problem, &mut state.v, h, Some(&mut start_v))
+            & Self::drift(problem, state, dt, t1, Some(&mut start_x));
+        (self.start.x, self.start.v) = (start_x, start_v);
         ok
     }
 
@@ -604,13 +664,12 @@ impl Explicit {
                 }
                 self.contact_start(problem, state, true);
                 self.damping_product(problem, &state.v);
-                let mut ok = self.kick(problem, &mut state.v, 0.5 * dt);
-                ok &= Self::drift(problem, state, dt, t1);
+                let mut ok = self.first_kick_and_drift(problem, state, 0.5 * dt, dt, t1);
                 ok &= self.contact_end(problem, state, dt, t0, true);
                 state.time = t1;
                 self.conservative_forces(problem, state);
                 self.damping_product(problem, &state.v);
-                ok &= self.kick(problem, &mut state.v, 0.5 * dt);
+                ok &= self.kick(problem, &mut state.v, 0.5 * dt, None);
                 self.cache_time = t1;
                 self.cache_valid = ok;
                 self.update_anchors(problem, state);
@@ -622,8 +681,7 @@ impl Explicit {
                 }
                 self.contact_start(problem, state, false);
                 self.damping_product(problem, &state.v);
-                let mut ok = self.kick(problem, &mut state.v, dt);
-                ok &= Self::drift(problem, state, dt, t1);
+                let mut ok = self.first_kick_and_drift(problem, state, dt, dt, t1);
                 ok &= self.contact_end(problem, state, dt, t0, false);
                 state.time = t1;
                 self.cache_valid = false;
@@ -1025,8 +1083,8 @@ impl Explicit {
         self.steps += 1;
         self.contact_fresh = true;
         let t_end = state.time + self.dt;
-        self.start.x.copy_from_slice(&state.x);
-        self.start.v.copy_from_slice(&state.v);
+        // The first sub-step's kick and drift fill `start.v` and `start.x`.
+        self.start_pending = true;
         self.start.contact.clone_from(&state.contact);
         self.start.time = state.time;
         let good_before = self.good.time;
