@@ -11,17 +11,9 @@
 mod common;
 use common::frames;
 
-use mss_core::Precision;
-
 fn main() {
-    let args: Vec<String> = std::env::args().collect();
-    let n: u32 = args.get(1).and_then(|a| a.parse().ok()).unwrap_or(10);
-    let young: f64 = args.get(2).and_then(|a| a.parse().ok()).unwrap_or(1.0e4);
-    let precision = args
-        .get(3)
-        .map(|a| Precision::from_name(a).expect("precision: f64 or f32"))
-        .unwrap_or_default();
-    let count: usize = args.get(4).and_then(|a| a.parse().ok()).unwrap_or(10_000);
+    let (n, young, precision, rest) = frames::args(10, 1.0e4);
+    let count: usize = rest.first().and_then(|a| a.parse().ok()).unwrap_or(10_000);
     let s = frames::haptic(n, young, precision, count);
     println!(
         "{} cells, E = {young} Pa, {} thread(s), {}: {count} frames of 1 ms (at most {} \

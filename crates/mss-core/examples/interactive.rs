@@ -9,16 +9,8 @@
 mod common;
 use common::frames;
 
-use mss_core::Precision;
-
 fn main() {
-    let args: Vec<String> = std::env::args().collect();
-    let n: u32 = args.get(1).and_then(|a| a.parse().ok()).unwrap_or(22);
-    let young: f64 = args.get(2).and_then(|a| a.parse().ok()).unwrap_or(2.0e4);
-    let precision = args
-        .get(3)
-        .map(|a| Precision::from_name(a).expect("precision: f64 or f32"))
-        .unwrap_or_default();
+    let (n, young, precision, _) = frames::args(22, 2.0e4);
     let s = frames::interactive(n, young, precision, 120);
     println!(
         "{} cells, E = {young} Pa, {} threads, {}: frame of 1/60 s in {} sub-steps; \

@@ -13,6 +13,19 @@ use mss_core::simulation::Simulation;
 use mss_core::solver::Problem;
 use mss_core::{Material, Model, Precision, Vec3};
 
+/// The frame examples' arguments `[CELLS_PER_SIDE] [YOUNG] [f64|f32]`, with
+/// their defaults, and the rest of the command line.
+pub fn args(cells: u32, young: f64) -> (u32, f64, Precision, Vec<String>) {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let n = args.first().and_then(|a| a.parse().ok()).unwrap_or(cells);
+    let young = args.get(1).and_then(|a| a.parse().ok()).unwrap_or(young);
+    let precision = args
+        .get(2)
+        .map(|a| Precision::from_name(a).expect("precision: f64 or f32"))
+        .unwrap_or_default();
+    (n, young, precision, args.into_iter().skip(3).collect())
+}
+
 /// CPU time of this process (s), to the nanosecond.
 fn process_cpu_seconds() -> f64 {
     let t = rustix::time::clock_gettime(rustix::time::ClockId::ProcessCPUTime);

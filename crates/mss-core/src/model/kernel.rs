@@ -1329,13 +1329,16 @@ fn gather_corners<const L: usize>(cells: &[[u32; 8]], x: &[[f64; 3]]) -> [V3<Lan
 }
 
 /// The stretches of the 12 edges of `L` cells (in [`CELL_EDGES`] order) from
-/// the lattice's edge stretches by node (portable path).
+/// the lattice's edge stretches by node, rounded to `E` (portable path).
 #[inline(always)]
-fn gather_edges<const L: usize>(cells: &[[u32; 8]], edges: &[[f64; 3]]) -> [Lanes<f64, L>; 12] {
+fn gather_edges<E: Element, const L: usize>(
+    cells: &[[u32; 8]],
+    edges: &[[f64; 3]],
+) -> [Lanes<E, L>; 12] {
     let mut wl = [Lanes::cst(0.0); 12];
     for (w, &(a, _, ax)) in wl.iter_mut().zip(&CELL_EDGES) {
         for (l, cell) in cells.iter().enumerate() {
-            w.0[l] = edges[cell[a] as usize][ax];
+            w.0[l] = E::from_f64(edges[cell[a] as usize][ax]);
         }
     }
     wl
@@ -1364,13 +1367,14 @@ pub(crate) fn cell_forces_from_edges(
     f
 }
 
-/// Writes the lanes' corner forces out cell by cell, `out[8 l + k]` for
-/// corner `k` of cell `l` (portable path).
+/// Writes the lanes' corner forces out cell by cell as `f64`, `out[8 l + k]`
+/// for corner `k` of cell `l` (portable path).
 #[inline(always)]
-fn scatter_corners<const L: usize>(f: &[V3<Lanes<f64, L>>; 8], out: &mut [[f64; 4]]) {
+fn scatter_corners<E: Element, const L: usize>(f: &[V3<Lanes<E, L>>; 8], out: &mut [[f64; 4]]) {
     for l in 0..L {
         for k in 0..8 {
-            out[8 * l + k] = [f[k][0].0[l], f[k][1].0[l], f[k][2].0[l], 0.0];
+            let c = |d: usize| f[k][d].0[l].to_f64();
+            out[8 * l + k] = [c(0), c(1), c(2), 0.0];
         }
     }
 }
@@ -1851,8 +1855,8 @@ pub(crate) fn forces_batch(
         out,
         Moves {
             gather: gather_corners::<LANES>,
-            gather_edges: gather_edges::<LANES>,
-            scatter: scatter_corners::<LANES>,
+            gather_edges: gather_edges::<f64, LANES>,
+            scatter: scatter_corners::<f64, LANES>,
             tail: cell_forces_from_edges,
         },
     );
@@ -1914,33 +1918,6 @@ fn gather_corners_f32<const L: usize>(
     xl
 }
 
-/// The 12 edge stretches of `L` cells in `f32` lanes (portable path).
-#[inline(always)]
-fn gather_edges_f32<const L: usize>(cells: &[[u32; 8]], edges: &[[f64; 3]]) -> [Lanes<f32, L>; 12] {
-    let mut wl = [Lanes::cst(0.0); 12];
-    for (w, &(a, _, ax)) in wl.iter_mut().zip(&CELL_EDGES) {
-        for (l, cell) in cells.iter().enumerate() {
-            w.0[l] = edges[cell[a] as usize][ax] as f32;
-        }
-    }
-    wl
-}
-
-/// The `f32` lanes' corner forces out as `f64`, cell by cell (portable path).
-#[inline(always)]
-fn scatter_corners_f32<const L: usize>(f: &[V3<Lanes<f32, L>>; 8], out: &mut [[f64; 4]]) {
-    for l in 0..L {
-        for k in 0..8 {
-            out[8 * l + k] = [
-                f64::from(f[k][0].0[l]),
-                f64::from(f[k][1].0[l]),
-                f64::from(f[k][2].0[l]),
-                0.0,
-            ];
-        }
-    }
-}
-
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 fn forces_batch_f32_avx2(
@@ -1992,8 +1969,8 @@ pub(crate) fn forces_batch_f32(
         out,
         Moves {
             gather: gather_corners_f32::<LANES_F32>,
-            gather_edges: gather_edges_f32::<LANES_F32>,
-            scatter: scatter_corners_f32::<LANES_F32>,
+            gather_edges: gather_edges::<f32, LANES_F32>,
+            scatter: scatter_corners::<f32, LANES_F32>,
             tail: cell_forces_from_edges_f32,
         },
     );
