@@ -3,7 +3,7 @@
 //! nodes leave free, and whether the body has a stable equilibrium under its
 //! load.
 
-use std::sync::atomic::AtomicBool;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use serde::Serialize;
 
@@ -57,22 +57,71 @@ const WRITE_RATE_NONE: f64 = 1.2e9;
 /// state (nothing is written): what `mss check` prints as the time estimate.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct TimeEstimate {
-    /// Estimated wall time of stepping and writing (s).
+    /// Estimated wall time of the run: its load check, stepping and
+    /// writing (s).
     pub seconds: f64,
     /// Of which writing the frames (s).
     pub writing_seconds: f64,
+    /// Of which the run's own load check before its first step (s; see
+    /// [`Job::run_load_check_budget`]).
+    pub load_check_seconds: f64,
     /// Steps timed (0: the static solve of [`LoadCheck`] was timed).
     pub probe_steps: u32,
     /// Wall time per step measured (s).
     pub seconds_per_step: f64,
+    /// The pilot run that scaled the steps timed at rest, for a body that
+    /// does not carry its load statically ([`Pilot`]).
+    pub pilot: Option<Pilot>,
 }
+
+/// A run of the scene with nothing written, made by `mss check` for its
+/// time estimate. When the body does not carry its load statically the run
+/// folds or collapses,
+/// its compressed cells stiffen, and the explicit sub-step (or the implicit
+/// solver's Newton iterations) follows them, with more frequent checks and
+/// steps taken again, so steps timed at rest see a fraction of the run's
+/// cost (the soft bunny held by its lowest layer: a tenth). The pilot runs
+/// on the scene's own lattice: one twice as coarse spreads the load of a
+/// few held nodes over larger cells and folds less (the soft bunny's saw a
+/// sixth of the growth). It stops after [`PILOT_SECONDS`] (folding) or
+/// [`PILOT_CALM_SECONDS`]; the rest of the run is then projected at the
+/// rate of the pilot's last quarter.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Pilot {
+    /// Its mean wall time per step over the scene's duration (projected
+    /// past [`Pilot::simulated_fraction`]) over the time per step at rest.
+    pub time_ratio: f64,
+    /// Its stepping time over the scene's duration (s; projected past
+    /// [`Pilot::simulated_fraction`]).
+    pub stepping_seconds: f64,
+    /// The fraction of the scene's duration it ran (1: to the end; less
+    /// when its time budget ran out or a step failed).
+    pub simulated_fraction: f64,
+}
+
+/// Wall time a [`Pilot`] run may take when the body folds (s).
+pub const PILOT_SECONDS: f64 = 15.0;
+/// Wall time a [`Pilot`] run may take when the body carries its load (s):
+/// contact, a moving obstacle or a fall still change the step's cost (the
+/// squeeze scene's ball pressed flat: 1.7 times the steps timed at rest).
+pub const PILOT_CALM_SECONDS: f64 = 3.0;
 
 impl TimeEstimate {
     /// Times `job`'s steps (see [`TimeEstimate`]); `static_seconds` is the
     /// time the load check's static solve took, the estimate of a static
-    /// run. `None` for an implicit run on more than [`LOAD_CHECK_MAX_NODES`]
-    /// nodes (a probe step would cost too much) or when a probe step fails.
-    pub fn new(job: &Job, static_seconds: Option<f64>) -> Option<Self> {
+    /// run, and `load_check_seconds` how long it would take in the run (see
+    /// [`Job::run_load_check_budget`]); `folds`: the body does not carry
+    /// its load statically. `None` for an implicit run on more than
+    /// [`LOAD_CHECK_MAX_NODES`] nodes (a probe step would cost too much),
+    /// when a probe step fails, or when `cancel` is set. A [`Pilot`] run
+    /// (longer when `folds`) measures what the steps at rest cannot see.
+    pub fn new(
+        job: &Job,
+        static_seconds: Option<f64>,
+        load_check_seconds: f64,
+        folds: bool,
+        cancel: &AtomicBool,
+    ) -> Option<Self> {
         let (frame_bytes, frames) = job.output_estimate();
         let rate = match job.input.scene.output.compression {
             crate::scene::CompressionKey::Zlib => {
@@ -87,8 +136,10 @@ impl TimeEstimate {
             return Some(TimeEstimate {
                 seconds: solve + writing_seconds,
                 writing_seconds,
+                load_check_seconds: 0.0,
                 probe_steps: 0,
                 seconds_per_step: solve,
+                pilot: None,
             });
         }
         let explicit = job
@@ -120,12 +171,70 @@ impl TimeEstimate {
         } else {
             first
         };
-        let stepping = first + per_step * plan.steps.saturating_sub(1) as f64;
+        let budget = if folds {
+            PILOT_SECONDS
+        } else {
+            PILOT_CALM_SECONDS
+        };
+        let pilot = Pilot::run(job, per_step, budget, cancel);
+        if cancel.load(Ordering::Relaxed) {
+            return None;
+        }
+        let rest_stepping = first + per_step * plan.steps.saturating_sub(1) as f64;
+        let stepping = pilot.as_ref().map_or(rest_stepping, |p| p.stepping_seconds);
         Some(TimeEstimate {
-            seconds: stepping + writing_seconds,
+            seconds: load_check_seconds + stepping + writing_seconds,
             writing_seconds,
+            load_check_seconds,
             probe_steps: probe as u32 + 1,
             seconds_per_step: per_step,
+            pilot,
+        })
+    }
+}
+
+impl Pilot {
+    /// Runs `job`'s scene for at most `budget` seconds (see [`Pilot`]),
+    /// whose steps at rest were timed at `rest_per_step` seconds; `None`
+    /// when it fails before it has measured anything. Stops at `cancel`.
+    pub fn run(job: &Job, rest_per_step: f64, budget: f64, cancel: &AtomicBool) -> Option<Pilot> {
+        let plan = &job.plan;
+        let mut integrator = job
+            .input
+            .integrator(&job.registry, &job.problem, plan)
+            .ok()??;
+        let mut state = State::at_rest(job.problem.model());
+        job.problem.apply_constraints(&mut state);
+        // Each step's end, from the start (s).
+        let mut ends = Vec::with_capacity(usize::try_from(plan.steps).unwrap_or(0).min(1 << 20));
+        let started = std::time::Instant::now();
+        while (ends.len() as u64) < plan.steps
+            && !cancel.load(Ordering::Relaxed)
+            && started.elapsed().as_secs_f64() < budget
+        {
+            if let Err(e) = integrator.step(&job.problem, &mut state) {
+                log::info!("the pilot run for the time estimate stopped: {e}");
+                break;
+            }
+            ends.push(started.elapsed().as_secs_f64());
+        }
+        let done = ends.len();
+        if done < 2 {
+            return None;
+        }
+        let total = plan.steps.max(1) as f64;
+        let mut stepping_seconds = ends[done - 1];
+        if (done as u64) < plan.steps {
+            // The rest at the rate of the last quarter of the steps taken.
+            let from = done - done.div_ceil(4);
+            let from_time = if from == 0 { 0.0 } else { ends[from - 1] };
+            let rate = (ends[done - 1] - from_time) / (done - from) as f64;
+            stepping_seconds += rate * (total - done as f64);
+        }
+        Some(Pilot {
+            time_ratio: stepping_seconds / total / rest_per_step.max(f64::MIN_POSITIVE),
+            stepping_seconds,
+            simulated_fraction: done as f64 / total,
         })
     }
 }
@@ -134,15 +243,17 @@ impl CheckReport {
     /// Whether the time estimate is only a lower bound: the body cannot
     /// carry its load statically (it buckles or collapses, or the solve
     /// failed), and a run's explicit steps shrink as it folds, which steps
-    /// timed at rest cannot see (the soft bunny hanging by its feet took 5
-    /// to 20 times the estimate).
+    /// timed at rest cannot see, and no [`Pilot`] run measured that (it
+    /// failed at once; the soft bunny hanging by its feet took 10 times the
+    /// steps timed at rest).
     /// (A static scene's estimate is the load check's own solve, made only
     /// when it converged.)
     pub fn time_is_lower_bound(&self) -> bool {
-        matches!(
-            self.load_check,
-            LoadCheck::LoadLimit { .. } | LoadCheck::Failed { .. } | LoadCheck::Mechanism { .. }
-        )
+        load_check_folds(&self.load_check)
+            && self
+                .time_estimate
+                .as_ref()
+                .is_some_and(|t| t.pilot.is_none())
     }
 
     /// Estimates and checks for `job`: counts zero-energy modes, solves the
@@ -171,29 +282,68 @@ impl CheckReport {
         // A free body in a dynamic run (held by obstacles, or by nothing)
         // has no static equilibrium to compare the run with.
         let free_dynamic = !job.plan.is_static && crate::job::problem_is_free(&job.problem);
-        let load_check = if free_dynamic {
-            LoadCheck::Skipped {
+        let run_budget = job.run_load_check_budget();
+        let (load_check, peak_at_budget) = if free_dynamic {
+            let skipped = LoadCheck::Skipped {
                 reason: "no node is held: the body moves freely, or as its obstacles let it"
                     .to_owned(),
-            }
+            };
+            (skipped, None)
+        } else if let Some(Some(budget)) = run_budget {
+            // The run stops its check after `budget` seconds: its memory is
+            // this process's peak at that time, not at the end of the check.
+            let done = AtomicBool::new(false);
+            std::thread::scope(|scope| {
+                let sampler = scope.spawn(|| {
+                    while !done.load(Ordering::Relaxed) && started.elapsed().as_secs_f64() < budget
+                    {
+                        std::thread::sleep(std::time::Duration::from_millis(10));
+                    }
+                    crate::job::peak_memory_bytes()
+                });
+                let check = job.load_check(mechanism_warning.is_some(), cancel);
+                done.store(true, Ordering::Relaxed);
+                (check, sampler.join().ok().flatten())
+            })
         } else {
-            job.load_check(mechanism_warning.is_some(), cancel)
+            let check = job.load_check(mechanism_warning.is_some(), cancel);
+            (check, crate::job::peak_memory_bytes())
         };
-        let static_seconds = matches!(load_check, LoadCheck::Equilibrium { .. })
-            .then(|| started.elapsed().as_secs_f64());
-        CheckReport {
-            held_nodes,
-            memory_bytes: run_memory_estimate(model.num_cells(), model.num_nodes(), needs_matrix)
+        let check_seconds = started.elapsed().as_secs_f64();
+        let static_seconds =
+            matches!(load_check, LoadCheck::Equilibrium { .. }).then_some(check_seconds);
+        // The run solves the same load before its first step, for as long
+        // as its budget lets it.
+        let run_check_seconds = match run_budget {
+            None => 0.0,
+            Some(None) => check_seconds,
+            Some(Some(budget)) => check_seconds.min(budget),
+        };
+        let folds = load_check_folds(&load_check);
+        let mut memory_bytes =
+            run_memory_estimate(model.num_cells(), model.num_nodes(), needs_matrix)
                 + crate::limits::mesh_memory_estimate(
                     job.bodies.iter().map(|b| b.mesh.vertices.len()).sum(),
-                ),
+                );
+        // The run solves the same load (or, static, is that solve): what
+        // this process needed for it is a measurement, where the sparse
+        // factorization's dense kernels keep per-thread buffers sized by the
+        // host's caches (57 MiB resident for the default job on a host
+        // reporting a 480 MiB L3) that no count of cells predicts.
+        let run_solves = job.plan.is_static || run_budget.is_some();
+        if run_solves && !matches!(load_check, LoadCheck::Skipped { .. }) {
+            memory_bytes = memory_bytes.max(peak_at_budget.unwrap_or(0));
+        }
+        CheckReport {
+            held_nodes,
+            memory_bytes,
             frames,
             frame_bytes,
             hourglass_stiffness: model.cell_coefficients(0).hourglass,
-            time_estimate: if cancel.load(std::sync::atomic::Ordering::Relaxed) {
+            time_estimate: if cancel.load(Ordering::Relaxed) {
                 None
             } else {
-                TimeEstimate::new(job, static_seconds)
+                TimeEstimate::new(job, static_seconds, run_check_seconds, folds, cancel)
             },
             load_check,
             mechanism_warning,
@@ -222,6 +372,14 @@ impl CheckReport {
         });
         (free, warning)
     }
+}
+
+/// Whether the load check says a run folds or collapses (or could not tell).
+fn load_check_folds(check: &LoadCheck) -> bool {
+    matches!(
+        check,
+        LoadCheck::LoadLimit { .. } | LoadCheck::Failed { .. } | LoadCheck::Mechanism { .. }
+    )
 }
 
 /// A warning if the boundary conditions leave zero-energy motions (rigid

@@ -519,6 +519,29 @@ impl Job {
         (check, stopped_by_budget)
     }
 
+    /// Whether a dynamic run of this job solves its load statically before
+    /// its first step (see [`Job::run`]), and for how long at most: `None`
+    /// when it does not (a static run, `[solver] accept_unstable`, or the
+    /// default kind of model on a body nothing holds), `Some(None)` when it
+    /// waits for the verdict (a model the check may refuse),
+    /// `Some(Some(seconds))` when it waits at most
+    /// [`Limits::load_check_seconds`] (the default kind of model, hourglass
+    /// control and the barrier, whose check only warns). A resumed run does
+    /// not check.
+    pub fn run_load_check_budget(&self) -> Option<Option<f64>> {
+        if self.input.scene.solver.accept_unstable || self.plan.is_static {
+            return None;
+        }
+        let model = self.problem.model();
+        let default_kind = model_has_barrier(model) && mss_core::modes::cells_are_rigid(model);
+        // A free body (held by obstacles or by nothing) has no static
+        // equilibrium to check: its rigid motions are no defect.
+        if default_kind && problem_is_free(&self.problem) {
+            return None;
+        }
+        Some(default_kind.then_some(self.limits.load_check_seconds))
+    }
+
     /// Before a dynamic run with a model that is not the default's kind
     /// (hourglass control and the barrier volumetric law): solves the
     /// scene's load statically ([`LoadCheck`]) and refuses the run when that
@@ -536,24 +559,13 @@ impl Job {
         cancel: &Cancel,
     ) -> Result<Option<String>, JobError> {
         let model = self.problem.model();
-        let barrier = (0..model.num_cells()).all(|c| {
-            let co = model.cell_coefficients(c);
-            co.volumetric_barrier && co.volumetric_lambda > 0.0
-        });
-        if self.input.scene.solver.accept_unstable {
+        let barrier = model_has_barrier(model);
+        let Some(budget) = self.run_load_check_budget() else {
             return Ok(None);
-        }
-        let default_kind = barrier && mss_core::modes::cells_are_rigid(model);
-        // A free body (held by obstacles or by nothing) has no static
-        // equilibrium to check: its rigid motions are no defect.
+        };
+        let default_kind = budget.is_some();
         let free_body = problem_is_free(&self.problem);
-        if default_kind && free_body {
-            return Ok(None);
-        }
         progress(Progress::Solving);
-        // The default model's check only warns: the run does not wait for
-        // it longer than the limits say.
-        let budget = default_kind.then_some(self.limits.load_check_seconds);
         let (check, over_budget) = self.load_check_within(free_body, cancel, budget);
         progress(Progress::StageDone);
         if over_budget {
@@ -1265,6 +1277,15 @@ fn largest_displacement(model: &mss_core::Model, x: &[mss_core::Vec3]) -> f64 {
         .map(|(x, r)| (x - r).norm_squared())
         .fold(0.0, f64::max)
         .sqrt()
+}
+
+/// Whether every cell has the volumetric law with the barrier against
+/// collapse (and a volumetric stiffness for it to act through).
+fn model_has_barrier(model: &mss_core::model::Model) -> bool {
+    (0..model.num_cells()).all(|c| {
+        let co = model.cell_coefficients(c);
+        co.volumetric_barrier && co.volumetric_lambda > 0.0
+    })
 }
 
 /// Whether `problem` holds no node: its body is free, held (if at all) by

@@ -98,24 +98,49 @@ pub fn run(args: &CheckArgs, global: &GlobalArgs) -> anyhow::Result<()> {
         human_bytes(job.limits.memory_bytes)
     );
     match &report.time_estimate {
-        Some(t) if t.probe_steps > 0 => crate::outln!(
-            "time estimate    {}{} ({:.3e} s per step, timed on {} steps; writing {}){}",
-            if report.time_is_lower_bound() {
-                "at least "
-            } else {
-                ""
-            },
-            human_seconds(t.seconds),
-            t.seconds_per_step,
-            t.probe_steps,
-            human_seconds(t.writing_seconds),
-            if report.time_is_lower_bound() {
-                "; the body does not carry its load statically, and a run's steps shrink \
-                 as it folds: it may take several times longer"
-            } else {
-                ""
+        Some(t) if t.probe_steps > 0 => {
+            let mut parts = vec![format!(
+                "{:.3e} s per step, timed on {} steps",
+                t.seconds_per_step, t.probe_steps
+            )];
+            if let Some(p) = &t.pilot {
+                parts.push(format!(
+                    "the body folds: {:.1} times that per step in a pilot run{}",
+                    p.time_ratio,
+                    if p.simulated_fraction < 1.0 {
+                        format!(
+                            " of the first {:.0} %, the rest projected",
+                            100.0 * p.simulated_fraction
+                        )
+                    } else {
+                        String::new()
+                    }
+                ));
             }
-        ),
+            if t.load_check_seconds > 0.0 {
+                parts.push(format!(
+                    "its load check {}",
+                    human_seconds(t.load_check_seconds)
+                ));
+            }
+            parts.push(format!("writing {}", human_seconds(t.writing_seconds)));
+            crate::outln!(
+                "time estimate    {}{} ({}){}",
+                if report.time_is_lower_bound() {
+                    "at least "
+                } else {
+                    ""
+                },
+                human_seconds(t.seconds),
+                parts.join("; "),
+                if report.time_is_lower_bound() {
+                    "; the body does not carry its load statically, and a run's steps shrink \
+                     as it folds: it may take several times longer"
+                } else {
+                    ""
+                }
+            )
+        }
         Some(t) => crate::outln!(
             "time estimate    {} (the static solve took {}; writing {})",
             human_seconds(t.seconds),

@@ -1001,4 +1001,22 @@ fn the_run_reports_its_load_check_and_does_not_wait_past_its_limit() {
     // A static run has no check before it; accept_unstable skips it.
     let accepted = short.replace("[solver]\n", "[solver]\naccept_unstable = true\n");
     assert_eq!(run(&accepted, 60.0).unwrap().load_check, None);
+
+    // What `mss check` adds to its time estimate for the run's own check.
+    let budget = |extra: &str| {
+        let limits = Limits {
+            load_check_seconds: 7.0,
+            ..Limits::default()
+        };
+        Job::prepare_with_limits(input(extra), Registry::default(), limits, &no_progress)
+            .unwrap()
+            .run_load_check_budget()
+    };
+    assert_eq!(budget(short), Some(Some(7.0)));
+    assert_eq!(budget(&springs), Some(None));
+    assert_eq!(budget(&accepted), None);
+    assert_eq!(
+        budget(&short.replace("[solver]\n", "[solver]\nkind = \"static\"\n")),
+        None
+    );
 }

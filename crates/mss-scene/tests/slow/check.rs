@@ -101,8 +101,17 @@ fn the_template_carries_its_weight_and_buckles_when_softer() {
     let LoadCheck::LoadLimit { load_factor } = report.load_check else {
         panic!("{:?}", report.load_check);
     };
-    // Its run folds: steps timed at rest only bound the run's time below.
-    assert!(report.time_is_lower_bound());
+    // Its run folds: steps timed at rest see a fraction of its cost, and a
+    // pilot run measures the rest (to the end: this run is short).
+    assert!(!report.time_is_lower_bound());
+    let t = report.time_estimate.as_ref().unwrap();
+    let pilot = t.pilot.as_ref().expect("a folding body's run is piloted");
+    assert_eq!(pilot.simulated_fraction, 1.0);
+    assert!(pilot.time_ratio > 1.0, "{pilot:?}");
+    assert!(
+        t.seconds >= pilot.stepping_seconds + t.writing_seconds,
+        "{t:?}"
+    );
     assert!((0.5..1.0).contains(&load_factor), "{load_factor}");
     assert!(report.load_check.warning().unwrap().contains("buckles"));
     // Twice as stiff, it carries the load.
@@ -158,9 +167,19 @@ fn the_time_estimate_times_the_runs_own_steps() {
     let r = CheckReport::new(&job(&default_scene("")));
     let t = r.time_estimate.expect("explicit runs are estimated");
     assert_eq!(t.probe_steps, TIME_PROBE_STEPS + 1);
-    // Stepping is the steps times the measured step, plus the writing.
-    let steps = job(&default_scene("")).plan.steps as f64;
-    assert!(t.seconds >= t.writing_seconds + t.seconds_per_step * (steps - 1.0));
+    // The estimate is the pilot run's stepping (the run itself, nothing
+    // written; short, so it runs to the end), the writing and the run's own
+    // load check (at most its limit).
+    let pilot = t.pilot.as_ref().expect("a short run is piloted");
+    assert_eq!(pilot.simulated_fraction, 1.0);
+    let parts = t.writing_seconds + t.load_check_seconds + pilot.stepping_seconds;
+    assert!((t.seconds - parts).abs() <= 1e-9 * t.seconds, "{t:?}");
+    assert!(t.seconds_per_step > 0.0 && pilot.time_ratio > 0.0, "{t:?}");
+    let limit = mss_scene::limits::Limits::default().load_check_seconds;
+    assert!(
+        t.load_check_seconds > 0.0 && t.load_check_seconds <= limit,
+        "{t:?}"
+    );
     assert!(t.seconds.is_finite() && t.writing_seconds > 0.0);
     // A static scene's estimate is the load check's solve.
     let r = CheckReport::new(&job(
