@@ -317,6 +317,12 @@ pub trait SkinExporter: Send {
         let _ = frame_times;
         Ok(())
     }
+    /// Frame times are round numbers to `decimals` decimals
+    /// ([`crate::vtk::time_decimals`]): an index file may print them so. The
+    /// default ignores it.
+    fn set_time_decimals(&mut self, decimals: usize) {
+        let _ = decimals;
+    }
 }
 
 /// The built-in skin exporter: OBJ or STL files, every frame or the last one.

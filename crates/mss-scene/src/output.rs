@@ -197,6 +197,8 @@ struct EmbeddedOutput {
     embedding: Embedding,
     triangles: Vec<[u32; 3]>,
     exporter: Box<dyn SkinExporter>,
+    /// Its files' extension.
+    extension: &'static str,
     cache: Option<Pc2Writer>,
 }
 
@@ -379,11 +381,14 @@ impl PartWriter {
                 embedding: Embedding::new(body.lattice, mesh),
                 triangles: mesh.triangles.clone(),
                 exporter: exporters.skins(
-                    crate::scene::obj_exporter(out.surface_normals),
+                    out.surface_exporter(),
                     dir,
                     &surface_stem,
                     SkinFrames::Every,
                 )?,
+                extension: exporters
+                    .skin_facts(out.surface_exporter())
+                    .map_or("", |f| f.extension),
                 cache: if out.pc2 {
                     Some(start_cache(
                         dir,
@@ -479,6 +484,12 @@ impl FrameWriter {
         for part in &mut self.parts {
             for (exporter, _) in &mut part.lattice {
                 exporter.set_time_decimals(decimals);
+            }
+            for (exporter, _) in &mut part.skin_exporters {
+                exporter.set_time_decimals(decimals);
+            }
+            if let Some(e) = &mut part.embedded {
+                e.exporter.set_time_decimals(decimals);
             }
         }
         if let Some(pvd) = &mut self.parts_pvd {
@@ -754,7 +765,8 @@ impl FrameWriter {
             if let Some(cache) = &mut e.cache {
                 cache.append(&pos)?;
             }
-            written.push(dir.join(format!("{surface_stem}_{index:04}.obj")));
+            let ext = &e.extension;
+            written.push(dir.join(format!("{surface_stem}_{index:04}.{ext}")));
         }
         Ok(())
     }
@@ -910,7 +922,7 @@ pub fn frame_size_estimate(out: &OutputSection, exporters: &Exporters, n: &Frame
         }
     }
     if out.embedded
-        && let Some(facts) = exporters.skin_facts(crate::scene::obj_exporter(out.surface_normals))
+        && let Some(facts) = exporters.skin_facts(out.surface_exporter())
     {
         total += (facts.bytes)(n.surface_vertices, n.surface_triangles);
     }
@@ -947,6 +959,8 @@ mod tests {
             "springs.pvd",
             "skin.pc2",
             "surface_rest.obj",
+            "surface_0003.vtu",
+            "surface.pvd",
             "summary.json",
             crate::checkpoint::CHECKPOINT_FILE,
         ] {
@@ -960,7 +974,7 @@ mod tests {
             "mesh.obj",
             "skin.obj",
             "lattice.vtu",
-            "skin.pvd",
+            "surface.vtu",
             "lattice_rest.obj",
             "lattice_0001.vtp",
         ] {

@@ -7,8 +7,8 @@
 //! skin is the boundary of their hexahedra (faces that belong to one cell),
 //! coloured by the `displacement` point field and by J = 1 +
 //! `volumetric_strain` averaged from the cells to the nodes. When every
-//! frame also has its embedded surface (`surface_NNNN.obj` beside
-//! `lattice_NNNN.vtu`), it is offered as well, coloured by its
+//! frame also has its embedded surface (`surface_NNNN.vtu`, or `.obj`,
+//! beside `lattice_NNNN.vtu`), it is offered as well, coloured by its
 //! displacement from the first frame. Frames are read when shown, so a
 //! long run costs no memory up front.
 
@@ -16,7 +16,9 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use mss_scene::mss_io::vtk::read::{LatticeFrameData, read_lattice_vtu, read_pvd};
+use mss_scene::mss_io::vtk::read::{
+    LatticeFrameData, read_lattice_vtu, read_pvd, read_surface_vtu,
+};
 
 use crate::protocol::{
     ClientMessage, SceneInfo, Status, SurfaceFrame, SurfaceInfo, encode_frame, encode_topology,
@@ -77,8 +79,10 @@ impl RunFolder {
                     .iter()
                     .map(|f| {
                         let s = f.strip_prefix("lattice_")?.strip_suffix(".vtu")?;
-                        let name = format!("surface_{s}.obj");
-                        dir.join(&name).is_file().then_some(name)
+                        ["vtu", "obj"]
+                            .into_iter()
+                            .map(|ext| format!("surface_{s}.{ext}"))
+                            .find(|name| dir.join(name).is_file())
                     })
                     .collect()
             })
@@ -222,7 +226,13 @@ fn read_surface(run: &RunFolder, files: &[String]) -> Result<SurfaceMesh, String
     let mut positions = Vec::new();
     let mut triangles = Vec::new();
     for file in files {
-        let (p, t) = read_obj(&run.dir.join(file))?;
+        let path = run.dir.join(file);
+        let (p, t) = if file.ends_with(".vtu") {
+            let frame = read_surface_vtu(&path, MAX_FRAME_BYTES).map_err(|e| e.to_string())?;
+            (frame.points, frame.triangles)
+        } else {
+            read_obj(&path)?
+        };
         let first = positions.len() as u32;
         positions.extend(p);
         triangles.extend(t.into_iter().map(|t| t.map(|v| v + first)));

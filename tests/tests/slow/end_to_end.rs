@@ -35,7 +35,9 @@ damping = 1.0
 [output]
 folder = "ignored"
 every_steps = 4
+skin_obj = true
 skin_stl = true
+surface_format = "obj"
 "#;
 
 fn piece_counts(path: &std::path::Path) -> (usize, usize, Vec<String>) {

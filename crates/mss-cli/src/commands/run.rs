@@ -284,8 +284,19 @@ fn print_summary(s: &RunSummary) -> Result<(), crate::StdoutError> {
         s.peak_displacement,
         s.peak_displacement_time
     );
+    // The collections a user opens in ParaView, as the run left them.
+    let folder = std::path::Path::new(&s.output_folder);
+    let collections: Vec<&str> = ["lattice.pvd", "surface.pvd"]
+        .into_iter()
+        .filter(|name| folder.join(name).is_file())
+        .collect();
+    let open = if collections.is_empty() {
+        String::new()
+    } else {
+        format!(" (open {} in ParaView)", collections.join(" and "))
+    };
     crate::outln!(
-        "output           {}: {} frames, {} files, {} (open lattice.pvd in ParaView)",
+        "output           {}: {} frames, {} files, {}{open}",
         s.output_folder,
         s.frames,
         s.files,

@@ -656,8 +656,14 @@ fn bundled_default_scene_checks_and_runs() {
     let tmp = dir.path().join("tmp");
     assert!(tmp.join("lattice.pvd").is_file());
     assert!(tmp.join("lattice_0000.vtu").is_file());
-    assert!(tmp.join("skin_0000.obj").is_file());
-    assert!(tmp.join("surface_0000.obj").is_file());
+    // The defaults: the lattice and the embedded surface, one series each.
+    assert!(tmp.join("surface.pvd").is_file());
+    assert!(tmp.join("surface_0000.vtu").is_file());
+    assert!(!tmp.join("skin_0000.obj").exists());
+    assert!(
+        stdout.contains("open lattice.pvd and surface.pvd in ParaView"),
+        "{stdout}"
+    );
     assert!(tmp.join("summary.json").is_file());
 }
 

@@ -21,8 +21,8 @@ pub use legacy::{LegacyFormat, write_legacy_vtk};
 pub use pvd::{PvdEntry, PvdWriter, time_decimals};
 #[cfg(feature = "legacy-vtk")]
 pub use series::LegacyVtkSeries;
-pub use series::{FrameExporter, VtuSeries};
-pub use vtu::{VtuEncoding, write_lines_vtu, write_quads_vtu, write_vtu};
+pub use series::{FrameExporter, SurfaceVtuSeries, VtuSeries};
+pub use vtu::{VtuEncoding, write_lines_vtu, write_quads_vtu, write_triangles_vtu, write_vtu};
 
 use crate::IoError;
 use std::path::Path;
@@ -31,6 +31,8 @@ use std::path::Path;
 pub const VTK_LINE: u8 = 3;
 /// VTK cell type of a four-node quadrilateral.
 pub const VTK_QUAD: u8 = 9;
+/// VTK cell type id of a triangle.
+pub const VTK_TRIANGLE: u8 = 5;
 /// VTK cell type of an eight-node hexahedron.
 pub const VTK_HEXAHEDRON: u8 = 12;
 

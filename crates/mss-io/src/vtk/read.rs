@@ -1,6 +1,7 @@
 //! Reading back the files of a run: the `.pvd` collection
-//! ([`read_pvd`]) and the lattice frames it lists ([`read_lattice_vtu`]),
-//! for replaying a run (the viewer) without ParaView.
+//! ([`read_pvd`]), the lattice frames it lists ([`read_lattice_vtu`]) and
+//! the embedded surface's frames ([`read_surface_vtu`]), for replaying a
+//! run (the viewer) without ParaView.
 //!
 //! A run folder is input like any other: a `.pvd` may name files outside
 //! its folder or be truncated, a `.vtu` may be malformed. The `.pvd` is
@@ -197,6 +198,64 @@ fn fields(
 /// arrays whose headers declare more than their piece holds, or more than
 /// `max_bytes` in all, before they are decompressed.
 pub fn read_lattice_vtu(path: &Path, max_bytes: u64) -> Result<LatticeFrameData, ReadError> {
+    let piece = read_cells_vtu(path, max_bytes, VTK_HEXAHEDRON, 8)?;
+    let points = piece.points;
+    let cells: Vec<[u32; 8]> = piece
+        .cells
+        .chunks_exact(8)
+        .map(|c| std::array::from_fn(|k| c[k]))
+        .collect();
+    let point_fields = fields(path, piece.data.point, points.len(), "point")?;
+    let cell_fields = fields(path, piece.data.cell, cells.len(), "cell")?;
+    Ok(LatticeFrameData {
+        points,
+        cells,
+        point_fields,
+        cell_fields,
+    })
+}
+
+/// A surface frame read back from a `.vtu` of triangles (the embedded
+/// surface's series, [`super::write_triangles_vtu`]).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct SurfaceFrameData {
+    /// Vertex positions (m).
+    pub points: Vec<[f64; 3]>,
+    /// Triangles, counter-clockwise seen from outside.
+    pub triangles: Vec<[u32; 3]>,
+}
+
+/// Reads a surface frame written by [`super::write_triangles_vtu`], with the
+/// guards of [`read_lattice_vtu`]: triangles only, every index in range.
+pub fn read_surface_vtu(path: &Path, max_bytes: u64) -> Result<SurfaceFrameData, ReadError> {
+    let piece = read_cells_vtu(path, max_bytes, super::VTK_TRIANGLE, 3)?;
+    let triangles = piece
+        .cells
+        .chunks_exact(3)
+        .map(|t| [t[0], t[1], t[2]])
+        .collect();
+    Ok(SurfaceFrameData {
+        points: piece.points,
+        triangles,
+    })
+}
+
+/// A `.vtu` piece of one cell type, checked.
+struct CellsPiece {
+    points: Vec<[f64; 3]>,
+    /// The cells' nodes, flattened, each in range.
+    cells: Vec<u32>,
+    data: vtkio::model::Attributes,
+}
+
+/// The piece of a `.vtu` whose cells are all `cell_type` of `nodes` nodes,
+/// read under the guards of [`read_lattice_vtu`].
+fn read_cells_vtu(
+    path: &Path,
+    max_bytes: u64,
+    cell_type: u8,
+    nodes: usize,
+) -> Result<CellsPiece, ReadError> {
     let size = std::fs::metadata(path)
         .map_err(|source| ReadError::Io {
             path: path.to_path_buf(),
@@ -253,32 +312,35 @@ pub fn read_lattice_vtu(path: &Path, max_bytes: u64) -> Result<LatticeFrameData,
     let points: Vec<[f64; 3]> = flat.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect();
     let (_, legacy) = piece.cells.cell_verts.into_legacy();
     let types = piece.cells.types;
-    let mut cells = Vec::with_capacity(types.len());
+    let what = match cell_type {
+        VTK_HEXAHEDRON => "a hexahedron",
+        _ => "a triangle",
+    };
+    let mut cells = Vec::with_capacity(types.len() * nodes);
     let mut at = 0usize;
     for (c, t) in types.iter().enumerate() {
-        if *t as u8 != VTK_HEXAHEDRON {
-            return Err(invalid(path, format!("cell {c} is not a hexahedron")));
+        if *t as u8 != cell_type {
+            return Err(invalid(path, format!("cell {c} is not {what}")));
         }
-        if legacy.get(at) != Some(&8) || legacy.len() < at + 9 {
-            return Err(invalid(path, format!("cell {c} does not have 8 nodes")));
+        if legacy.get(at) != Some(&(nodes as u32)) || legacy.len() < at + 1 + nodes {
+            return Err(invalid(
+                path,
+                format!("cell {c} does not have {nodes} nodes"),
+            ));
         }
-        let mut cell = [0u32; 8];
-        cell.copy_from_slice(&legacy[at + 1..at + 9]);
+        let cell = &legacy[at + 1..at + 1 + nodes];
         if cell.iter().any(|&n| n as usize >= points.len()) {
             return Err(invalid(
                 path,
                 format!("cell {c} names a node beyond the {} points", points.len()),
             ));
         }
-        cells.push(cell);
-        at += 9;
+        cells.extend_from_slice(cell);
+        at += 1 + nodes;
     }
-    let point_fields = fields(path, piece.data.point, points.len(), "point")?;
-    let cell_fields = fields(path, piece.data.cell, cells.len(), "cell")?;
-    Ok(LatticeFrameData {
+    Ok(CellsPiece {
         points,
         cells,
-        point_fields,
-        cell_fields,
+        data: piece.data,
     })
 }

@@ -114,6 +114,29 @@ pub fn write_quads_vtu(
     write_atomic(path, |w| write_grid(w, &grid, encoding))
 }
 
+/// Writes a triangulated surface (VTK_TRIANGLE cells), e.g. the embedded
+/// input surface of a frame, with its point fields, as an XML
+/// UnstructuredGrid, atomically.
+pub fn write_triangles_vtu(
+    path: &Path,
+    points: &[[f64; 3]],
+    triangles: &[[u32; 3]],
+    point_data: &[Field],
+    encoding: VtuEncoding,
+) -> Result<(), IoError> {
+    let connectivity = triangles.as_flattened();
+    validate_grid(path, points, connectivity, 3, point_data, &[])?;
+    let grid = Grid {
+        points,
+        connectivity,
+        nodes_per_cell: 3,
+        cell_type: super::VTK_TRIANGLE,
+        point_data,
+        cell_data: &[],
+    };
+    write_atomic(path, |w| write_grid(w, &grid, encoding))
+}
+
 /// An array as the writer sees it: a typed source of elements, some generated
 /// on the fly so that nothing is copied before encoding.
 #[derive(Clone, Copy)]

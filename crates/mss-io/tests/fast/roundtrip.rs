@@ -485,6 +485,67 @@ fn skin_exporters_write_every_frame_or_the_last() {
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 4);
 }
 
+/// The surface series (`vtu` skin exporter): triangles and displacements
+/// from the first frame read back exactly by vtkio and by the run reader,
+/// a `.pvd` listing the frames at their times, and a resumed series that
+/// goes on measuring from the first frame on disk.
+#[test]
+fn surface_vtu_series_round_trips_and_resumes() {
+    let (mut p, t) = octahedron();
+    let dir = tempfile::tempdir().unwrap();
+    let exporters = Exporters::default();
+    let facts = exporters.skin_facts("vtu").unwrap();
+    assert_eq!(
+        (facts.extension, facts.index_extension),
+        ("vtu", Some("pvd"))
+    );
+    let mut series = exporters
+        .skins("vtu", dir.path(), "surface", SkinFrames::Every)
+        .unwrap();
+    series.set_time_decimals(2);
+    let lift = |p: &mut Vec<[f64; 3]>, k: usize| p[4][2] = 1.0 + 0.25 * k as f64;
+    // Displacements are measured from the first frame written.
+    lift(&mut p, 0);
+    let rest = p.clone();
+    for k in 0..3 {
+        lift(&mut p, k);
+        series.write_skin(k, 0.1 * k as f64, &p, &t).unwrap();
+    }
+    series.finish().unwrap();
+    // Resumed after frame 1 (frame 2 is written again, as after a restart).
+    let mut resumed = exporters
+        .skins("vtu", dir.path(), "surface", SkinFrames::Every)
+        .unwrap();
+    resumed.resume(&[0.0, 0.1]).unwrap();
+    resumed.write_skin(2, 0.2, &p, &t).unwrap();
+    let times: Vec<f64> = pvd_entries(&dir.path().join("surface.pvd"))
+        .into_iter()
+        .map(|(time, _)| time)
+        .collect();
+    assert_eq!(times, [0.0, 0.1, 0.2]);
+    for k in 0..3 {
+        let path = dir.path().join(format!("surface_{k:04}.vtu"));
+        lift(&mut p, k);
+        let back = mss_io::vtk::read::read_surface_vtu(&path, 1 << 20).unwrap();
+        assert_eq!(back.points, p);
+        assert_eq!(back.triangles, t);
+        let r = read_back(&path);
+        assert!(r.types.iter().all(|&c| c == CellType::Triangle));
+        let expected: Vec<f64> = p
+            .iter()
+            .zip(&rest)
+            .flat_map(|(a, b)| [a[0] - b[0], a[1] - b[1], a[2] - b[2]])
+            .collect();
+        assert_eq!(r.point_data["displacement"], expected, "frame {k}");
+    }
+    // A lattice frame is not a surface.
+    let s = sample();
+    let lattice = dir.path().join("lattice.vtu");
+    write_vtu(&lattice, &frame(&s), VtuEncoding::Base64Zlib).unwrap();
+    let err = mss_io::vtk::read::read_surface_vtu(&lattice, 1 << 20).unwrap_err();
+    assert!(err.to_string().contains("not a triangle"), "{err}");
+}
+
 #[test]
 fn a_frame_whose_compressed_header_lies_is_refused_before_it_is_unpacked() {
     use base64::Engine as _;

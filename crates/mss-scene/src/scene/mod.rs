@@ -884,7 +884,7 @@ mod tests {
                 ..Default::default()
             }
         );
-        assert_eq!(t.output.every_time, Some(0.025));
+        assert_eq!(t.output.every_time, Some(0.05));
     }
 
     #[test]

@@ -29,15 +29,25 @@ pub struct OutputSection {
     /// Lattice frames as legacy `.vtk` (default false).
     #[serde(default)]
     pub vtk: bool,
-    /// Deformed lattice boundary skin as OBJ per frame (default true).
-    #[serde(default = "yes")]
+    /// Deformed lattice boundary skin as OBJ per frame (default false: the
+    /// `.vtu` frames hold the lattice, whose boundary it is).
+    #[serde(default)]
     pub skin_obj: bool,
     /// Deformed lattice boundary skin as binary STL per frame (default false).
     #[serde(default)]
     pub skin_stl: bool,
-    /// The input surface carried by the lattice, as OBJ per frame (default true).
+    /// The input surface carried by the lattice, per frame, in
+    /// `surface_format` (default true).
     #[serde(default = "yes")]
     pub embedded: bool,
+    /// How the embedded surface's frames are written: `"vtu"` (default:
+    /// ZLib-compressed triangles with their `displacement`, listed with
+    /// their times in `surface.pvd`, so that ParaView opens them as one
+    /// series) or `"obj"` (a text OBJ per frame shaded by
+    /// `surface_normals`, for tools that import OBJ; Blender plays the
+    /// point cache of `pc2` instead).
+    #[serde(default)]
+    pub surface_format: SurfaceFormat,
     /// Shading of the skin OBJ files: `"flat"` (one normal per triangle,
     /// default: the skin is made of cube faces) or `"smooth"`.
     #[serde(default = "flat")]
@@ -81,6 +91,27 @@ pub enum CompressionKey {
     Zlib,
     /// Uncompressed.
     None,
+}
+
+/// `[output] surface_format`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum SurfaceFormat {
+    /// Compressed `.vtu` triangles and a `.pvd` (the skin exporter `vtu`).
+    #[default]
+    Vtu,
+    /// Text OBJ per frame (the skin exporters `obj` and `obj-flat`).
+    Obj,
+}
+
+impl OutputSection {
+    /// The skin exporter that writes the embedded surface's frames.
+    pub fn surface_exporter(&self) -> &'static str {
+        match self.surface_format {
+            SurfaceFormat::Vtu => "vtu",
+            SurfaceFormat::Obj => obj_exporter(self.surface_normals),
+        }
+    }
 }
 
 impl CompressionKey {
@@ -131,9 +162,10 @@ impl Default for OutputSection {
             pvd: true,
             compression: CompressionKey::Zlib,
             vtk: false,
-            skin_obj: true,
+            skin_obj: false,
             skin_stl: false,
             embedded: true,
+            surface_format: SurfaceFormat::Vtu,
             skin_normals: Normals::Flat,
             surface_normals: Normals::Smooth,
             pc2: false,

@@ -35,7 +35,7 @@ fn point_caches_hold_every_frame_of_their_rest_shapes() {
     let text = "[mesh]\npath = \"builtin:critter\"\n[voxelize]\ncells = 8\n[material]\n\
                 young = 1.0e5\npoisson = 0.3\ndensity = 1000.0\n[[fixed]]\nkind = \"lowest_layer\"\n\
                 [loads]\ngravity = [0.0, 0.0, -9.81]\n[solver]\nduration = 0.02\n\
-                [output]\nevery_time = 0.005\npc2 = true\n";
+                [output]\nevery_time = 0.005\npc2 = true\nskin_obj = true\nsurface_format = \"obj\"\n";
     let input = SceneInput::from_toml(text, "pc2.toml").unwrap();
     let job = Job::prepare(input, Registry::default(), &no_progress).unwrap();
     let out = tempfile::tempdir().unwrap();
@@ -81,7 +81,7 @@ fn smooth_skins_on_request() {
     let text = "[mesh]\npath = \"builtin:critter\"\n[voxelize]\ncells = 6\n[material]\n\
                 young = 1.0e5\npoisson = 0.3\ndensity = 1000.0\n[[fixed]]\nkind = \"lowest_layer\"\n\
                 [solver]\nduration = 0.002\n[output]\nlast_only = true\n\nskin_normals = \"smooth\"\nsurface_normals = \"flat\"\n\
-                embedded = true\n";
+                embedded = true\nskin_obj = true\nsurface_format = \"obj\"\n";
     let input = SceneInput::from_toml(text, "smooth.toml").unwrap();
     let job = Job::prepare(input, Registry::default(), &no_progress).unwrap();
     let out = tempfile::tempdir().unwrap();

@@ -104,12 +104,12 @@ fn a_squeezed_ball_and_the_block_push_each_other_equally_and_the_outputs_hold_bo
         assert_eq!(frame.cells.len(), summary.bodies[k].cells);
         let own_pvd = out.path().join(format!("lattice_{}.pvd", body.name));
         assert_eq!(mss_io::vtk::read::read_pvd(&own_pvd).unwrap().len(), 7);
-        let skin = out.path().join(format!("skin_{}_0006.obj", body.name));
-        let surface = out.path().join(format!("surface_{}_0006.obj", body.name));
-        assert!(
-            skin.is_file() || surface.is_file(),
-            "a skin or surface per body and frame"
-        );
+        // The embedded surface per body and frame, as one series per body.
+        let surface = out.path().join(format!("surface_{}_0006.vtu", body.name));
+        let frame = mss_io::vtk::read::read_surface_vtu(&surface, 1 << 30).unwrap();
+        assert_eq!(frame.points.len(), body.mesh.vertices.len());
+        let surface_pvd = out.path().join(format!("surface_{}.pvd", body.name));
+        assert_eq!(mss_io::vtk::read::read_pvd(&surface_pvd).unwrap().len(), 7);
     }
     // Every file of the run is recognised as one (a new run there removes
     // them), and counted in the summary.
