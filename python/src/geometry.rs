@@ -30,6 +30,12 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
 }
 
 /// A closed triangle surface (m): what is voxelized.
+///
+/// Mesh(vertices, triangles, name="arrays")
+///
+/// A mesh from an (n, 3) array of vertex positions (m) and an (m, 3)
+/// array of vertex indices, cleaned as files are (degenerate and
+/// repeated triangles dropped, unused vertices removed).
 #[pyclass(name = "Mesh", module = "hexmss", frozen)]
 pub struct PyMesh {
     pub mesh: Arc<TriMesh>,
@@ -65,11 +71,6 @@ fn cached<'py, T: numpy::Element>(
 
 #[pymethods]
 impl PyMesh {
-    /// Mesh(vertices, triangles, name="arrays")
-    ///
-    /// A mesh from an (n, 3) array of vertex positions (m) and an (m, 3)
-    /// array of vertex indices, cleaned as files are (degenerate and
-    /// repeated triangles dropped, unused vertices removed).
     #[new]
     #[pyo3(signature = (vertices, triangles, name = "arrays".to_owned()))]
     fn new(

@@ -40,6 +40,11 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
 }
 
 /// An isotropic linear elastic material.
+///
+/// Material(young, poisson, density)
+///
+/// Young's modulus E (Pa), Poisson's ratio nu (-1 < nu < 0.5) and
+/// density (kg/m^3).
 #[pyclass(name = "Material", module = "hexmss", frozen)]
 #[derive(Clone, Copy)]
 pub struct PyMaterial {
@@ -48,10 +53,6 @@ pub struct PyMaterial {
 
 #[pymethods]
 impl PyMaterial {
-    /// Material(young, poisson, density)
-    ///
-    /// Young's modulus E (Pa), Poisson's ratio nu (-1 < nu < 0.5) and
-    /// density (kg/m^3).
     #[new]
     fn new(young: f64, poisson: f64, density: f64) -> PyResult<Self> {
         Material::new(young, poisson, density)
@@ -116,6 +117,15 @@ fn integrators() -> Vec<String> {
 
 /// A lattice turned into a mass-spring model (masses, springs, the chosen
 /// parameterization's coefficients).
+///
+/// Model(lattice, material, parameterization=None, hourglass=None)
+///
+/// `parameterization` is one of `parameterizations()`, optionally with
+/// `+hg`, read as a scene's `[model]` table: `hourglass` sets the
+/// factor of hourglass control (and adds it to any name); a `+hg` name
+/// without it gets the library's default factor (0.05). Without a
+/// parameterization: the bundled default scene's model,
+/// `"volumetric-barrier+hg"` with hourglass 1.0 (unless given).
 #[pyclass(name = "Model", module = "hexmss", frozen)]
 pub struct PyModel {
     pub model: Arc<Model>,
@@ -123,14 +133,6 @@ pub struct PyModel {
 
 #[pymethods]
 impl PyModel {
-    /// Model(lattice, material, parameterization=None, hourglass=None)
-    ///
-    /// `parameterization` is one of `parameterizations()`, optionally with
-    /// `+hg`, read as a scene's `[model]` table: `hourglass` sets the
-    /// factor of hourglass control (and adds it to any name); a `+hg` name
-    /// without it gets the library's default factor (0.05). Without a
-    /// parameterization: the bundled default scene's model,
-    /// `"volumetric-barrier+hg"` with hourglass 1.0 (unless given).
     #[new]
     #[pyo3(signature = (lattice, material, parameterization = None, hourglass = None))]
     fn new(
@@ -386,6 +388,17 @@ impl Recipe {
 }
 
 /// A model with boundary conditions, loads, damping and obstacles.
+///
+/// Problem(model, *, fixed=(), gravity=None, forces=(), tractions=(), drags=(), custom_loads=(), motions=(), motion_duration=1.0, damping=0.0, stiffness_damping=0.0, obstacles=(), contact_points="nodes", surface=None)
+///
+/// The keys follow a scene's tables: `fixed` is a list of `[[fixed]]`
+/// tables (`{"kind": "lowest_layer"}`, `{"kind": "face", "face": "x-"}`,
+/// ...), `gravity` (m/s^2), `forces`, `tractions`, `drags` and
+/// `custom_loads` (loads by `kind`) are the lists of `[loads]`, `motions` the `[[motions]]` tables (their default
+/// end is `motion_duration`, s), `damping` the mass damping alpha (1/s)
+/// and `stiffness_damping` beta (s), `obstacles` the `[[obstacles]]`
+/// tables touched by `contact_points` (`"nodes"`, or `"surface"` /
+/// `"both"` with the embedded `surface`).
 #[pyclass(name = "Problem", module = "hexmss", frozen)]
 pub struct PyProblem {
     pub recipe: Recipe,
@@ -421,16 +434,6 @@ impl PyProblem {
 
 #[pymethods]
 impl PyProblem {
-    /// Problem(model, *, fixed=(), gravity=None, forces=(), tractions=(), drags=(), custom_loads=(), motions=(), motion_duration=1.0, damping=0.0, stiffness_damping=0.0, obstacles=(), contact_points="nodes", surface=None)
-    ///
-    /// The keys follow a scene's tables: `fixed` is a list of `[[fixed]]`
-    /// tables (`{"kind": "lowest_layer"}`, `{"kind": "face", "face": "x-"}`,
-    /// ...), `gravity` (m/s^2), `forces`, `tractions`, `drags` and
-    /// `custom_loads` (loads by `kind`) are the lists of `[loads]`, `motions` the `[[motions]]` tables (their default
-    /// end is `motion_duration`, s), `damping` the mass damping alpha (1/s)
-    /// and `stiffness_damping` beta (s), `obstacles` the `[[obstacles]]`
-    /// tables touched by `contact_points` (`"nodes"`, or `"surface"` /
-    /// `"both"` with the embedded `surface`).
     #[new]
     #[pyo3(signature = (model, *, fixed = None, gravity = None, forces = None, tractions = None, drags = None, custom_loads = None, motions = None, motion_duration = 1.0, damping = 0.0, stiffness_damping = 0.0, obstacles = None, contact_points = None, surface = None))]
     #[allow(clippy::too_many_arguments)]
@@ -596,6 +599,10 @@ impl PyProblem {
 }
 
 /// Positions, velocities and time of a problem's nodes.
+///
+/// State(problem)
+///
+/// The problem's rest state at t = 0 (held nodes on their motion).
 #[pyclass(name = "State", module = "hexmss", frozen)]
 pub struct PyState {
     pub state: Mutex<State>,
@@ -614,9 +621,6 @@ impl PyState {
 
 #[pymethods]
 impl PyState {
-    /// State(problem)
-    ///
-    /// The problem's rest state at t = 0 (held nodes on their motion).
     #[new]
     fn new(problem: &PyProblem) -> Self {
         let p = problem.problem.get();
@@ -812,6 +816,14 @@ fn py_solve_static<'py>(
 }
 
 /// A time integrator bound to a problem.
+///
+/// Integrator(problem, kind="explicit", *, dt=None, safety=0.9, substep=False, rtol=None, max_newton=None, linear_solver="auto", precision="f64")
+///
+/// `kind` is one of `integrators()`. Explicit schemes step at the stable
+/// limit times `safety` unless `dt` is given (refused above the limit
+/// unless `substep`); `"implicit"` needs no stability limit (default
+/// dt 0.01 s). `precision="f32"` runs the explicit force pass in single
+/// precision (faster; Newton solvers refuse it).
 #[pyclass(name = "Integrator", module = "hexmss", frozen)]
 pub struct PyIntegrator {
     problem: Arc<ProblemRef>,
@@ -820,13 +832,6 @@ pub struct PyIntegrator {
 
 #[pymethods]
 impl PyIntegrator {
-    /// Integrator(problem, kind="explicit", *, dt=None, safety=0.9, substep=False, rtol=None, max_newton=None, linear_solver="auto", precision="f64")
-    ///
-    /// `kind` is one of `integrators()`. Explicit schemes step at the stable
-    /// limit times `safety` unless `dt` is given (refused above the limit
-    /// unless `substep`); `"implicit"` needs no stability limit (default
-    /// dt 0.01 s). `precision="f32"` runs the explicit force pass in single
-    /// precision (faster; Newton solvers refuse it).
     #[new]
     #[pyo3(signature = (problem, kind = "explicit", *, dt = None, safety = None, substep = false, rtol = None, max_newton = None, linear_solver = "auto", precision = "f64"))]
     #[allow(clippy::too_many_arguments)]
@@ -918,6 +923,11 @@ impl PyIntegrator {
 
 /// An interactive simulation: a problem and its state stepped frame by
 /// frame, with a drag on picked nodes.
+///
+/// Simulation(problem, surface=None)
+///
+/// A simulation of (a fresh copy of) `problem` from rest; `surface`, an
+/// `Embedding`, is what `surface_positions()` deforms.
 #[pyclass(name = "Simulation", module = "hexmss", frozen)]
 pub struct PySimulation {
     sim: Mutex<Simulation>,
@@ -941,10 +951,6 @@ impl PySimulation {
 
 #[pymethods]
 impl PySimulation {
-    /// Simulation(problem, surface=None)
-    ///
-    /// A simulation of (a fresh copy of) `problem` from rest; `surface`, an
-    /// `Embedding`, is what `surface_positions()` deforms.
     #[new]
     #[pyo3(signature = (problem, surface = None))]
     fn new(py: Python<'_>, problem: &PyProblem, surface: Option<&PyEmbedding>) -> PyResult<Self> {

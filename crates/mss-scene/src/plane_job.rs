@@ -173,10 +173,14 @@ impl PlaneJob {
         let (lo, hi) = outline.bounds();
         let longest = (hi[0] - lo[0]).max(hi[1] - lo[1]);
         let vox = &scene.voxelize;
-        let cell = match (vox.cell_sides, vox.cell_size, vox.cells) {
-            (Some(s), _, _) => s,
-            (None, Some(h), _) => [h, h],
-            (None, None, n) => {
+        let cell = match (vox.cell_sides, vox.cell_size, vox.cells_per_axis, vox.cells) {
+            (Some(s), ..) => s,
+            (None, Some(h), ..) => [h, h],
+            (None, None, Some([nx, ny]), _) => [
+                (hi[0] - lo[0]) / f64::from(nx),
+                (hi[1] - lo[1]) / f64::from(ny),
+            ],
+            (None, None, None, n) => {
                 let h = longest / n.unwrap_or(crate::scene::DEFAULT_CELLS) as f64;
                 [h, h]
             }

@@ -105,7 +105,12 @@ pub fn run(args: &CheckArgs, global: &GlobalArgs) -> anyhow::Result<()> {
             )];
             if let Some(p) = &t.pilot {
                 parts.push(format!(
-                    "the body folds: {:.1} times that per step in a pilot run{}",
+                    "{}{:.1} times that per step in a pilot run{}",
+                    if report.body_folds() {
+                        "the body folds: "
+                    } else {
+                        ""
+                    },
                     p.time_ratio,
                     if p.simulated_fraction < 1.0 {
                         format!(

@@ -179,6 +179,7 @@ pub fn run(args: &VoxelizeArgs, global: &GlobalArgs) -> anyhow::Result<()> {
         cells: args.cells,
         cell_size: args.size,
         cell_sides: None,
+        cells_per_axis: None,
         rule: args.rule.clone(),
         fraction: args.fraction,
         components: if args.all_components {

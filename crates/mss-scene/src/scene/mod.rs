@@ -657,6 +657,16 @@ impl Scene {
                     "two sides are for a 2D body ([model] dimension = 2); the 3D model's cells are cubes: give one length".into(),
                 ));
             }
+            if let Some(n) = body.voxelize.cells_per_axis
+                && !body.model.is_plane()
+            {
+                return Err(invalid(
+                    body.key("[voxelize] cells"),
+                    format!(
+                        "= {n:?}; cells per axis are for a 2D body ([model] dimension = 2); the 3D model's cells are cubes: give the number along the longest axis"
+                    ),
+                ));
+            }
             check_material(&body.material).map_err(|e| in_table("[material]", e))?;
             for (i, s) in body.fixed.iter().enumerate() {
                 check_selector(s).map_err(|e| in_list("[[fixed]]", i, e))?;

@@ -100,6 +100,10 @@ pub struct VoxelizeSection {
     /// A 2D body's cell sides `[lx, ly]` (m): `cell_size = [lx, ly]` in a
     /// scene (rectangles of any aspect ratio; the 3D model needs cubes).
     pub cell_sides: Option<[f64; 2]>,
+    /// A 2D body's cells along x and along y of its outline's bounding box:
+    /// `cells = [nx, ny]` in a scene (rectangles of the box's width / nx by
+    /// its height / ny; the 3D model needs cubes).
+    pub cells_per_axis: Option<[u32; 2]>,
     /// Occupancy rule, by its name in [`OccupancyRules`]: `"centre"` (cell
     /// centre inside the surface, default), `"any"` (cell overlaps the
     /// solid), `"fraction"` (at least `fraction` of the cell inside), or one a
@@ -118,7 +122,7 @@ pub struct VoxelizeSection {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawVoxelizeSection {
-    cells: Option<u32>,
+    cells: Option<CellsKey>,
     cell_size: Option<CellSizeKey>,
     #[serde(default = "default_rule")]
     rule: String,
@@ -128,6 +132,17 @@ struct RawVoxelizeSection {
     components: ComponentPolicy,
     #[serde(default = "default_max_cells")]
     max_cells: u64,
+}
+
+/// `cells`: along the longest axis, or along x and y for a 2D body.
+#[derive(Deserialize)]
+#[serde(
+    untagged,
+    expecting = "a number of cells along the longest axis, or [nx, ny] for a 2D body"
+)]
+enum CellsKey {
+    Longest(u32),
+    PerAxis([u32; 2]),
 }
 
 /// `cell_size`: one length, or two for a 2D body's rectangles.
@@ -145,8 +160,14 @@ impl From<RawVoxelizeSection> for VoxelizeSection {
             Some(CellSizeKey::Cube(h)) => (Some(h), None),
             Some(CellSizeKey::Sides(s)) => (None, Some(s)),
         };
+        let (cells, cells_per_axis) = match raw.cells {
+            None => (None, None),
+            Some(CellsKey::Longest(n)) => (Some(n), None),
+            Some(CellsKey::PerAxis(n)) => (None, Some(n)),
+        };
         Self {
-            cells: raw.cells,
+            cells,
+            cells_per_axis,
             cell_size,
             cell_sides,
             rule: raw.rule,
@@ -171,6 +192,7 @@ impl Default for VoxelizeSection {
     fn default() -> Self {
         Self {
             cells: None,
+            cells_per_axis: None,
             cell_size: None,
             cell_sides: None,
             rule: default_rule(),
@@ -202,6 +224,17 @@ impl VoxelizeSection {
     /// key its own way ([`KeyError::key`]).
     pub fn check(&self) -> Result<(), KeyError> {
         let bad = |key: &str, message: String| Err(KeyError::new(key, message));
+        if let Some(n) = self.cells_per_axis {
+            if self.cell_size.is_some() || self.cell_sides.is_some() {
+                return bad("", "give either `cells` or `cell_size`, not both".into());
+            }
+            if n.contains(&0) {
+                return bad(
+                    "cells",
+                    format!("= {n:?}; the number of cells along each axis must be at least 1"),
+                );
+            }
+        }
         if let Some(s) = self.cell_sides {
             if self.cells.is_some() {
                 return bad("", "give either `cells` or `cell_size`, not both".into());

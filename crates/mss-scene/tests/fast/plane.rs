@@ -196,3 +196,48 @@ fn what_a_2d_body_cannot_take_is_refused_by_key() {
         .to_string();
     assert!(e.contains("mss run"), "{e}");
 }
+
+/// `cells = [nx, ny]`: that many rectangles along each side of the
+/// outline's box (here 0.4 x 0.1 m: cells of 0.05 x 0.025 m); a 3D body
+/// refuses two counts, and every count must be at least 1.
+#[test]
+fn cells_per_axis_give_rectangles_of_the_box() {
+    let dir = tempfile::tempdir().unwrap();
+    let svg = dir.path().join("strip.svg");
+    std::fs::write(
+        &svg,
+        "<svg xmlns=\"http://www.w3.org/2000/svg\"><rect x=\"0\" y=\"0\" width=\"400\" height=\"100\"/></svg>",
+    )
+    .unwrap();
+    let scene = |cells: &str| {
+        format!(
+            "[mesh]\npath = {:?}\nunits = \"mm\"\n[voxelize]\ncells = {cells}\n\
+             [model]\ndimension = 2\nthickness = 0.01\nparameterization = \"paper+hg\"\n\
+             [material]\nyoung = 1e5\npoisson = 0.3\ndensity = 1000.0\n\
+             [[fixed]]\nkind = \"face\"\nface = \"x-\"\n[solver]\nkind = \"static\"\n",
+            svg.display().to_string()
+        )
+    };
+    let job = prepare(&scene("[8, 4]")).unwrap();
+    assert_eq!(job.lattice.num_cells(), 32);
+    let [lx, ly] = job.problem.model.cell_size();
+    assert!(
+        (lx - 0.05).abs() < 1e-12 && (ly - 0.025).abs() < 1e-12,
+        "{lx} {ly}"
+    );
+    // One number: squares, that many along the longest side.
+    let squares = prepare(&scene("8")).unwrap();
+    assert_eq!(squares.lattice.num_cells(), 16);
+    let e = prepare(&scene("[8, 0]")).unwrap_err();
+    assert!(
+        e.contains("[voxelize] cells") && e.contains("at least 1"),
+        "{e}"
+    );
+    let cube = "[mesh]\npath = \"builtin:cube\"\nscale = 0.1\n[voxelize]\ncells = [4, 8]\n\
+                [material]\nyoung = 1e4\npoisson = 0.3\ndensity = 1000.0\n";
+    let e = SceneInput::from_toml(cube, "cube.toml")
+        .map(|_| ())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("[voxelize] cells") && e.contains("2D"), "{e}");
+}
