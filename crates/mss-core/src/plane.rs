@@ -797,6 +797,38 @@ pub struct PlaneProblem {
     pub damping: f64,
     /// Contact with rigid obstacles.
     pub contact: Option<PlaneContact>,
+    /// Held nodes moved along prescribed paths ([`PlaneMotion`]); their
+    /// nodes are held (`held`) too.
+    pub motions: Vec<PlaneMotion>,
+}
+
+/// Held nodes moved by `displacement` (m), reached linearly from t = 0 to
+/// `ramp` (s) and then kept: a scene's `[[motions]]` in the plane.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlaneMotion {
+    /// The nodes moved.
+    pub nodes: Vec<u32>,
+    /// Their final displacement (m).
+    pub displacement: [f64; 2],
+    /// When it is reached (s, > 0).
+    pub ramp: f64,
+}
+
+impl PlaneMotion {
+    /// The displacement at time `t` (s).
+    pub fn displacement_at(&self, t: f64) -> [f64; 2] {
+        let share = (t / self.ramp).clamp(0.0, 1.0);
+        self.displacement.map(|d| d * share)
+    }
+
+    /// The velocity at time `t` (s): constant during the ramp, then zero.
+    pub fn velocity_at(&self, t: f64) -> [f64; 2] {
+        if (0.0..self.ramp).contains(&t) {
+            self.displacement.map(|d| d / self.ramp)
+        } else {
+            [0.0; 2]
+        }
+    }
 }
 
 /// Why a 2D solve failed.
@@ -821,6 +853,27 @@ impl PlaneProblem {
             forces: vec![[0.0; 2]; n],
             damping: 0.0,
             contact: None,
+            motions: Vec::new(),
+        }
+    }
+
+    /// Puts the moved nodes where their motions have them at time `t`,
+    /// `share` of the way (a static solve's load increment), with their
+    /// velocity at `t` when `v` is given.
+    fn place_moved(&self, t: f64, share: f64, x: &mut [Vec3], mut v: Option<&mut [Vec3]>) {
+        let rest = &self.model.rest;
+        for m in &self.motions {
+            let d = m.displacement_at(t);
+            let u = m.velocity_at(t);
+            for &n in &m.nodes {
+                let n = n as usize;
+                x[n].x = rest[n].x + share * d[0];
+                x[n].y = rest[n].y + share * d[1];
+                if let Some(v) = v.as_deref_mut() {
+                    v[n].x = u[0];
+                    v[n].y = u[1];
+                }
+            }
         }
     }
 
@@ -869,11 +922,12 @@ impl PlaneProblem {
             .collect()
     }
 
-    /// The static equilibrium from `x` (held nodes stay where `x` has
-    /// them). The load is applied whole first; when Newton's method fails
-    /// (large deformation), in increments that halve on failure and grow
-    /// on success. Returns the Newton iterations.
-    pub fn solve_static(&self, x: &mut [Vec3]) -> Result<u32, PlaneSolveError> {
+    /// The static equilibrium from `x` at time `time` (held nodes stay
+    /// where `x` has them, moved nodes go where their motions have them at
+    /// `time`). The load (and the motions) are applied whole first; when
+    /// Newton's method fails (large deformation), in increments that halve
+    /// on failure and grow on success. Returns the Newton iterations.
+    pub fn solve_static(&self, time: f64, x: &mut [Vec3]) -> Result<u32, PlaneSolveError> {
         let h = self.model.size[0].min(self.model.size[1]);
         let mut linear = LinearSolver::for_lattice(
             &self.model.cells_as_hex(),
@@ -886,6 +940,7 @@ impl PlaneProblem {
         while done < 1.0 {
             let target = (done + step).min(1.0);
             let mut trial = x.to_vec();
+            self.place_moved(time, target, &mut trial, None);
             match self.newton_under(target, &mut trial, &mut linear) {
                 Ok(n) => {
                     iterations += n;
@@ -945,6 +1000,7 @@ impl PlaneProblem {
     /// ends with, as in the explicit step. Returns the Newton iterations.
     pub fn step_implicit(
         &self,
+        t0: f64,
         x: &mut [Vec3],
         v: &mut [Vec3],
         dt: f64,
@@ -1008,7 +1064,8 @@ impl PlaneProblem {
                 v0: v.to_vec(),
                 dt,
             };
-            // Predictor: the current velocity.
+            // Predictor: the current velocity; moved nodes where their
+            // motions have them at the step's end.
             for i in 0..x.len() {
                 for d in 0..2 {
                     if !self.held[i][d] {
@@ -1016,6 +1073,8 @@ impl PlaneProblem {
                     }
                 }
             }
+            let t_end = t0 + (step + 1) as f64 * dt;
+            self.place_moved(t_end, 1.0, x, None);
             iterations += newton(&mut sys, x, &free, h, h, opts, &mut linear)
                 .map_err(|e| newton_error(e, Some(step)))?;
             for i in 0..x.len() {
@@ -1025,6 +1084,7 @@ impl PlaneProblem {
                 }
                 self.hold_velocity(i, &mut v[i]);
             }
+            self.place_moved(t_end, 1.0, x, Some(v));
         }
         Ok(iterations)
     }
@@ -1058,10 +1118,12 @@ impl PlaneProblem {
         }
     }
 
-    /// `steps` explicit steps of `dt` (s) from `(x, v)`: semi-implicit
-    /// Euler with the damping applied implicitly; held nodes do not move.
+    /// `steps` explicit steps of `dt` (s) from `(x, v)` at time `t0`:
+    /// semi-implicit Euler with the damping applied implicitly; held nodes
+    /// do not move, moved nodes follow their motions.
     pub fn step_explicit(
         &self,
+        t0: f64,
         x: &mut [Vec3],
         v: &mut [Vec3],
         dt: f64,
@@ -1090,6 +1152,7 @@ impl PlaneProblem {
                     }
                 }
             }
+            self.place_moved(t0 + (step + 1) as f64 * dt, 1.0, x, Some(v));
             if !x.iter().all(|p| p.x.is_finite() && p.y.is_finite()) {
                 return Err(PlaneSolveError::Diverged(step));
             }

@@ -49,7 +49,7 @@ use hexmesh::outline::{OutlineEmbedding, load_outline};
 use hexmesh::plane::{Outline, RectLattice, rasterize};
 use mss_core::Vec3;
 use mss_core::constraints::{Face, NodeSelector};
-use mss_core::plane::{PlaneModel, PlaneProblem};
+use mss_core::plane::{PlaneModel, PlaneMotion, PlaneProblem};
 use mss_io::vtk::{Field, PvdWriter, VtuEncoding, write_quads_vtu};
 use serde::Serialize;
 
@@ -268,6 +268,17 @@ impl PlaneJob {
                 problem.held[n as usize] = [true, true];
             }
         }
+        for (i, m) in scene.motions.iter().enumerate() {
+            let nodes = select(&m.select, &format!("[[motions]] #{}", i + 1))?;
+            for &n in &nodes {
+                problem.held[n as usize] = [true, true];
+            }
+            problem.motions.push(PlaneMotion {
+                nodes,
+                displacement: [m.displacement[0], m.displacement[1]],
+                ramp: m.ramp.unwrap_or(scene.solver.duration),
+            });
+        }
         for (i, f) in scene.loads.forces.iter().enumerate() {
             let nodes = select(&f.select, &format!("[[loads.forces]] #{}", i + 1))?;
             let share = if f.per_node {
@@ -392,7 +403,9 @@ impl PlaneJob {
             message: e.to_string(),
         };
         let (steps, time) = if self.input.scene.solver.is_static() {
-            let iterations = p.solve_static(&mut x).map_err(solver_error)?;
+            let iterations = p
+                .solve_static(self.input.scene.solver.duration, &mut x)
+                .map_err(solver_error)?;
             peak = displacement(&x);
             writer.write(0.0, &x, &v)?;
             (iterations as usize, 0.0)
@@ -403,11 +416,12 @@ impl PlaneJob {
                     break;
                 }
                 let chunk = self.frame_every.min(self.steps - done);
+                let t0 = done as f64 * self.dt;
                 if self.input.scene.solver.kind == "implicit" {
-                    p.step_implicit(&mut x, &mut v, self.dt, chunk)
+                    p.step_implicit(t0, &mut x, &mut v, self.dt, chunk)
                         .map_err(solver_error)?;
                 } else {
-                    p.step_explicit(&mut x, &mut v, self.dt, chunk)
+                    p.step_explicit(t0, &mut x, &mut v, self.dt, chunk)
                         .map_err(solver_error)?;
                 }
                 done += chunk;

@@ -206,7 +206,7 @@ fn tension(model: PlaneModel, axis: usize) -> Result<(f64, f64), PlaneExperiment
         }
     }
     let mut x = rest.clone();
-    p.solve_static(&mut x)?;
+    p.solve_static(0.0, &mut x)?;
     let mean = |d: usize, at: f64, along: usize| {
         let sel: Vec<f64> = rest
             .iter()
@@ -451,7 +451,7 @@ pub fn cantilever_study(
                 p.forces = coarse.forces.clone();
                 let rest = p.model.rest_positions().to_vec();
                 let mut x = rest.clone();
-                match p.solve_static(&mut x) {
+                match p.solve_static(0.0, &mut x) {
                     Ok(_) => {
                         let u: Vec<[f64; 2]> = x
                             .iter()

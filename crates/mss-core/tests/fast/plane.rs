@@ -55,7 +55,7 @@ fn tension(model: PlaneModel, axis: usize, stress: f64) -> (f64, f64) {
         }
     }
     let mut x = rest.clone();
-    p.solve_static(&mut x).unwrap();
+    p.solve_static(0.0, &mut x).unwrap();
     let mean = |d: usize, at: f64, along: usize| {
         let (s, n) = rest
             .iter()
@@ -235,7 +235,7 @@ fn a_free_body_keeps_its_momentum_while_it_vibrates() {
     let mut v: Vec<Vec3> = (0..x.len()).map(|_| Vec3::new(0.3, -0.2, 0.0)).collect();
     let momentum = |v: &[Vec3]| -> Vec3 { v.iter().zip(&masses).map(|(v, m)| v * *m).sum() };
     let before = momentum(&v);
-    p.step_explicit(&mut x, &mut v, dt, 2000).unwrap();
+    p.step_explicit(0.0, &mut x, &mut v, dt, 2000).unwrap();
     let after = momentum(&v);
     assert!(
         (after - before).norm() < 1e-12 * before.norm(),
@@ -276,11 +276,11 @@ fn static_and_damped_dynamic_answers_agree() {
         p
     };
     let mut xs = p.model.rest_positions().to_vec();
-    p.solve_static(&mut xs).unwrap();
+    p.solve_static(0.0, &mut xs).unwrap();
     let mut x = p.model.rest_positions().to_vec();
     let mut v = vec![Vec3::zeros(); x.len()];
     let dt = p.model.stable_time_step(0.8);
-    p.step_explicit(&mut x, &mut v, dt, (2.0 / dt) as usize)
+    p.step_explicit(0.0, &mut x, &mut v, dt, (2.0 / dt) as usize)
         .unwrap();
     let (s, d) = (tip_sag(&p, &xs), tip_sag(&p, &x));
     assert!(s > 1e-4, "sag {s}");
@@ -292,9 +292,9 @@ fn results_do_not_depend_on_the_thread_count() {
     let p = cantilever([12, 3], [0.02, 0.01], 1.0e7, PlaneParameterization::Paper);
     let run = || {
         let mut x = p.model.rest_positions().to_vec();
-        p.solve_static(&mut x).unwrap();
+        p.solve_static(0.0, &mut x).unwrap();
         let mut v = vec![Vec3::zeros(); x.len()];
-        p.step_explicit(&mut x, &mut v, 1e-5, 50).unwrap();
+        p.step_explicit(0.0, &mut x, &mut v, 1e-5, 50).unwrap();
         x
     };
     let one = on_threads(1, run);
@@ -373,7 +373,7 @@ fn a_cantilever_converges_towards_timoshenko_under_refinement() {
             PlaneParameterization::Paper,
         );
         let mut x = p.model.rest_positions().to_vec();
-        p.solve_static(&mut x).unwrap();
+        p.solve_static(0.0, &mut x).unwrap();
         let sag = tip_sag(&p, &x);
         errors.push(sag / timoshenko - 1.0);
     }
@@ -419,7 +419,7 @@ fn a_block_rests_on_the_ground_carrying_its_weight() {
     // Statics has no friction: one roller keeps the block from sliding away.
     p.held[0] = [true, false];
     let mut x = p.model.rest_positions().to_vec();
-    p.solve_static(&mut x).unwrap();
+    p.solve_static(0.0, &mut x).unwrap();
     p.held[0] = [false, false];
     let weight = p.model.total_mass() * 9.81;
     let carried: f64 = x.iter().filter(|q| q.y < 0.0).map(|q| -q.y * 1.0e5).sum();
@@ -437,7 +437,7 @@ fn a_block_rests_on_the_ground_carrying_its_weight() {
         .collect();
     let mut v = vec![Vec3::zeros(); x.len()];
     let dt = p.stable_time_step(0.8);
-    p.step_explicit(&mut x, &mut v, dt, (1.5 / dt) as usize)
+    p.step_explicit(0.0, &mut x, &mut v, dt, (1.5 / dt) as usize)
         .unwrap();
     let carried: f64 = x.iter().filter(|q| q.y < 0.0).map(|q| -q.y * 1.0e5).sum();
     assert!(
@@ -465,12 +465,12 @@ fn a_block_on_a_slope_slides_at_the_coulomb_rate_or_sticks() {
         let mut settle = p.clone();
         settle.gravity = [0.0, g[1]];
         settle.held[0] = [true, false];
-        settle.solve_static(&mut x).unwrap();
+        settle.solve_static(0.0, &mut x).unwrap();
         let x0: f64 = x.iter().map(|q| q.x).sum::<f64>() / x.len() as f64;
         let mut v = vec![Vec3::zeros(); x.len()];
         let dt = p.stable_time_step(0.5);
         let t = 0.3;
-        p.step_explicit(&mut x, &mut v, dt, (t / dt) as usize)
+        p.step_explicit(0.0, &mut x, &mut v, dt, (t / dt) as usize)
             .unwrap();
         let moved = x.iter().map(|q| q.x).sum::<f64>() / x.len() as f64 - x0;
         let rigid = 0.5 * 9.81 * (angle.sin() - mu * angle.cos()) * t * t;
@@ -490,14 +490,95 @@ fn the_implicit_step_settles_at_the_static_equilibrium_with_large_steps() {
     let mut p = cantilever([8, 2], [0.02, 0.02], 1.0e7, PlaneParameterization::Paper);
     p.damping = 5.0;
     let mut xs = p.model.rest_positions().to_vec();
-    p.solve_static(&mut xs).unwrap();
+    p.solve_static(0.0, &mut xs).unwrap();
     let mut x = p.model.rest_positions().to_vec();
     let mut v = vec![Vec3::zeros(); x.len()];
     // 100 times the explicit limit: stable, and damped to rest.
     let dt = 100.0 * p.model.stable_time_step(1.0);
-    let iterations = p.step_implicit(&mut x, &mut v, dt, 400).unwrap();
+    let iterations = p.step_implicit(0.0, &mut x, &mut v, dt, 400).unwrap();
     assert!(iterations > 0);
     let (s, d) = (tip_sag(&p, &xs), tip_sag(&p, &x));
     assert!((s - d).abs() < 1e-3 * s, "static {s}, implicit {d}");
     assert!(v.iter().all(|v| v.norm() < 1e-3), "not at rest");
+}
+
+/// A strip held at x = 0 and stretched by a motion of its far end: the
+/// moved nodes follow the ramp exactly in both time integrators, and the
+/// damped dynamic runs end at the static solve of the motion's end (which
+/// puts them exactly there), where the strip is in uniaxial tension
+/// between its clamps: its mid-height nodes stretched by u * x / L.
+#[test]
+fn moved_nodes_follow_their_ramp_and_the_runs_end_at_the_static_answer() {
+    use mss_core::plane::PlaneMotion;
+    let model = model(
+        [8, 2],
+        [0.02, 0.02],
+        0.0,
+        PlaneParameterization::Paper,
+        None,
+    );
+    let rest = model.rest_positions().to_vec();
+    let length = 0.16;
+    let mut p = PlaneProblem::new(model);
+    let far: Vec<u32> = (0..rest.len() as u32)
+        .filter(|&i| (rest[i as usize].x - length).abs() < 1e-12)
+        .collect();
+    for (i, r) in rest.iter().enumerate() {
+        if r.x.abs() < 1e-12 {
+            p.held[i] = [true, true];
+        }
+    }
+    for &n in &far {
+        p.held[n as usize] = [true, true];
+    }
+    let u = 2e-3;
+    p.motions.push(PlaneMotion {
+        nodes: far.clone(),
+        displacement: [u, 0.0],
+        ramp: 0.1,
+    });
+    p.damping = 40.0;
+    let mut xs = rest.clone();
+    p.solve_static(1.0, &mut xs).unwrap();
+    for &n in &far {
+        assert_eq!(xs[n as usize].x, rest[n as usize].x + u);
+    }
+    // nu = 0: no lateral contraction for the clamps to hinder, so the
+    // strain is uniform up to the model's nonlinearity at 1.25 % strain.
+    for (r, x) in rest.iter().zip(&xs) {
+        assert!(
+            (x.x - r.x - u * r.x / length).abs() < 1e-3 * u,
+            "{r:?} {x:?}"
+        );
+        assert!((x.y - r.y).abs() < 1e-3 * u, "{r:?} {x:?}");
+    }
+    let dt = 0.5 * p.stable_time_step(1.0);
+    let steps = (0.5 / dt) as usize;
+    for implicit in [false, true] {
+        let mut x = rest.clone();
+        let mut v = vec![Vec3::zeros(); x.len()];
+        let dt = if implicit { 20.0 * dt } else { dt };
+        let steps = if implicit { steps / 20 } else { steps };
+        let mut t = 0.0;
+        // In chunks, as a run writes frames: the time goes on across them.
+        for chunk in [steps / 3, steps / 3, steps - 2 * (steps / 3)] {
+            if implicit {
+                p.step_implicit(t, &mut x, &mut v, dt, chunk).unwrap();
+            } else {
+                p.step_explicit(t, &mut x, &mut v, dt, chunk).unwrap();
+            }
+            t += chunk as f64 * dt;
+            let share = (t / 0.1).min(1.0);
+            for &n in &far {
+                let n = n as usize;
+                assert!((x[n].x - rest[n].x - share * u).abs() < 1e-15, "t = {t}");
+            }
+        }
+        let worst = x
+            .iter()
+            .zip(&xs)
+            .map(|(a, b)| (a - b).norm())
+            .fold(0.0, f64::max);
+        assert!(worst < 1e-3 * u, "implicit {implicit}: {worst}");
+    }
 }

@@ -484,8 +484,19 @@ impl Scene {
                 );
             }
         }
-        if !self.motions.is_empty() {
-            return not_yet("[[motions]]", "a prescribed motion");
+        if let Some((i, m)) = self
+            .motions
+            .iter()
+            .enumerate()
+            .find(|(_, m)| m.displacement[2] != 0.0)
+        {
+            return Err(invalid(
+                format!("[[motions]] #{} displacement", i + 1),
+                format!(
+                    "= {:?}; a 2D body moves in the x-y plane (z = 0)",
+                    m.displacement
+                ),
+            ));
         }
         if self.solver.precision != mss_core::Precision::F64 {
             return not_yet("[solver] precision", "a single-precision force pass");

@@ -164,6 +164,14 @@ fn what_a_2d_body_cannot_take_is_refused_by_key() {
         let e = prepare(&text.replace(change.0, change.1)).unwrap_err();
         assert!(e.contains(key) && e.contains(words), "{change:?}: {e}");
     }
+    let e = prepare(&format!(
+        "{text}\n[[motions]]\nselect = {{ kind = \"face\", face = \"x+\" }}\ndisplacement = [0.0, 0.0, 0.01]\n"
+    ))
+    .unwrap_err();
+    assert!(
+        e.contains("[[motions]] #1 displacement") && e.contains("x-y plane"),
+        "{e}"
+    );
     let moving = format!(
         "{text}\n[[obstacles]]\nshape = {{ kind = \"ground\" }}\nmotion = [[0.0, 0.0, 0.0, 0.0], [1.0, 0.1, 0.0, 0.0]]\n"
     );
@@ -197,18 +205,26 @@ fn what_a_2d_body_cannot_take_is_refused_by_key() {
     assert!(e.contains("mss run"), "{e}");
 }
 
+/// An SVG of one rectangle, `width` x `height` mm, at the origin.
+fn strip_svg(dir: &std::path::Path, width: u32, height: u32) -> PathBuf {
+    let svg = dir.join("strip.svg");
+    std::fs::write(
+        &svg,
+        format!(
+            "<svg xmlns=\"http://www.w3.org/2000/svg\"><rect x=\"0\" y=\"0\" width=\"{width}\" height=\"{height}\"/></svg>"
+        ),
+    )
+    .unwrap();
+    svg
+}
+
 /// `cells = [nx, ny]`: that many rectangles along each side of the
 /// outline's box (here 0.4 x 0.1 m: cells of 0.05 x 0.025 m); a 3D body
 /// refuses two counts, and every count must be at least 1.
 #[test]
 fn cells_per_axis_give_rectangles_of_the_box() {
     let dir = tempfile::tempdir().unwrap();
-    let svg = dir.path().join("strip.svg");
-    std::fs::write(
-        &svg,
-        "<svg xmlns=\"http://www.w3.org/2000/svg\"><rect x=\"0\" y=\"0\" width=\"400\" height=\"100\"/></svg>",
-    )
-    .unwrap();
+    let svg = strip_svg(dir.path(), 400, 100);
     let scene = |cells: &str| {
         format!(
             "[mesh]\npath = {:?}\nunits = \"mm\"\n[voxelize]\ncells = {cells}\n\
@@ -240,4 +256,48 @@ fn cells_per_axis_give_rectangles_of_the_box() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("[voxelize] cells") && e.contains("2D"), "{e}");
+}
+
+/// `[[motions]]` in a 2D scene: a strip held at x-, pulled at x+ by 2 mm
+/// over 0.1 s and sagging under its weight between its ends; the static
+/// run, the damped explicit and the implicit runs end at the same largest
+/// displacement (the sag's, more than the pull).
+#[test]
+fn a_strip_pulled_by_a_motion_ends_where_the_static_solve_puts_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let svg = strip_svg(dir.path(), 200, 40);
+    let scene = |solver: &str| {
+        format!(
+            "[mesh]\npath = {:?}\nunits = \"mm\"\n[voxelize]\ncells = [10, 2]\n\
+             [model]\ndimension = 2\nthickness = 0.01\nparameterization = \"paper+hg\"\n\
+             [material]\nyoung = 1e5\npoisson = 0.3\ndensity = 1000.0\n\
+             [[fixed]]\nkind = \"face\"\nface = \"x-\"\n\
+             [[motions]]\nselect = {{ kind = \"face\", face = \"x+\" }}\ndisplacement = [0.002, 0.0, 0.0]\nramp = 0.1\n\
+             [loads]\ngravity = [0.0, -9.81, 0.0]\n[solver]\n{solver}\nduration = 0.6\n[output]\nlast_only = true\n",
+            svg.display().to_string()
+        )
+    };
+    let run = |solver: &str, name: &str| {
+        prepare(&scene(solver))
+            .unwrap()
+            .run(&dir.path().join(name), &Cancel::new())
+            .unwrap()
+    };
+    let s = run("kind = \"static\"", "static");
+    assert!(s.max_displacement > 0.0025, "{s:?}");
+    for (solver, name) in [
+        ("kind = \"explicit\"\ndamping = 60.0", "explicit"),
+        (
+            "kind = \"implicit\"\ndamping = 60.0\ndt = 0.005",
+            "implicit",
+        ),
+    ] {
+        let d = run(solver, name);
+        assert!(
+            (d.max_displacement - s.max_displacement).abs() < 1e-3 * s.max_displacement,
+            "{name}: {} against {}",
+            d.max_displacement,
+            s.max_displacement
+        );
+    }
 }
