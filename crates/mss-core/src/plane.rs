@@ -222,6 +222,12 @@ pub struct PlaneModel {
     coefficients: PlaneCoefficients,
     material: Material,
     variant: PlaneParameterization,
+    /// The coefficients of each region's material after the first
+    /// (`[[regions]]`); empty in one material.
+    region_coefficients: Vec<PlaneCoefficients>,
+    /// Each cell's material: 0 the model's, k the k-th of
+    /// `region_coefficients` (empty in one material).
+    cell_material: Vec<u32>,
     /// CSR node -> (cell, corner), for a gather in a fixed order.
     node_offsets: Vec<u32>,
     node_corners: Vec<u32>,
@@ -249,6 +255,63 @@ impl PlaneModel {
         let mut model = Self::with_coefficients(lattice, material, thickness, coefficients)?;
         model.variant = variant;
         Ok(model)
+    }
+
+    /// The model with a material per cell: `cell_material[c]` is 0 for
+    /// the model's material and k for `materials[k - 1]`, each with the
+    /// model's variant and hourglass factor `hourglass` (as given to
+    /// [`PlaneModel::new`]). The masses follow each cell's density.
+    pub fn with_regions(
+        mut self,
+        hourglass: Option<f64>,
+        materials: &[Material],
+        cell_material: Vec<u32>,
+    ) -> Result<Self, PlaneModelError> {
+        assert_eq!(
+            cell_material.len(),
+            self.cells.len(),
+            "one material per cell"
+        );
+        assert!(
+            cell_material.iter().all(|&m| m as usize <= materials.len()),
+            "materials named by the cells exist"
+        );
+        self.region_coefficients = materials
+            .iter()
+            .map(|m| PlaneCoefficients::new(self.variant, hourglass, m, self.thickness, self.size))
+            .collect::<Result<_, _>>()?;
+        let area = self.size[0] * self.size[1] * self.thickness / 4.0;
+        self.masses.iter_mut().for_each(|m| *m = 0.0);
+        for (c, cell) in self.cells.iter().enumerate() {
+            let density = match cell_material[c] {
+                0 => self.material.density,
+                k => materials[k as usize - 1].density,
+            };
+            for &a in cell {
+                self.masses[a as usize] += density * area;
+            }
+        }
+        self.cell_material = cell_material;
+        Ok(self)
+    }
+
+    /// The coefficients of cell `c`.
+    fn coefficients_of(&self, c: usize) -> &PlaneCoefficients {
+        match self.cell_material.get(c) {
+            None | Some(0) => &self.coefficients,
+            Some(&k) => &self.region_coefficients[k as usize - 1],
+        }
+    }
+
+    /// Each cell's material index (see [`PlaneModel::with_regions`]; empty
+    /// in one material).
+    pub fn cell_materials(&self) -> &[u32] {
+        &self.cell_material
+    }
+
+    /// The coefficients of every material, the model's first.
+    pub fn all_coefficients(&self) -> impl Iterator<Item = &PlaneCoefficients> {
+        std::iter::once(&self.coefficients).chain(&self.region_coefficients)
     }
 
     /// The model of `lattice` with given cell coefficients (to study
@@ -298,6 +361,8 @@ impl PlaneModel {
             coefficients,
             material,
             variant: PlaneParameterization::Paper,
+            region_coefficients: Vec::new(),
+            cell_material: Vec::new(),
             node_offsets,
             node_corners,
         })
@@ -342,7 +407,8 @@ impl PlaneModel {
     pub fn num_cells(&self) -> usize {
         self.cells.len()
     }
-    /// The cells' coefficients.
+    /// The coefficients of the model's material (cells of other
+    /// materials have their own: [`PlaneModel::with_regions`]).
     pub fn coefficients(&self) -> PlaneCoefficients {
         self.coefficients
     }
@@ -361,7 +427,7 @@ impl PlaneModel {
 
     /// The internal forces of cell `c` on its 4 corners (N).
     pub fn cell_forces(&self, x: &[Vec3], c: usize) -> [[f64; 2]; 4] {
-        cell_forces(&self.coefficients, self.size, &self.corners(x, c))
+        cell_forces(self.coefficients_of(c), self.size, &self.corners(x, c))
     }
 
     /// The internal forces at `x` (N; z components zero). Cells in
@@ -390,7 +456,7 @@ impl PlaneModel {
     /// not the gradient of an energy.
     pub fn energy(&self, x: &[Vec3]) -> f64 {
         (0..self.cells.len())
-            .map(|c| cell_energy(&self.coefficients, self.size, &self.corners(x, c)))
+            .map(|c| cell_energy(self.coefficients_of(c), self.size, &self.corners(x, c)))
             .sum()
     }
 
@@ -414,8 +480,9 @@ impl PlaneModel {
                     plus[n][d] += step;
                     let mut minus = p;
                     minus[n][d] -= step;
-                    let fp = cell_forces(&self.coefficients, self.size, &plus);
-                    let fm = cell_forces(&self.coefficients, self.size, &minus);
+                    let k = self.coefficients_of(c);
+                    let fp = cell_forces(k, self.size, &plus);
+                    let fm = cell_forces(k, self.size, &minus);
                     for (row, v) in column.iter_mut().enumerate() {
                         *v = (fp[row / 2][row % 2] - fm[row / 2][row % 2]) / (2.0 * step);
                     }

@@ -216,10 +216,47 @@ impl PlaneJob {
             .material
             .ok_or_else(|| setting("[material]", "missing".into()))?;
         let thickness = scene.model.thickness.unwrap_or_default();
-        let model = PlaneModel::new(&lattice, material, thickness, variant, hourglass)
+        let mut model = PlaneModel::new(&lattice, material, thickness, variant, hourglass)
             .map_err(|e| setting("[model]", e.to_string()))?;
-        let c = model.coefficients();
-        if hourglass.is_none() && (c.k_l < 0.0 || c.k_h < 0.0) {
+        if !scene.regions.is_empty() {
+            // A material per region, chosen by each cell's centre (z = 0),
+            // as a 3D body's regions are.
+            let nodes = lattice.nodes();
+            let centres: Vec<[f64; 3]> = lattice
+                .cells()
+                .iter()
+                .map(|c| {
+                    let (x, y) = c.iter().fold((0.0, 0.0), |(x, y), &a| {
+                        (
+                            x + 0.25 * nodes[a as usize][0],
+                            y + 0.25 * nodes[a as usize][1],
+                        )
+                    });
+                    [x, y, 0.0]
+                })
+                .collect();
+            let loaders = crate::Registry::default().loaders;
+            let mesh_of = |path: &str| input.load_placed_mesh_with(path, &placement, &loaders);
+            let context = crate::regions::RegionContext {
+                bounds: hexmesh::Aabb::of_points(nodes.iter().map(|p| [p[0], p[1], 0.0]))
+                    .ok_or_else(|| setting("[voxelize]", "the lattice has no node".into()))?,
+                h: cell[0].min(cell[1]),
+                mesh_of: &mesh_of,
+                cell_labels: None,
+            };
+            let regions = crate::regions::assign_regions_at(
+                &centres,
+                &context,
+                &material,
+                &scene.regions,
+                &crate::regions::RegionSelectors::default(),
+            )
+            .map_err(|e| setting(&format!("[[regions]] #{}", e.region + 1), e.message))?;
+            model = model
+                .with_regions(hourglass, &regions.materials[1..], regions.cell_material)
+                .map_err(|e| setting("[[regions]]", e.to_string()))?;
+        }
+        if hourglass.is_none() && model.all_coefficients().any(|c| c.k_l < 0.0 || c.k_h < 0.0) {
             // Without hourglass control such a lattice has bending modes of
             // negative stiffness: no stable equilibrium, a run that explodes.
             return Err(setting(
@@ -588,7 +625,12 @@ impl<'a> FrameWriter<'a> {
                     Field::vectors("internal_force", &force),
                     Field::flags("fixed", &fixed),
                 ],
-                &[],
+                &if p.model.cell_materials().is_empty() {
+                    Vec::new()
+                } else {
+                    // As a 3D frame's: 0 the scene's material, k the k-th region.
+                    vec![Field::ids("material", p.model.cell_materials())]
+                },
                 VtuEncoding::Base64Zlib,
             )?;
             if let Some(pvd) = &mut self.pvd {

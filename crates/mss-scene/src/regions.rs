@@ -260,19 +260,30 @@ pub fn assign_regions_with_labels(
         .iter()
         .map(|c| std::array::from_fn(|k| o[k] + (c[k] as f64 + 0.5) * h))
         .collect();
-    let bounds = lattice.bounding_box();
     let context = RegionContext {
-        bounds,
+        bounds: lattice.bounding_box(),
         h,
         mesh_of,
         cell_labels: cell_labels.map(|l| Arc::new(CellLabels::new(lattice, l))),
     };
+    assign_regions_at(&centres, &context, base, regions, selectors)
+}
+
+/// [`assign_regions`] for cells given by their centres (a 2D body's
+/// rectangles, at z = 0), in `context`.
+pub fn assign_regions_at(
+    centres: &[[f64; 3]],
+    context: &RegionContext<'_>,
+    base: &Material,
+    regions: &[RegionSpec],
+    selectors: &RegionSelectors,
+) -> Result<RegionAssignment, RegionError> {
     let mut materials = vec![*base];
     let mut cell_material = vec![0u32; centres.len()];
     let mut selected = Vec::with_capacity(regions.len());
     for (r, region) in regions.iter().enumerate() {
         let error = |message: String| RegionError { region: r, message };
-        let inside = selectors.test(&region.select, &context).map_err(error)?;
+        let inside = selectors.test(&region.select, context).map_err(error)?;
         let index = materials.len() as u32;
         let mut count = 0;
         for (c, &p) in centres.iter().enumerate() {

@@ -582,3 +582,60 @@ fn moved_nodes_follow_their_ramp_and_the_runs_end_at_the_static_answer() {
         assert!(worst < 1e-3 * u, "implicit {implicit}: {worst}");
     }
 }
+
+/// Two materials in series (`with_regions`): a bar of nu = 0 whose right
+/// half is 4 times stiffer and 3 times denser, pulled at its end, stretches
+/// by F L1 / (E1 A) + F L2 / (E2 A); its mass is each half's.
+#[test]
+fn materials_in_series_stretch_as_springs_in_series() {
+    let (n, cell) = ([8u32, 2u32], [0.02, 0.02]);
+    let base = model(n, cell, 0.0, PlaneParameterization::Paper, None);
+    let soft = base.material();
+    let stiff = Material::with_poisson_range(4.0 * soft.young, 0.0, 3000.0, -1.0, 0.5).unwrap();
+    let rest = base.rest_positions().to_vec();
+    let length = 0.16;
+    let cell_material: Vec<u32> = base
+        .cells()
+        .iter()
+        .map(|c| {
+            let x = c.iter().map(|&a| rest[a as usize].x).sum::<f64>() / 4.0;
+            u32::from(x > 0.5 * length)
+        })
+        .collect();
+    let model = base.with_regions(None, &[stiff], cell_material).unwrap();
+    let (width, t) = (0.04, model.thickness());
+    let expected_mass = (soft.density + stiff.density) * 0.5 * length * width * t;
+    assert!((model.total_mass() - expected_mass).abs() < 1e-12 * expected_mass);
+    let mut p = PlaneProblem::new(model);
+    let force = 1e-3 * soft.young * width * t;
+    for (i, r) in rest.iter().enumerate() {
+        if r.x.abs() < 1e-12 {
+            p.held[i] = [true, true];
+        }
+        if (r.x - length).abs() < 1e-12 {
+            // Consistent loads: the edge nodes carry half a cell face.
+            let share = if r.y.abs() < 1e-12 || (r.y - width).abs() < 1e-12 {
+                0.25
+            } else {
+                0.5
+            };
+            p.forces[i][0] = force * share;
+        }
+    }
+    let mut x = rest.clone();
+    p.solve_static(0.0, &mut x).unwrap();
+    let end: Vec<f64> = rest
+        .iter()
+        .zip(&x)
+        .filter(|(r, _)| (r.x - length).abs() < 1e-12)
+        .map(|(r, x)| x.x - r.x)
+        .collect();
+    let mean = end.iter().sum::<f64>() / end.len() as f64;
+    let area = width * t;
+    let series =
+        force * 0.5 * length / (soft.young * area) + force * 0.5 * length / (stiff.young * area);
+    assert!(
+        (mean - series).abs() < 2e-3 * series,
+        "{mean} against {series}"
+    );
+}

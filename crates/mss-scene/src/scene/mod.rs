@@ -467,9 +467,6 @@ impl Scene {
         if self.image.is_some() {
             return not_yet("[image]", "a label image");
         }
-        if !self.regions.is_empty() {
-            return not_yet("[[regions]]", "a material per region");
-        }
         for (i, o) in self.obstacles.iter().enumerate() {
             if !o.motion.is_empty() {
                 return not_yet(

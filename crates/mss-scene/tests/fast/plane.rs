@@ -301,3 +301,61 @@ fn a_strip_pulled_by_a_motion_ends_where_the_static_solve_puts_it() {
         );
     }
 }
+
+/// `[[regions]]` in a 2D scene: the right half of a long strip of nu = 0
+/// four times stiffer stretches it by 5/8 of the one-material stretch (springs
+/// in series); the frames carry each cell's `material`; a region that
+/// selects no cell is refused by its number.
+#[test]
+fn a_stiffer_region_of_a_strip_stretches_as_springs_in_series() {
+    let dir = tempfile::tempdir().unwrap();
+    let svg = strip_svg(dir.path(), 800, 40);
+    let scene = |regions: &str| {
+        format!(
+            "[mesh]\npath = {:?}\nunits = \"mm\"\n[voxelize]\ncells = [40, 2]\n\
+             [model]\ndimension = 2\nthickness = 0.01\nparameterization = \"paper+hg\"\n\
+             [material]\nyoung = 1e5\npoisson = 0.0\ndensity = 1000.0\n\
+             [[fixed]]\nkind = \"face\"\nface = \"x-\"\n\
+             [[loads.forces]]\nselect = {{ kind = \"face\", face = \"x+\" }}\nforce = [0.4, 0.0, 0.0]\n\
+             [solver]\nkind = \"static\"\n{regions}",
+            svg.display().to_string()
+        )
+    };
+    let run = |regions: &str, name: &str| {
+        prepare(&scene(regions))
+            .unwrap()
+            .run(&dir.path().join(name), &Cancel::new())
+            .unwrap()
+    };
+    let one = run("", "one");
+    let region = "[[regions]]\nselect = { kind = \"box\", min = [0.5, 0.0, 0.0], max = [1.0, 1.0, 1.0], relative = true }\nyoung = 4e5\n";
+    let two = run(region, "two");
+    let ratio = two.max_displacement / one.max_displacement;
+    // Up to the end's local response to equal nodal forces (1.5 % here).
+    assert!((ratio - 0.625).abs() < 0.015 * 0.625, "{ratio}");
+    let vtk = vtkio::Vtk::import(dir.path().join("two/lattice_0001.vtu")).unwrap();
+    let vtkio::model::DataSet::UnstructuredGrid { pieces, .. } = vtk.data else {
+        panic!("not an unstructured grid");
+    };
+    let piece = pieces[0].load_piece_data(None).unwrap();
+    let material = piece
+        .data
+        .cell
+        .iter()
+        .find_map(|a| match a {
+            vtkio::model::Attribute::DataArray(d) if d.name == "material" => {
+                d.data.clone().cast_into::<u32>()
+            }
+            _ => None,
+        })
+        .expect("a material field");
+    assert_eq!(material.iter().filter(|&&m| m == 1).count(), 40);
+    let nowhere = region
+        .replace("min = [0.5, 0.0, 0.0]", "min = [2.0, 0.0, 0.0]")
+        .replace("max = [1.0", "max = [3.0");
+    let e = prepare(&scene(&nowhere)).unwrap_err();
+    assert!(
+        e.contains("[[regions]] #1") && e.contains("selects no cell"),
+        "{e}"
+    );
+}
