@@ -50,6 +50,7 @@ use hexmesh::plane::RectLattice;
 use rayon::prelude::*;
 use thiserror::Error;
 
+use crate::contact::Path;
 use crate::solver::{LinearSolver, LinearSolverKind};
 use crate::solver::{NewtonFailure, NewtonOptions, NonlinearSystem, newton};
 use crate::{BlockCsr, Material, Vec3};
@@ -753,11 +754,13 @@ impl PlaneObstacle {
 /// Contact of a 2D body's nodes with rigid obstacles: a penalty along the
 /// obstacle's normal, and Coulomb friction applied to the velocities of
 /// the explicit step (a node sticks while the friction an impulse can give
-/// stops it, else slides against it).
+/// stops it, else slides against it). Obstacles may move along paths.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PlaneContact {
-    /// The obstacles.
+    /// The obstacles, where they are at t = 0.
     pub obstacles: Vec<PlaneObstacle>,
+    /// Each obstacle's translation in time (its x and y; none: it stays).
+    pub paths: Vec<Path>,
     /// Penalty stiffness per node (N/m).
     pub stiffness: f64,
     /// Coulomb friction coefficient.
@@ -765,12 +768,37 @@ pub struct PlaneContact {
 }
 
 impl PlaneContact {
-    /// The contact force on a node at `p` (N) and the normal force's size.
-    fn force(&self, p: [f64; 2]) -> ([f64; 2], f64) {
+    /// Each obstacle with `p` (m) in the frame it had at t = 0, at time `t`.
+    fn placed(
+        &self,
+        p: [f64; 2],
+        t: f64,
+    ) -> impl Iterator<Item = (usize, &PlaneObstacle, [f64; 2])> {
+        self.obstacles.iter().enumerate().map(move |(i, o)| {
+            let d = self
+                .paths
+                .get(i)
+                .map_or(Vec3::zeros(), |path| path.offset(t));
+            (i, o, [p[0] - d.x, p[1] - d.y])
+        })
+    }
+
+    /// The velocity of obstacle `i` at time `t` (m/s).
+    fn velocity(&self, i: usize, t: f64) -> [f64; 2] {
+        let v = self
+            .paths
+            .get(i)
+            .map_or(Vec3::zeros(), |path| path.velocity(t));
+        [v.x, v.y]
+    }
+
+    /// The contact force on a node at `p` (N) at time `t`, and the normal
+    /// force's size.
+    fn force(&self, p: [f64; 2], t: f64) -> ([f64; 2], f64) {
         let mut f = [0.0; 2];
         let mut normal = 0.0;
-        for o in &self.obstacles {
-            if let Some((depth, n)) = o.penetration(p) {
+        for (_, o, q) in self.placed(p, t) {
+            if let Some((depth, n)) = o.penetration(q) {
                 let fn_ = self.stiffness * depth;
                 f[0] += fn_ * n[0];
                 f[1] += fn_ * n[1];
@@ -786,12 +814,14 @@ impl PlaneContact {
 struct StaticSystem<'a> {
     p: &'a PlaneProblem,
     load: f64,
+    /// Where the moving obstacles are (s).
+    time: f64,
 }
 
 impl NonlinearSystem for StaticSystem<'_> {
     fn residual(&mut self, x: &[Vec3], r: &mut [Vec3]) -> f64 {
         let p = self.p;
-        p.forces_under(x, self.load, r);
+        p.forces_under(x, self.load, self.time, r);
         let weight: f64 = p
             .model
             .masses
@@ -812,8 +842,8 @@ impl NonlinearSystem for StaticSystem<'_> {
             // from the first Newton step.
             let margin = 0.01 * self.p.model.size[0].min(self.p.model.size[1]);
             for (i, p) in x.iter().enumerate() {
-                for o in &c.obstacles {
-                    if let Some((_, n)) = o.within([p.x, p.y], margin) {
+                for (_, o, q) in c.placed([p.x, p.y], self.time) {
+                    if let Some((_, n)) = o.within(q, margin) {
                         let k = j.find(i, i).expect("the diagonal is in the pattern");
                         for e in 0..2 {
                             for d in 0..2 {
@@ -960,21 +990,22 @@ impl PlaneProblem {
         safety * 2.0 / (omega * omega + contact).sqrt()
     }
 
-    /// Internal plus external forces at `x` (N).
-    pub fn total_forces(&self, x: &[Vec3], out: &mut [Vec3]) {
-        self.forces_under(x, 1.0, out);
+    /// Internal plus external forces at `x` (N) at time `t` (s; where the
+    /// moving obstacles are).
+    pub fn total_forces(&self, t: f64, x: &[Vec3], out: &mut [Vec3]) {
+        self.forces_under(x, 1.0, t, out);
     }
 
-    /// Internal and contact forces plus `load` times gravity and the
-    /// nodal forces, at `x` (N).
-    fn forces_under(&self, x: &[Vec3], load: f64, out: &mut [Vec3]) {
+    /// Internal and contact forces (the obstacles at time `t`) plus `load`
+    /// times gravity and the nodal forces, at `x` (N).
+    fn forces_under(&self, x: &[Vec3], load: f64, t: f64, out: &mut [Vec3]) {
         self.model.internal_forces(x, out);
         for (i, f) in out.iter_mut().enumerate() {
             let m = self.model.masses[i];
             f.x += load * (m * self.gravity[0] + self.forces[i][0]);
             f.y += load * (m * self.gravity[1] + self.forces[i][1]);
             if let Some(c) = &self.contact {
-                let (g, _) = c.force([x[i].x, x[i].y]);
+                let (g, _) = c.force([x[i].x, x[i].y], t);
                 f.x += g[0];
                 f.y += g[1];
             }
@@ -1008,7 +1039,8 @@ impl PlaneProblem {
             let target = (done + step).min(1.0);
             let mut trial = x.to_vec();
             self.place_moved(time, target, &mut trial, None);
-            match self.newton_under(target, &mut trial, &mut linear) {
+            // Moving obstacles go along their paths with the increments.
+            match self.newton_under(target, target * time, &mut trial, &mut linear) {
                 Ok(n) => {
                     iterations += n;
                     x.copy_from_slice(&trial);
@@ -1029,6 +1061,7 @@ impl PlaneProblem {
     fn newton_under(
         &self,
         load: f64,
+        time: f64,
         x: &mut [Vec3],
         linear: &mut LinearSolver,
     ) -> Result<u32, PlaneSolveError> {
@@ -1049,7 +1082,11 @@ impl PlaneProblem {
             slope_line_search: false,
         };
         newton(
-            &mut StaticSystem { p: self, load },
+            &mut StaticSystem {
+                p: self,
+                load,
+                time,
+            },
             x,
             &free,
             size,
@@ -1078,10 +1115,12 @@ impl PlaneProblem {
             x0: Vec<Vec3>,
             v0: Vec<Vec3>,
             dt: f64,
+            /// The step's end (s).
+            t_end: f64,
         }
         impl NonlinearSystem for Step<'_> {
             fn residual(&mut self, x: &[Vec3], r: &mut [Vec3]) -> f64 {
-                self.p.total_forces(x, r);
+                self.p.total_forces(self.t_end, x, r);
                 let (dt, c) = (self.dt, self.p.damping);
                 let mut scale = 0.0;
                 for i in 0..x.len() {
@@ -1097,6 +1136,7 @@ impl PlaneProblem {
                 let mut j = StaticSystem {
                     p: self.p,
                     load: 1.0,
+                    time: self.t_end,
                 }
                 .jacobian(x);
                 let (dt, c) = (self.dt, self.p.damping);
@@ -1125,11 +1165,13 @@ impl PlaneProblem {
         };
         let mut iterations = 0;
         for step in 0..steps {
+            let t_end = t0 + (step + 1) as f64 * dt;
             let mut sys = Step {
                 p: self,
                 x0: x.to_vec(),
                 v0: v.to_vec(),
                 dt,
+                t_end,
             };
             // Predictor: the current velocity; moved nodes where their
             // motions have them at the step's end.
@@ -1140,14 +1182,13 @@ impl PlaneProblem {
                     }
                 }
             }
-            let t_end = t0 + (step + 1) as f64 * dt;
             self.place_moved(t_end, 1.0, x, None);
             iterations += newton(&mut sys, x, &free, h, h, opts, &mut linear)
                 .map_err(|e| newton_error(e, Some(step)))?;
             for i in 0..x.len() {
                 v[i] = (x[i] - sys.x0[i]) / dt;
                 if let Some(c) = &self.contact {
-                    self.apply_friction(c, x[i], &mut v[i], dt / self.model.masses[i]);
+                    self.apply_friction(c, t_end, x[i], &mut v[i], dt / self.model.masses[i]);
                 }
                 self.hold_velocity(i, &mut v[i]);
             }
@@ -1168,14 +1209,18 @@ impl PlaneProblem {
     /// Coulomb friction on a touching node's velocity: the impulse
     /// `friction * normal force * dt` stops its tangential motion if it can
     /// (sticking), else slows it by that much (sliding).
-    fn apply_friction(&self, c: &PlaneContact, x: Vec3, v: &mut Vec3, dt_over_m: f64) {
+    /// The obstacles are where they are at time `t`, and the tangential
+    /// velocity is relative to theirs.
+    fn apply_friction(&self, c: &PlaneContact, t: f64, x: Vec3, v: &mut Vec3, dt_over_m: f64) {
         if c.friction == 0.0 {
             return;
         }
-        for o in &c.obstacles {
-            if let Some((depth, n)) = o.penetration([x.x, x.y]) {
-                let vn = v.x * n[0] + v.y * n[1];
-                let vt = [v.x - vn * n[0], v.y - vn * n[1]];
+        for (i, o, q) in c.placed([x.x, x.y], t) {
+            if let Some((depth, n)) = o.penetration(q) {
+                let w = c.velocity(i, t);
+                let r = [v.x - w[0], v.y - w[1]];
+                let vn = r[0] * n[0] + r[1] * n[1];
+                let vt = [r[0] - vn * n[0], r[1] - vn * n[1]];
                 let speed = norm(vt);
                 let stop = c.friction * c.stiffness * depth * dt_over_m;
                 let scale = if speed <= stop { 1.0 } else { stop / speed };
@@ -1199,7 +1244,8 @@ impl PlaneProblem {
         let mut f = vec![Vec3::zeros(); x.len()];
         let keep = 1.0 / (1.0 + dt * self.damping);
         for step in 0..steps {
-            self.total_forces(x, &mut f);
+            let t = t0 + step as f64 * dt;
+            self.total_forces(t, x, &mut f);
             for i in 0..x.len() {
                 let inv_m = 1.0 / self.model.masses[i];
                 for d in 0..2 {
@@ -1210,7 +1256,7 @@ impl PlaneProblem {
                     };
                 }
                 if let Some(c) = &self.contact {
-                    self.apply_friction(c, x[i], &mut v[i], dt * inv_m);
+                    self.apply_friction(c, t, x[i], &mut v[i], dt * inv_m);
                     self.hold_velocity(i, &mut v[i]);
                 }
                 for d in 0..2 {

@@ -335,6 +335,7 @@ impl PlaneJob {
         if !scene.obstacles.is_empty() {
             let low = rest.iter().map(|p| p.y).fold(f64::INFINITY, f64::min);
             let mut obstacles = Vec::new();
+            let mut paths = Vec::new();
             let mut friction = None;
             let mut stiffness = None;
             for (i, o) in scene.obstacles.iter().enumerate() {
@@ -344,6 +345,16 @@ impl PlaneJob {
                     .tagged_as()
                     .map_err(|e| setting(&key, e.to_string()))?;
                 obstacles.push(plane_obstacle(shape, low).map_err(|m| setting(&key, m))?);
+                let motion_key = format!("[[obstacles]] #{} motion", i + 1);
+                if let Some(k) = o.motion.iter().find(|k| k[3] != 0.0) {
+                    return Err(setting(
+                        &motion_key,
+                        format!(
+                            "has the keyframe {k:?}; a 2D obstacle moves in the x-y plane (dz = 0)"
+                        ),
+                    ));
+                }
+                paths.push(o.path().map_err(|e| setting(&motion_key, e.message))?);
                 friction = friction.or(o.friction);
                 stiffness = stiffness.or(o.stiffness);
             }
@@ -365,6 +376,7 @@ impl PlaneJob {
             }
             problem.contact = Some(mss_core::plane::PlaneContact {
                 obstacles,
+                paths,
                 stiffness,
                 friction,
             });

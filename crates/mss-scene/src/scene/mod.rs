@@ -468,12 +468,6 @@ impl Scene {
             return not_yet("[image]", "a label image");
         }
         for (i, o) in self.obstacles.iter().enumerate() {
-            if !o.motion.is_empty() {
-                return not_yet(
-                    &format!("[[obstacles]] #{} motion", i + 1),
-                    "a moving obstacle",
-                );
-            }
             if o.damping_ratio.is_some() || o.friction_kinetic.is_some() {
                 return not_yet(
                     &format!("[[obstacles]] #{}", i + 1),

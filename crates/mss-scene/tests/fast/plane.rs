@@ -173,7 +173,7 @@ fn what_a_2d_body_cannot_take_is_refused_by_key() {
         "{e}"
     );
     let moving = format!(
-        "{text}\n[[obstacles]]\nshape = {{ kind = \"ground\" }}\nmotion = [[0.0, 0.0, 0.0, 0.0], [1.0, 0.1, 0.0, 0.0]]\n"
+        "{text}\n[[obstacles]]\nshape = {{ kind = \"ground\" }}\nmotion = [[0.0, 0.0, 0.0, 0.0], [1.0, 0.1, 0.0, 0.1]]\n"
     );
     let e = prepare(&moving).unwrap_err();
     assert!(
