@@ -875,6 +875,10 @@ fn newton_error(e: NewtonFailure, step: Option<usize>) -> PlaneSolveError {
     })
 }
 
+/// How many times a 2D implicit step is halved where Newton's method fails
+/// before the failure is reported.
+pub const MAX_IMPLICIT_HALVINGS: u32 = 6;
+
 /// Smallest load increment of a 2D static solve, as a fraction of the load.
 pub const MIN_LOAD_STEP: f64 = 1.0 / 1024.0;
 
@@ -1097,7 +1101,9 @@ impl PlaneProblem {
         .map_err(|e| newton_error(e, None))
     }
 
-    /// `steps` implicit (backward Euler) steps of `dt` (s) from `(x, v)`:
+    /// `steps` implicit (backward Euler) steps of `dt` (s) from `(x, v)` at
+    /// time `t0` (a step where Newton's method fails is taken again in
+    /// halves, [`MAX_IMPLICIT_HALVINGS`] times at most):
     /// each step solves `M (v' - v) / dt = f(x') - c M v'` with
     /// `x' = x + dt v'` by Newton's method, so any step is stable (and
     /// damps the highest modes). Friction acts on the velocity each step
@@ -1165,34 +1171,58 @@ impl PlaneProblem {
         };
         let mut iterations = 0;
         for step in 0..steps {
-            let t_end = t0 + (step + 1) as f64 * dt;
-            let mut sys = Step {
-                p: self,
-                x0: x.to_vec(),
-                v0: v.to_vec(),
-                dt,
-                t_end,
-            };
-            // Predictor: the current velocity; moved nodes where their
-            // motions have them at the step's end.
-            for i in 0..x.len() {
-                for d in 0..2 {
-                    if !self.held[i][d] {
-                        x[i][d] += dt * v[i][d];
+            // The step, taken again in halves where Newton's method fails
+            // (a node's contact switching on and off within it, which the
+            // penalty's kink makes Newton cycle over), down to
+            // 2^-MAX_IMPLICIT_HALVINGS of it; in time order (a stack).
+            let mut pending = vec![(t0 + step as f64 * dt, dt, 0u32)];
+            while let Some((start, sub_dt, halvings)) = pending.pop() {
+                let t_end = start + sub_dt;
+                let mut sys = Step {
+                    p: self,
+                    x0: x.to_vec(),
+                    v0: v.to_vec(),
+                    dt: sub_dt,
+                    t_end,
+                };
+                // Predictor: the current velocity; moved nodes where their
+                // motions have them at the step's end.
+                for i in 0..x.len() {
+                    for d in 0..2 {
+                        if !self.held[i][d] {
+                            x[i][d] += sub_dt * v[i][d];
+                        }
                     }
                 }
-            }
-            self.place_moved(t_end, 1.0, x, None);
-            iterations += newton(&mut sys, x, &free, h, h, opts, &mut linear)
-                .map_err(|e| newton_error(e, Some(step)))?;
-            for i in 0..x.len() {
-                v[i] = (x[i] - sys.x0[i]) / dt;
-                if let Some(c) = &self.contact {
-                    self.apply_friction(c, t_end, x[i], &mut v[i], dt / self.model.masses[i]);
+                self.place_moved(t_end, 1.0, x, None);
+                match newton(&mut sys, x, &free, h, h, opts, &mut linear) {
+                    Ok(n) => iterations += n,
+                    Err(e) if halvings >= MAX_IMPLICIT_HALVINGS => {
+                        return Err(newton_error(e, Some(step)));
+                    }
+                    Err(e) => {
+                        log::debug!(
+                            "2D implicit step {step}: {}; taken again in halves",
+                            newton_error(e, Some(step))
+                        );
+                        x.copy_from_slice(&sys.x0);
+                        v.copy_from_slice(&sys.v0);
+                        let half = 0.5 * sub_dt;
+                        pending.push((start + half, half, halvings + 1));
+                        pending.push((start, half, halvings + 1));
+                        continue;
+                    }
                 }
-                self.hold_velocity(i, &mut v[i]);
+                for i in 0..x.len() {
+                    v[i] = (x[i] - sys.x0[i]) / sub_dt;
+                    if let Some(c) = &self.contact {
+                        let dt_over_m = sub_dt / self.model.masses[i];
+                        self.apply_friction(c, t_end, x[i], &mut v[i], dt_over_m);
+                    }
+                    self.hold_velocity(i, &mut v[i]);
+                }
+                self.place_moved(t_end, 1.0, x, Some(v));
             }
-            self.place_moved(t_end, 1.0, x, Some(v));
         }
         Ok(iterations)
     }
