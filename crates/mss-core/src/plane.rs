@@ -113,6 +113,9 @@ pub enum PlaneModelError {
     /// The hourglass strength is not a non-negative finite number.
     #[error("hourglass strength {0} must be a non-negative number")]
     Hourglass(f64),
+    /// A material per cell that does not fit the lattice.
+    #[error("{0}")]
+    Regions(String),
 }
 
 /// The constants of one cell: spring stiffnesses (N/m), the corrections'
@@ -268,15 +271,22 @@ impl PlaneModel {
         materials: &[Material],
         cell_material: Vec<u32>,
     ) -> Result<Self, PlaneModelError> {
-        assert_eq!(
-            cell_material.len(),
-            self.cells.len(),
-            "one material per cell"
-        );
-        assert!(
-            cell_material.iter().all(|&m| m as usize <= materials.len()),
-            "materials named by the cells exist"
-        );
+        if cell_material.len() != self.cells.len() {
+            return Err(PlaneModelError::Regions(format!(
+                "{} cell materials for {} cells",
+                cell_material.len(),
+                self.cells.len()
+            )));
+        }
+        if let Some(m) = cell_material
+            .iter()
+            .find(|&&m| m as usize > materials.len())
+        {
+            return Err(PlaneModelError::Regions(format!(
+                "a cell names material {m}, but there are {} besides the model's",
+                materials.len()
+            )));
+        }
         self.region_coefficients = materials
             .iter()
             .map(|m| PlaneCoefficients::new(self.variant, hourglass, m, self.thickness, self.size))

@@ -70,23 +70,24 @@ pub struct TimeEstimate {
     pub probe_steps: u32,
     /// Wall time per step measured (s).
     pub seconds_per_step: f64,
-    /// The pilot run that scaled the steps timed at rest, for a body that
-    /// does not carry its load statically ([`Pilot`]).
+    /// The pilot run whose stepping time is the estimate's ([`Pilot`]);
+    /// `None` when it failed at once (the steps timed at rest are used).
     pub pilot: Option<Pilot>,
 }
 
 /// A run of the scene with nothing written, made by `mss check` for its
-/// time estimate. When the body does not carry its load statically the run
-/// folds or collapses,
-/// its compressed cells stiffen, and the explicit sub-step (or the implicit
+/// time estimate. Steps timed at rest miss what changes a step's cost
+/// later: contact, a moving obstacle, a fall, and above all a body that does
+/// not carry its load statically. Such a body folds or collapses, its
+/// compressed cells stiffen, and the explicit sub-step (or the implicit
 /// solver's Newton iterations) follows them, with more frequent checks and
-/// steps taken again, so steps timed at rest see a fraction of the run's
-/// cost (the soft bunny held by its lowest layer: a tenth). The pilot runs
-/// on the scene's own lattice: one twice as coarse spreads the load of a
-/// few held nodes over larger cells and folds less (the soft bunny's saw a
-/// sixth of the growth). It stops after [`PILOT_SECONDS`] (folding) or
-/// [`PILOT_CALM_SECONDS`]; the rest of the run is then projected at the
-/// rate of the pilot's last quarter.
+/// steps taken again: the soft bunny held by its lowest layer costs ten
+/// times its steps at rest. The pilot runs on the scene's own lattice: one
+/// twice as coarse spreads the load of a few held nodes over larger cells
+/// and folds less (the soft bunny's saw a sixth of the growth). It stops
+/// after [`PILOT_SECONDS`] (a folding body) or [`PILOT_CALM_SECONDS`]; the
+/// rest of the run is then projected at the rate of the pilot's last
+/// quarter.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Pilot {
     /// Its mean wall time per step over the scene's duration (projected

@@ -776,3 +776,28 @@ fn moving_obstacles_push_and_carry_a_block() {
         top(&xs)
     );
 }
+
+/// `with_regions` refuses materials that do not fit the lattice.
+#[test]
+fn regions_that_do_not_fit_are_refused() {
+    let m = || {
+        model(
+            [2, 1],
+            [0.02, 0.02],
+            0.3,
+            PlaneParameterization::Paper,
+            None,
+        )
+    };
+    let other = m().material();
+    let short = m().with_regions(None, &[other], vec![0]).unwrap_err();
+    assert!(
+        short.to_string().contains("1 cell materials for 2 cells"),
+        "{short}"
+    );
+    let missing = m().with_regions(None, &[other], vec![0, 2]).unwrap_err();
+    assert!(
+        missing.to_string().contains("names material 2"),
+        "{missing}"
+    );
+}
