@@ -316,6 +316,53 @@ impl PlaneJob {
                 ramp: m.ramp.unwrap_or(scene.solver.duration),
             });
         }
+        if !scene.loads.tractions.is_empty() {
+            // Dead tractions on the boundary edges (sides of one cell)
+            // whose midpoints lie in the box: each edge carries the
+            // traction times its length and the thickness, half at each end.
+            let cells = problem.model.cells();
+            let mut edges: std::collections::HashMap<(u32, u32), u32> = Default::default();
+            for c in cells {
+                for k in 0..4 {
+                    let (a, b) = (c[k], c[(k + 1) % 4]);
+                    *edges.entry((a.min(b), a.max(b))).or_default() += 1;
+                }
+            }
+            let mut boundary: Vec<(u32, u32)> = edges
+                .into_iter()
+                .filter(|&(_, n)| n == 1)
+                .map(|(e, _)| e)
+                .collect();
+            // A fixed order: the sums below do not depend on the hash.
+            boundary.sort_unstable();
+            let thickness = problem.model.thickness();
+            let tol = 1e-9 * h;
+            for (i, t) in scene.loads.tractions.iter().enumerate() {
+                let mut loaded = 0;
+                for &(a, b) in &boundary {
+                    let (pa, pb) = (rest[a as usize], rest[b as usize]);
+                    let mid = [0.5 * (pa.x + pb.x), 0.5 * (pa.y + pb.y), 0.0];
+                    if !(0..3).all(|k| mid[k] >= t.min[k] - tol && mid[k] <= t.max[k] + tol) {
+                        continue;
+                    }
+                    let half = 0.5 * (pb - pa).norm() * thickness;
+                    for n in [a, b] {
+                        problem.forces[n as usize][0] += t.traction[0] * half;
+                        problem.forces[n as usize][1] += t.traction[1] * half;
+                    }
+                    loaded += 1;
+                }
+                if loaded == 0 {
+                    return Err(setting(
+                        &format!("[[loads.tractions]] #{}", i + 1),
+                        format!(
+                            "no boundary edge has its midpoint in the box {:?}..{:?} (z = 0 must be in it); widen the box",
+                            t.min, t.max
+                        ),
+                    ));
+                }
+            }
+        }
         for (i, f) in scene.loads.forces.iter().enumerate() {
             let nodes = select(&f.select, &format!("[[loads.forces]] #{}", i + 1))?;
             let share = if f.per_node {

@@ -492,11 +492,23 @@ impl Scene {
         if self.solver.precision != mss_core::Precision::F64 {
             return not_yet("[solver] precision", "a single-precision force pass");
         }
-        if !(self.loads.tractions.is_empty()
-            && self.loads.drags.is_empty()
-            && self.loads.custom.is_empty())
+        if !(self.loads.drags.is_empty() && self.loads.custom.is_empty()) {
+            return not_yet("[loads]", "a drag or custom load");
+        }
+        if let Some((i, t)) = self
+            .loads
+            .tractions
+            .iter()
+            .enumerate()
+            .find(|(_, t)| t.traction[2] != 0.0)
         {
-            return not_yet("[loads]", "a traction, drag or custom load");
+            return Err(invalid(
+                format!("[[loads.tractions]] #{} traction", i + 1),
+                format!(
+                    "= {:?}; a 2D body takes tractions in the x-y plane (z = 0)",
+                    t.traction
+                ),
+            ));
         }
         if let Some(g) = self.loads.gravity
             && g[2] != 0.0

@@ -359,3 +359,47 @@ fn a_stiffer_region_of_a_strip_stretches_as_springs_in_series() {
         "{e}"
     );
 }
+
+/// `[[loads.tractions]]` in a 2D scene: 1 kPa on the free end of a strip of
+/// nu = 0 stretches it by sigma L / E (4 mm); a traction out of the plane,
+/// or a box holding no boundary edge, is refused by its number.
+#[test]
+fn a_traction_on_the_end_of_a_strip_stretches_it_by_sigma_l_over_e() {
+    let dir = tempfile::tempdir().unwrap();
+    let svg = strip_svg(dir.path(), 400, 40);
+    let scene = |traction: &str| {
+        format!(
+            "[mesh]\npath = {:?}\nunits = \"mm\"\n[voxelize]\ncells = [20, 2]\n\
+             [model]\ndimension = 2\nthickness = 0.01\nparameterization = \"paper+hg\"\n\
+             [material]\nyoung = 1e5\npoisson = 0.0\ndensity = 1000.0\n\
+             [[fixed]]\nkind = \"face\"\nface = \"x-\"\n\
+             [[loads.tractions]]\nmin = [0.399, -1.0, -1.0]\nmax = [0.401, 1.0, 1.0]\n{traction}\n\
+             [solver]\nkind = \"static\"\n",
+            svg.display().to_string()
+        )
+    };
+    let s = prepare(&scene("traction = [1000.0, 0.0, 0.0]"))
+        .unwrap()
+        .run(&dir.path().join("out"), &Cancel::new())
+        .unwrap();
+    let expected = 1000.0 * 0.4 / 1e5;
+    assert!(
+        (s.max_displacement - expected).abs() < 1e-2 * expected,
+        "{} against {expected}",
+        s.max_displacement
+    );
+    let e = prepare(&scene("traction = [0.0, 0.0, 1000.0]")).unwrap_err();
+    assert!(
+        e.contains("[[loads.tractions]] #1 traction") && e.contains("x-y plane"),
+        "{e}"
+    );
+    let e = prepare(
+        &scene("traction = [1000.0, 0.0, 0.0]")
+            .replace("min = [0.399, -1.0, -1.0]", "min = [0.399, -1.0, 0.5]"),
+    )
+    .unwrap_err();
+    assert!(
+        e.contains("[[loads.tractions]] #1") && e.contains("no boundary edge"),
+        "{e}"
+    );
+}
