@@ -382,12 +382,7 @@ impl SkinExporter for SkinSeries {
         triangles: &[[u32; 3]],
     ) -> Result<(), IoError> {
         let path = self.frame_path(frame_index);
-        if let Some(l) = self.last_index.filter(|&l| frame_index <= l) {
-            return Err(IoError::invalid(
-                &path,
-                format!("frame index {frame_index} does not follow the previous frame index {l}"),
-            ));
-        }
+        crate::vtk::check_index(self.last_index, frame_index, &path)?;
         log::debug!(
             "skin frame {frame_index} (t = {time}) -> {}",
             path.display()

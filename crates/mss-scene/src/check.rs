@@ -115,8 +115,10 @@ impl TimeEstimate {
     /// [`Job::run_load_check_budget`]); `folds`: the body does not carry
     /// its load statically. `None` for an implicit run on more than
     /// [`LOAD_CHECK_MAX_NODES`] nodes (a probe step would cost too much),
-    /// when a probe step fails, or when `cancel` is set. A [`Pilot`] run
-    /// (longer when `folds`) measures what the steps at rest cannot see.
+    /// when the first step fails, or when `cancel` is set. One pass steps
+    /// the scene: its first steps are the ones timed at rest, all of them
+    /// the [`Pilot`] run (longer when `folds`), which measures what the
+    /// steps at rest cannot see.
     pub fn new(
         job: &Job,
         static_seconds: Option<f64>,
@@ -157,31 +159,28 @@ impl TimeEstimate {
             .input
             .integrator(&job.registry, &job.problem, plan)
             .ok()??;
-        let mut state = State::at_rest(model);
-        job.problem.apply_constraints(&mut state);
-        let probe = if explicit { TIME_PROBE_STEPS } else { 1 };
-        let probe = u64::from(probe).min(plan.steps.saturating_sub(1));
-        let start = std::time::Instant::now();
-        integrator.step(&job.problem, &mut state).ok()?;
-        let first = start.elapsed().as_secs_f64();
-        let start = std::time::Instant::now();
-        for _ in 0..probe {
-            integrator.step(&job.problem, &mut state).ok()?;
-        }
-        let per_step = if probe > 0 {
-            start.elapsed().as_secs_f64() / probe as f64
-        } else {
-            first
-        };
         let budget = if folds {
             PILOT_SECONDS
         } else {
             PILOT_CALM_SECONDS
         };
-        let pilot = Pilot::run(job, per_step, budget, cancel);
+        // One pass: its first steps are the probe at rest, all of them the
+        // pilot run.
+        let ends = step_ends(job, integrator.as_mut(), budget, cancel)?;
         if cancel.load(Ordering::Relaxed) {
             return None;
         }
+        let probe = if explicit { TIME_PROBE_STEPS } else { 1 };
+        let probe = (probe as usize)
+            .min(usize::try_from(plan.steps.saturating_sub(1)).unwrap_or(usize::MAX))
+            .min(ends.len() - 1);
+        let first = ends[0];
+        let per_step = if probe > 0 {
+            (ends[probe] - ends[0]) / probe as f64
+        } else {
+            first
+        };
+        let pilot = Pilot::from_step_ends(&ends, plan.steps, per_step);
         let rest_stepping = first + per_step * plan.steps.saturating_sub(1) as f64;
         let stepping = pilot.as_ref().map_or(rest_stepping, |p| p.stepping_seconds);
         Some(TimeEstimate {
@@ -195,38 +194,45 @@ impl TimeEstimate {
     }
 }
 
-impl Pilot {
-    /// Runs `job`'s scene for at most `budget` seconds (see [`Pilot`]),
-    /// whose steps at rest were timed at `rest_per_step` seconds; `None`
-    /// when it fails before it has measured anything. Stops at `cancel`.
-    pub fn run(job: &Job, rest_per_step: f64, budget: f64, cancel: &AtomicBool) -> Option<Pilot> {
-        let plan = &job.plan;
-        let mut integrator = job
-            .input
-            .integrator(&job.registry, &job.problem, plan)
-            .ok()??;
-        let mut state = State::at_rest(job.problem.model());
-        job.problem.apply_constraints(&mut state);
-        // Each step's end, from the start (s).
-        let mut ends = Vec::with_capacity(usize::try_from(plan.steps).unwrap_or(0).min(1 << 20));
-        let started = std::time::Instant::now();
-        while (ends.len() as u64) < plan.steps
-            && !cancel.load(Ordering::Relaxed)
-            && started.elapsed().as_secs_f64() < budget
-        {
-            if let Err(e) = integrator.step(&job.problem, &mut state) {
-                log::info!("the pilot run for the time estimate stopped: {e}");
-                break;
-            }
-            ends.push(started.elapsed().as_secs_f64());
+/// Steps `job`'s scene with `integrator` from rest, nothing written, until
+/// its end, `budget` seconds or `cancel`; each step's end from the start
+/// (s). `None` when the first step fails.
+fn step_ends(
+    job: &Job,
+    integrator: &mut dyn mss_core::solver::Integrator,
+    budget: f64,
+    cancel: &AtomicBool,
+) -> Option<Vec<f64>> {
+    let plan = &job.plan;
+    let mut state = State::at_rest(job.problem.model());
+    job.problem.apply_constraints(&mut state);
+    let mut ends = Vec::with_capacity(usize::try_from(plan.steps).unwrap_or(0).min(1 << 20));
+    let started = std::time::Instant::now();
+    while (ends.len() as u64) < plan.steps
+        && !cancel.load(Ordering::Relaxed)
+        && started.elapsed().as_secs_f64() < budget
+    {
+        if let Err(e) = integrator.step(&job.problem, &mut state) {
+            log::info!("the pilot run for the time estimate stopped: {e}");
+            break;
         }
+        ends.push(started.elapsed().as_secs_f64());
+    }
+    (!ends.is_empty()).then_some(ends)
+}
+
+impl Pilot {
+    /// The pilot of a run of `steps` steps whose first steps ended at
+    /// `ends` (s from its start) and whose steps at rest took
+    /// `rest_per_step` seconds; `None` with fewer than two steps.
+    pub fn from_step_ends(ends: &[f64], steps: u64, rest_per_step: f64) -> Option<Pilot> {
         let done = ends.len();
         if done < 2 {
             return None;
         }
-        let total = plan.steps.max(1) as f64;
+        let total = steps.max(1) as f64;
         let mut stepping_seconds = ends[done - 1];
-        if (done as u64) < plan.steps {
+        if (done as u64) < steps {
             // The rest at the rate of the last quarter of the steps taken.
             let from = done - done.div_ceil(4);
             let from_time = if from == 0 { 0.0 } else { ends[from - 1] };
@@ -439,5 +445,24 @@ pub fn mechanism_warning(job: &Job) -> Option<String> {
                 None
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Pilot;
+
+    /// A pilot cut short projects the rest at its last quarter's rate; one
+    /// that ran to the end is its own time.
+    #[test]
+    fn a_pilot_projects_the_rest_at_its_last_quarters_rate() {
+        // Steps of 1 s, then 2 s: the last quarter (one step) took 2 s.
+        let p = Pilot::from_step_ends(&[1.0, 2.0, 3.0, 5.0], 10, 1.0).unwrap();
+        assert_eq!(p.stepping_seconds, 5.0 + 6.0 * 2.0);
+        assert_eq!(p.simulated_fraction, 0.4);
+        assert_eq!(p.time_ratio, 1.7);
+        let whole = Pilot::from_step_ends(&[1.0, 2.0, 3.0, 5.0], 4, 1.0).unwrap();
+        assert_eq!(whole.stepping_seconds, 5.0);
+        assert!(Pilot::from_step_ends(&[1.0], 4, 1.0).is_none());
     }
 }

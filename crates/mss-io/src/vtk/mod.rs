@@ -21,6 +21,7 @@ pub use legacy::{LegacyFormat, write_legacy_vtk};
 pub use pvd::{PvdEntry, PvdWriter, time_decimals};
 #[cfg(feature = "legacy-vtk")]
 pub use series::LegacyVtkSeries;
+pub(crate) use series::check_index;
 pub use series::{FrameExporter, SurfaceVtuSeries, VtuSeries};
 pub use vtu::{VtuEncoding, write_lines_vtu, write_quads_vtu, write_triangles_vtu, write_vtu};
 

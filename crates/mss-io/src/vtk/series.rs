@@ -46,7 +46,7 @@ pub trait FrameExporter: Send {
 
 /// Refuses frame indices that do not increase, which would list a frame twice
 /// in a `.pvd` or silently overwrite an earlier file.
-fn check_index(last: Option<usize>, index: usize, path: &Path) -> Result<(), IoError> {
+pub(crate) fn check_index(last: Option<usize>, index: usize, path: &Path) -> Result<(), IoError> {
     match last {
         Some(l) if index <= l => Err(IoError::invalid(
             path,

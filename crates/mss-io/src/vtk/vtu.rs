@@ -77,17 +77,7 @@ pub fn write_lines_vtu(
     cell_data: &[Field],
     encoding: VtuEncoding,
 ) -> Result<(), IoError> {
-    let connectivity = lines.as_flattened();
-    validate_grid(path, points, connectivity, 2, &[], cell_data)?;
-    let grid = Grid {
-        points,
-        connectivity,
-        nodes_per_cell: 2,
-        cell_type: VTK_LINE,
-        point_data: &[],
-        cell_data,
-    };
-    write_atomic(path, |w| write_grid(w, &grid, encoding))
+    write_cells_vtu(path, points, lines, VTK_LINE, &[], cell_data, encoding)
 }
 
 /// Writes quadrilateral cells (VTK_QUAD, 4 points counter-clockwise), e.g.
@@ -101,17 +91,8 @@ pub fn write_quads_vtu(
     cell_data: &[Field],
     encoding: VtuEncoding,
 ) -> Result<(), IoError> {
-    let connectivity = quads.as_flattened();
-    validate_grid(path, points, connectivity, 4, point_data, cell_data)?;
-    let grid = Grid {
-        points,
-        connectivity,
-        nodes_per_cell: 4,
-        cell_type: super::VTK_QUAD,
-        point_data,
-        cell_data,
-    };
-    write_atomic(path, |w| write_grid(w, &grid, encoding))
+    let quad = super::VTK_QUAD;
+    write_cells_vtu(path, points, quads, quad, point_data, cell_data, encoding)
 }
 
 /// Writes a triangulated surface (VTK_TRIANGLE cells), e.g. the embedded
@@ -124,15 +105,30 @@ pub fn write_triangles_vtu(
     point_data: &[Field],
     encoding: VtuEncoding,
 ) -> Result<(), IoError> {
-    let connectivity = triangles.as_flattened();
-    validate_grid(path, points, connectivity, 3, point_data, &[])?;
+    let triangle = super::VTK_TRIANGLE;
+    write_cells_vtu(path, points, triangles, triangle, point_data, &[], encoding)
+}
+
+/// Cells of `N` nodes and one `cell_type`, checked, as an XML
+/// UnstructuredGrid, atomically.
+fn write_cells_vtu<const N: usize>(
+    path: &Path,
+    points: &[[f64; 3]],
+    cells: &[[u32; N]],
+    cell_type: u8,
+    point_data: &[Field],
+    cell_data: &[Field],
+    encoding: VtuEncoding,
+) -> Result<(), IoError> {
+    let connectivity = cells.as_flattened();
+    validate_grid(path, points, connectivity, N, point_data, cell_data)?;
     let grid = Grid {
         points,
         connectivity,
-        nodes_per_cell: 3,
-        cell_type: super::VTK_TRIANGLE,
+        nodes_per_cell: N,
+        cell_type,
         point_data,
-        cell_data: &[],
+        cell_data,
     };
     write_atomic(path, |w| write_grid(w, &grid, encoding))
 }

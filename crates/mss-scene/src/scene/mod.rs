@@ -464,6 +464,20 @@ impl Scene {
                 format!("{what} is not available for 2D bodies yet ([model] dimension = 2)"),
             ))
         };
+        // The first entry of a list table whose vector leaves the plane.
+        let in_plane = |list: &str,
+                        field: &str,
+                        verb: &str,
+                        vectors: &mut dyn Iterator<Item = [f64; 3]>|
+         -> Result<(), SceneError> {
+            match vectors.enumerate().find(|(_, v)| v[2] != 0.0) {
+                Some((i, v)) => Err(invalid(
+                    format!("{list} #{} {field}", i + 1),
+                    format!("= {v:?}; a 2D body {verb} in the x-y plane (z = 0)"),
+                )),
+                None => Ok(()),
+            }
+        };
         if self.image.is_some() {
             return not_yet("[image]", "a label image");
         }
@@ -475,41 +489,24 @@ impl Scene {
                 );
             }
         }
-        if let Some((i, m)) = self
-            .motions
-            .iter()
-            .enumerate()
-            .find(|(_, m)| m.displacement[2] != 0.0)
-        {
-            return Err(invalid(
-                format!("[[motions]] #{} displacement", i + 1),
-                format!(
-                    "= {:?}; a 2D body moves in the x-y plane (z = 0)",
-                    m.displacement
-                ),
-            ));
-        }
+        in_plane(
+            "[[motions]]",
+            "displacement",
+            "moves",
+            &mut self.motions.iter().map(|m| m.displacement),
+        )?;
         if self.solver.precision != mss_core::Precision::F64 {
             return not_yet("[solver] precision", "a single-precision force pass");
         }
         if !(self.loads.drags.is_empty() && self.loads.custom.is_empty()) {
             return not_yet("[loads]", "a drag or custom load");
         }
-        if let Some((i, t)) = self
-            .loads
-            .tractions
-            .iter()
-            .enumerate()
-            .find(|(_, t)| t.traction[2] != 0.0)
-        {
-            return Err(invalid(
-                format!("[[loads.tractions]] #{} traction", i + 1),
-                format!(
-                    "= {:?}; a 2D body takes tractions in the x-y plane (z = 0)",
-                    t.traction
-                ),
-            ));
-        }
+        in_plane(
+            "[[loads.tractions]]",
+            "traction",
+            "takes tractions",
+            &mut self.loads.tractions.iter().map(|t| t.traction),
+        )?;
         if let Some(g) = self.loads.gravity
             && g[2] != 0.0
         {
@@ -520,21 +517,12 @@ impl Scene {
                 ),
             ));
         }
-        if let Some((i, f)) = self
-            .loads
-            .forces
-            .iter()
-            .enumerate()
-            .find(|(_, f)| f.force[2] != 0.0)
-        {
-            return Err(invalid(
-                format!("[[loads.forces]] #{} force", i + 1),
-                format!(
-                    "= {:?}; a 2D body takes forces in the x-y plane (z = 0)",
-                    f.force
-                ),
-            ));
-        }
+        in_plane(
+            "[[loads.forces]]",
+            "force",
+            "takes forces",
+            &mut self.loads.forces.iter().map(|f| f.force),
+        )?;
         if !(self.solver.is_static()
             || self.solver.kind == "explicit"
             || self.solver.kind == "implicit")

@@ -218,6 +218,19 @@ fn strip_svg(dir: &std::path::Path, width: u32, height: u32) -> PathBuf {
     svg
 }
 
+/// A 2D scene of the strip drawn in `svg` (mm): `cells` rectangles, the
+/// `paper+hg` element 1 cm thick, E = 100 kPa and Poisson's ratio
+/// `poisson`, its x- side held; a test adds its loads and solver.
+fn strip_scene(svg: &std::path::Path, cells: &str, poisson: f64) -> String {
+    format!(
+        "[mesh]\npath = {:?}\nunits = \"mm\"\n[voxelize]\ncells = {cells}\n\
+         [model]\ndimension = 2\nthickness = 0.01\nparameterization = \"paper+hg\"\n\
+         [material]\nyoung = 1e5\npoisson = {poisson:?}\ndensity = 1000.0\n\
+         [[fixed]]\nkind = \"face\"\nface = \"x-\"\n",
+        svg.display().to_string()
+    )
+}
+
 /// `cells = [nx, ny]`: that many rectangles along each side of the
 /// outline's box (here 0.4 x 0.1 m: cells of 0.05 x 0.025 m); a 3D body
 /// refuses two counts, and every count must be at least 1.
@@ -227,11 +240,8 @@ fn cells_per_axis_give_rectangles_of_the_box() {
     let svg = strip_svg(dir.path(), 400, 100);
     let scene = |cells: &str| {
         format!(
-            "[mesh]\npath = {:?}\nunits = \"mm\"\n[voxelize]\ncells = {cells}\n\
-             [model]\ndimension = 2\nthickness = 0.01\nparameterization = \"paper+hg\"\n\
-             [material]\nyoung = 1e5\npoisson = 0.3\ndensity = 1000.0\n\
-             [[fixed]]\nkind = \"face\"\nface = \"x-\"\n[solver]\nkind = \"static\"\n",
-            svg.display().to_string()
+            "{}[solver]\nkind = \"static\"\n",
+            strip_scene(&svg, cells, 0.3)
         )
     };
     let job = prepare(&scene("[8, 4]")).unwrap();
@@ -268,13 +278,9 @@ fn a_strip_pulled_by_a_motion_ends_where_the_static_solve_puts_it() {
     let svg = strip_svg(dir.path(), 200, 40);
     let scene = |solver: &str| {
         format!(
-            "[mesh]\npath = {:?}\nunits = \"mm\"\n[voxelize]\ncells = [10, 2]\n\
-             [model]\ndimension = 2\nthickness = 0.01\nparameterization = \"paper+hg\"\n\
-             [material]\nyoung = 1e5\npoisson = 0.3\ndensity = 1000.0\n\
-             [[fixed]]\nkind = \"face\"\nface = \"x-\"\n\
-             [[motions]]\nselect = {{ kind = \"face\", face = \"x+\" }}\ndisplacement = [0.002, 0.0, 0.0]\nramp = 0.1\n\
+            "{}[[motions]]\nselect = {{ kind = \"face\", face = \"x+\" }}\ndisplacement = [0.002, 0.0, 0.0]\nramp = 0.1\n\
              [loads]\ngravity = [0.0, -9.81, 0.0]\n[solver]\n{solver}\nduration = 0.6\n[output]\nlast_only = true\n",
-            svg.display().to_string()
+            strip_scene(&svg, "[10, 2]", 0.3)
         )
     };
     let run = |solver: &str, name: &str| {
@@ -312,13 +318,9 @@ fn a_stiffer_region_of_a_strip_stretches_as_springs_in_series() {
     let svg = strip_svg(dir.path(), 800, 40);
     let scene = |regions: &str| {
         format!(
-            "[mesh]\npath = {:?}\nunits = \"mm\"\n[voxelize]\ncells = [40, 2]\n\
-             [model]\ndimension = 2\nthickness = 0.01\nparameterization = \"paper+hg\"\n\
-             [material]\nyoung = 1e5\npoisson = 0.0\ndensity = 1000.0\n\
-             [[fixed]]\nkind = \"face\"\nface = \"x-\"\n\
-             [[loads.forces]]\nselect = {{ kind = \"face\", face = \"x+\" }}\nforce = [0.4, 0.0, 0.0]\n\
+            "{}[[loads.forces]]\nselect = {{ kind = \"face\", face = \"x+\" }}\nforce = [0.4, 0.0, 0.0]\n\
              [solver]\nkind = \"static\"\n{regions}",
-            svg.display().to_string()
+            strip_scene(&svg, "[40, 2]", 0.0)
         )
     };
     let run = |regions: &str, name: &str| {
@@ -369,13 +371,9 @@ fn a_traction_on_the_end_of_a_strip_stretches_it_by_sigma_l_over_e() {
     let svg = strip_svg(dir.path(), 400, 40);
     let scene = |traction: &str| {
         format!(
-            "[mesh]\npath = {:?}\nunits = \"mm\"\n[voxelize]\ncells = [20, 2]\n\
-             [model]\ndimension = 2\nthickness = 0.01\nparameterization = \"paper+hg\"\n\
-             [material]\nyoung = 1e5\npoisson = 0.0\ndensity = 1000.0\n\
-             [[fixed]]\nkind = \"face\"\nface = \"x-\"\n\
-             [[loads.tractions]]\nmin = [0.399, -1.0, -1.0]\nmax = [0.401, 1.0, 1.0]\n{traction}\n\
+            "{}[[loads.tractions]]\nmin = [0.399, -1.0, -1.0]\nmax = [0.401, 1.0, 1.0]\n{traction}\n\
              [solver]\nkind = \"static\"\n",
-            svg.display().to_string()
+            strip_scene(&svg, "[20, 2]", 0.0)
         )
     };
     let s = prepare(&scene("traction = [1000.0, 0.0, 0.0]"))
