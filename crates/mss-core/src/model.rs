@@ -658,9 +658,9 @@ pub struct Model {
     masses: Vec<f64>,
     /// Kernel constants per material.
     params: Vec<CellParams>,
-    /// Per entry of `params`: the volumetric term's share of the cell's
-    /// stiffness at rest (Gershgorin bounds), for [`Model::stiffness_growth`].
-    volumetric_share: Vec<f64>,
+    /// Per entry of `params`: the shares of the cell's stiffness at rest that
+    /// grow under large strain, for [`Model::stiffness_growth`].
+    growth_shares: Vec<GrowthShares>,
     /// Parameterization output per material.
     coefficients: Vec<CellCoefficients>,
     materials: Vec<Material>,
@@ -783,16 +783,24 @@ impl Model {
                 vol_barrier: co.volumetric_barrier,
                 grad_scale: 0.25 / h,
                 k_hourglass: co.hourglass,
+                // The barrier law guards the corners too, at the stiffness of
+                // a constrained compression (lambda + 2 mu) over each corner's
+                // eighth of the cell.
+                corner_barrier: if co.volumetric_barrier {
+                    (m.lambda() + 2.0 * m.shear_modulus()) * h * h * h / 8.0
+                } else {
+                    0.0
+                },
             });
             coefficients.push(co);
         }
         let cube: [[f64; 3]; 8] =
             std::array::from_fn(|k| hexmesh::CORNER_OFFSETS[k].map(|o| f64::from(o) * h));
-        let volumetric_share = params
+        let growth_shares = params
             .iter()
             .map(|p| {
-                if p.vol_lambda_h3 == 0.0 {
-                    return 0.0;
+                if p.vol_lambda_h3 == 0.0 && p.corner_barrier == 0.0 {
+                    return GrowthShares::default();
                 }
                 let whole = kernel::gershgorin(&kernel::cell_jacobian(p, &cube));
                 let volumetric_only = CellParams {
@@ -800,10 +808,17 @@ impl Model {
                     k_diag: 0.0,
                     correction: None,
                     k_hourglass: 0.0,
+                    corner_barrier: 0.0,
                     ..*p
                 };
                 let part = kernel::gershgorin(&kernel::cell_jacobian(&volumetric_only, &cube));
-                (part / whole).min(1.0)
+                GrowthShares {
+                    volumetric: (part / whole).min(1.0),
+                    // The barrier's Hessian per unit psi'' or psi' is of the
+                    // order of kappa / h^2 (a corner Jacobian's gradient is
+                    // of the order of 1 / h).
+                    corner_barrier: p.corner_barrier / (h * h * whole),
+                }
             })
             .collect();
         let rest = lattice.shared_nodes();
@@ -858,7 +873,7 @@ impl Model {
             h,
             masses,
             params,
-            volumetric_share,
+            growth_shares,
             coefficients,
             materials: materials.to_vec(),
             cell_material,
@@ -898,7 +913,7 @@ impl Model {
         let mut rest = Vec::with_capacity(nodes);
         let mut cells = Vec::new();
         let mut masses = Vec::with_capacity(nodes);
-        let (mut params, mut volumetric_share, mut coefficients, mut materials) =
+        let (mut params, mut growth_shares, mut coefficients, mut materials) =
             (Vec::new(), Vec::new(), Vec::new(), Vec::new());
         let mut cell_material = Vec::new();
         let mut offsets = vec![0u32];
@@ -930,7 +945,7 @@ impl Model {
             cell_material
                 .extend((0..body.num_cells()).map(|c| body.cell_material(c) + material_offset));
             params.extend_from_slice(&body.params);
-            volumetric_share.extend_from_slice(&body.volumetric_share);
+            growth_shares.extend_from_slice(&body.growth_shares);
             coefficients.extend_from_slice(&body.coefficients);
             materials.extend_from_slice(&body.materials);
             // A body's layers keep their parity (an empty layer between
@@ -955,7 +970,7 @@ impl Model {
             h,
             masses,
             params,
-            volumetric_share,
+            growth_shares,
             coefficients,
             materials,
             cell_material,
@@ -1076,7 +1091,7 @@ impl Model {
         self.rest.len() * 24
             + self.cells.len() * 32
             + self.masses.capacity() * 8
-            + self.volumetric_share.capacity() * 8
+            + self.growth_shares.capacity() * std::mem::size_of::<GrowthShares>()
             + self.cell_material.capacity() * 4
             + self.layers.offsets.capacity() * 4
             + self.leftover_edges.capacity() * std::mem::size_of::<LeftoverEdge>()
@@ -1467,6 +1482,7 @@ impl Model {
                     let mut full = [[0.0; 3]; 8];
                     let no_hourglass = CellParams {
                         k_hourglass: 0.0,
+                        corner_barrier: 0.0,
                         ..*p
                     };
                     kernel::cell_forces(&no_hourglass, &xc, &mut full);
@@ -1553,12 +1569,18 @@ impl Model {
     /// bounded exactly, element by element: omega^2 <= the Gershgorin bound
     /// of the cell's exact Jacobian over its corner mass. The explicit step
     /// divides its sub-step by the square root of this (docs/robustness.md).
+    /// The corner barrier (models with the barrier law) is ranked the same
+    /// way, by `psi'' + |psi'|` at the cell's lowest corner Jacobian.
     /// Models without a volumetric term report 1: springs do not stiffen
     /// along their length, and their transverse stiffening when folded is
     /// left to the step control's retries.
     pub fn stiffness_growth(&self, x: &[Vec3]) -> f64 {
         assert_eq!(x.len(), self.num_nodes(), "positions: one per node");
-        if self.volumetric_share.iter().all(|&w| w == 0.0) {
+        if self
+            .growth_shares
+            .iter()
+            .all(|w| *w == GrowthShares::default())
+        {
             return 1.0;
         }
         // The cheap estimate over every cell; the worst cells by it are then
@@ -1567,10 +1589,21 @@ impl Model {
             .into_par_iter()
             .with_min_len(CHUNK)
             .fold(Worst::default, |mut worst, c| {
-                let w = self.volumetric_share[self.param_index(c)];
-                if w != 0.0 {
-                    let g = kernel::volumetric_growth(self.params_of(c), &self.corners(x, c));
-                    worst.offer(1.0 - w + w * g, c as u32);
+                let shares = self.growth_shares[self.param_index(c)];
+                if shares != GrowthShares::default() {
+                    let (p, xc) = (self.params_of(c), self.corners(x, c));
+                    let w = shares.volumetric;
+                    let mut g = 1.0 - w;
+                    if w != 0.0 {
+                        g += w * kernel::volumetric_growth(p, &xc);
+                    }
+                    if shares.corner_barrier != 0.0 {
+                        let (_, jac) = kernel::corner_jacobians(&xc, 1.0 / p.rest_edge.powi(3));
+                        let lowest = jac.into_iter().fold(f64::INFINITY, f64::min);
+                        let (_, slope, curvature) = kernel::corner_barrier_law(lowest);
+                        g += 8.0 * shares.corner_barrier * (curvature + slope.abs());
+                    }
+                    worst.offer(g, c as u32);
                 }
                 worst
             })
@@ -1594,7 +1627,9 @@ impl Model {
         (worst_cell_omega_sq / self.omega_max_sq).max(1.0)
     }
 
-    /// Cells whose Jacobian `J = det F` at the centre is `<= 0` (inverted).
+    /// Cells whose Jacobian `J = det F` at the centre is `<= 0` (inverted):
+    /// the solvers refuse such a state (a step that makes one is taken again
+    /// with a shorter sub-step, or fails).
     pub fn inverted_cells(&self, x: &[Vec3]) -> Vec<u32> {
         assert_eq!(x.len(), self.num_nodes(), "positions: one per node");
         (0..self.cells.len())
@@ -1605,6 +1640,50 @@ impl Model {
             .map(|c| c as u32)
             .collect()
     }
+
+    /// Cells folded at a corner: a corner Jacobian `J_n <= 0` (the trilinear
+    /// map turned inside out near that corner) while the centre may still
+    /// look healthy. The barrier law's corner barrier keeps quasi-static
+    /// scenes free of them; a violent rebound can fold a corner for a few
+    /// steps, which the barrier then unfolds, so the solvers report folded
+    /// cells (`mss run` and `summary.json`) rather than refuse the state
+    /// (docs/robustness.md).
+    pub fn folded_cells(&self, x: &[Vec3]) -> Vec<u32> {
+        self.corner_jacobians(x)
+            .into_iter()
+            .enumerate()
+            .filter(|&(_, j)| j <= 0.0)
+            .map(|(c, _)| c as u32)
+            .collect()
+    }
+
+    /// Per cell, the smallest of its 8 corner Jacobians `J_n` (the trilinear
+    /// map's determinant at each corner: 1 at rest, `<= 0` where the cell is
+    /// folded through near that corner).
+    pub fn corner_jacobians(&self, x: &[Vec3]) -> Vec<f64> {
+        assert_eq!(x.len(), self.num_nodes(), "positions: one per node");
+        (0..self.cells.len())
+            .into_par_iter()
+            .with_min_len(CHUNK)
+            .map(|c| Self::lowest_corner(self.params_of(c), &self.corners(x, c)))
+            .collect()
+    }
+
+    fn lowest_corner(p: &CellParams, xc: &[[f64; 3]; 8]) -> f64 {
+        let (_, jac) = kernel::corner_jacobians(xc, 1.0 / p.rest_edge.powi(3));
+        jac.into_iter().fold(f64::INFINITY, f64::min)
+    }
+}
+
+/// The shares of a cell's stiffness at rest (Gershgorin bounds) that grow
+/// under large strain.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct GrowthShares {
+    /// The volumetric term's share.
+    volumetric: f64,
+    /// The corner barrier's `kappa / h^2` over the cell's stiffness (the
+    /// barrier is zero at rest).
+    corner_barrier: f64,
 }
 
 /// Cells examined exactly by [`Model::stiffness_growth`].

@@ -248,6 +248,12 @@ pub struct RunSummary {
     /// Each body's figures (one entry without `[[bodies]]`); the fields
     /// above are the totals, or the first body's for its mesh.
     pub bodies: Vec<BodySummary>,
+    /// Cells folded at a corner at the end (a corner Jacobian `<= 0` while
+    /// the centre may look healthy: `Model::folded_cells`).
+    pub folded_cells: usize,
+    /// Most cells folded at a corner in one frame (frames written since the
+    /// run started or was resumed), and that frame's time (s).
+    pub most_folded_cells: (usize, f64),
     /// What the load check before a dynamic run found, in one line (as
     /// `mss check` prints it), or that it was stopped after
     /// [`Limits::load_check_seconds`](crate::limits::Limits::load_check_seconds);
@@ -263,6 +269,35 @@ struct RunTotals {
     peak: (f64, f64),
     /// Newton iterations so far.
     newton_iterations: u64,
+    /// Most cells folded at a corner in one frame written by this process,
+    /// and its time (s).
+    most_folded: (usize, f64),
+}
+
+impl RunTotals {
+    /// Counts the cells folded at a corner at a frame (`Model::folded_cells`)
+    /// and warns the first time there are any: the run goes on (the corner
+    /// barrier may unfold them), but the user learns where it happened.
+    fn note_folds(&mut self, scene: &str, model: &mss_core::Model, state: &State) {
+        let folded = model.folded_cells(&state.x);
+        if folded.is_empty() {
+            return;
+        }
+        if self.most_folded.0 == 0 {
+            log::warn!(
+                "{scene}: {} cells are folded at a corner at t = {:.3e} s (a corner Jacobian \
+                 <= 0; cells {:?}...): the body is deformed past what its lattice resolves there. \
+                 A finer lattice ([voxelize] cells), the default model (its corner barrier), \
+                 more held nodes or more damping avoid it",
+                folded.len(),
+                state.time,
+                &folded[..folded.len().min(8)]
+            );
+        }
+        if folded.len() > self.most_folded.0 {
+            self.most_folded = (folded.len(), state.time);
+        }
+    }
 }
 
 /// One body's figures in a [`RunSummary`].
@@ -717,6 +752,7 @@ impl Job {
                         totals = RunTotals {
                             peak: (c.peak_displacement, c.peak_time),
                             newton_iterations: c.newton_iterations,
+                            most_folded: (0, 0.0),
                         };
                         steps_done = c.step;
                         log::info!(
@@ -800,6 +836,7 @@ impl Job {
                     }
                     if plan.frame_after(k) {
                         writer.write(problem, &state)?;
+                        totals.note_folds(&name, problem.model(), &state);
                     }
                     if checkpoint_steps.is_some_and(|n| k % n == 0) && k < plan.steps {
                         checkpoint(k, &state, totals, integrator.as_ref(), &writer)?;
@@ -822,6 +859,9 @@ impl Job {
         writer.finish()?;
         let model = problem.model();
         let max_displacement = largest_displacement(model, &state.x);
+        // The end state of a static solve (or a run ending between frames).
+        totals.note_folds(&name, model, &state);
+        let folded_cells = model.folded_cells(&state.x).len();
         let (files, bytes) = writer.files_and_bytes();
         let held_nodes = (0..model.num_nodes())
             .filter(|&n| problem.constraints().mask(n).iter().any(|&h| h))
@@ -867,6 +907,8 @@ impl Job {
                 0.0
             },
             bodies: body_summaries,
+            folded_cells,
+            most_folded_cells: totals.most_folded,
             load_check,
         })
     }

@@ -17,6 +17,45 @@ fn centre_jacobians(model: &mss_core::Model, x: &[Vec3]) -> Vec<f64> {
         .collect()
 }
 
+/// Per cell, the smallest corner Jacobian: the determinant of the cell's
+/// three edge vectors at each corner over h^3 (computed here from the
+/// positions, so that any build of the model can be measured the same way).
+fn corner_jacobians(model: &mss_core::Model, x: &[Vec3]) -> Vec<f64> {
+    let h3 = model.h().powi(3);
+    // The corners of a cell (VTK order) and their neighbours along +-x, +-y, +-z,
+    // listed so that the three edge vectors point along +x, +y, +z.
+    const AT: [[(usize, usize); 3]; 8] = [
+        [(0, 1), (0, 3), (0, 4)],
+        [(0, 1), (1, 2), (1, 5)],
+        [(3, 2), (1, 2), (2, 6)],
+        [(3, 2), (0, 3), (3, 7)],
+        [(4, 5), (4, 7), (0, 4)],
+        [(4, 5), (5, 6), (1, 5)],
+        [(7, 6), (5, 6), (2, 6)],
+        [(7, 6), (4, 7), (3, 7)],
+    ];
+    model
+        .cells()
+        .iter()
+        .map(|cell| {
+            AT.iter()
+                .map(|edges| {
+                    let e = edges.map(|(a, b)| x[cell[b] as usize] - x[cell[a] as usize]);
+                    e[0].dot(&e[1].cross(&e[2])) / h3
+                })
+                .fold(f64::INFINITY, f64::min)
+        })
+        .collect()
+}
+
+/// "N folded cells (corner J <= 0), lowest corner J v".
+fn folded(model: &mss_core::Model, x: &[Vec3]) -> String {
+    let cj = corner_jacobians(model, x);
+    let n = cj.iter().filter(|&&j| j <= 0.0).count();
+    let lowest = cj.iter().cloned().fold(f64::INFINITY, f64::min);
+    format!("{n} folded cells (corner J <= 0), lowest corner J {lowest:.3}")
+}
+
 struct Stderr;
 impl log::Log for Stderr {
     fn enabled(&self, _: &log::Metadata) -> bool {
@@ -125,6 +164,7 @@ fn main() {
                 break;
             }
         }
+        println!("end t {:.4}: {}", state.time, folded(model, &state.x));
     } else {
         let r = mss_core::solve_static(problem, &mut state, &Default::default());
         let jac = centre_jacobians(model, &state.x);
@@ -198,10 +238,21 @@ fn main() {
                     let dev = model.affine_deviation(&x);
                     let maxd = dev.iter().cloned().fold(0.0, f64::max);
                     let umax = s.displacement.iter().map(|u| u.norm()).fold(0.0, f64::max);
+                    let mss_u = state.displacements(model);
+                    let diff = largest(
+                        &mss_u
+                            .iter()
+                            .zip(&s.displacement)
+                            .map(|(a, b)| a - b)
+                            .collect::<Vec<_>>(),
+                    );
                     println!(
-                        "FEM {law:?}: {} load steps, minJ {minj:.3} maxdev {:.2}%h umax {umax:.4e}",
+                        "FEM {law:?}: {} load steps, minJ {minj:.3} maxdev {:.2}%h umax {umax:.4e}; {}; \
+                         largest |u_mss - u_fem| {diff:.4e} ({:.1} % of the FEM's max)",
                         s.load_steps,
-                        100.0 * maxd
+                        100.0 * maxd,
+                        folded(model, &x),
+                        100.0 * diff / umax
                     );
                 }
                 Err(e) => println!("FEM {law:?} failed: {e}"),

@@ -284,6 +284,15 @@ fn print_summary(s: &RunSummary) -> Result<(), crate::StdoutError> {
         s.peak_displacement,
         s.peak_displacement_time
     );
+    if s.most_folded_cells.0 > 0 {
+        crate::outln!(
+            "folded cells     {} at the end, {} at most (t = {:.4} s): cells with a corner \
+             Jacobian <= 0 (see the warning above)",
+            s.folded_cells,
+            s.most_folded_cells.0,
+            s.most_folded_cells.1
+        );
+    }
     // The collections a user opens in ParaView, as the run left them.
     let folder = std::path::Path::new(&s.output_folder);
     let collections: Vec<&str> = ["lattice.pvd", "surface.pvd"]

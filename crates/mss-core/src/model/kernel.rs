@@ -30,6 +30,12 @@ pub(crate) trait Scalar:
     fn barrier_slope(self) -> Self {
         self.apply(barrier_slope)
     }
+    /// `o` where `o > self`, else `self` (so a NaN `self` stays NaN), like
+    /// the AVX `max` with `o` first.
+    fn at_least(self, o: Self) -> Self;
+    /// Whether any value held (any lane) is below `v`: the corner barrier
+    /// is evaluated only for groups of cells where one corner needs it.
+    fn any_below(self, v: f64) -> bool;
 }
 
 /// What [`fast_ln`] needs of a number type beyond arithmetic.
@@ -37,9 +43,6 @@ pub(crate) trait SplitExponent: Scalar {
     /// `(m, k)` with `self = m 2^k`, `m` in `[sqrt(1/2), sqrt(2))` and `k`
     /// an integer, for positive normal finite `self`.
     fn split_exponent(self) -> (Self, Self);
-    /// `o` where `o > self`, else `self` (so a NaN `self` stays NaN), like
-    /// the AVX `max` with `o` first.
-    fn at_least(self, o: Self) -> Self;
 }
 
 // The coefficients of the minimax polynomial of fdlibm's `log` (e_log.c):
@@ -182,16 +185,20 @@ impl<E: Element> Scalar for E {
     fn barrier_slope(self) -> Self {
         fast_barrier_slope(self)
     }
+    #[inline(always)]
+    fn at_least(self, o: Self) -> Self {
+        if o > self { o } else { self }
+    }
+    #[inline(always)]
+    fn any_below(self, v: f64) -> bool {
+        self < E::from_f64(v)
+    }
 }
 
 impl<E: Element> SplitExponent for E {
     #[inline(always)]
     fn split_exponent(self) -> (Self, Self) {
         self.split()
-    }
-    #[inline(always)]
-    fn at_least(self, o: Self) -> Self {
-        if o > self { o } else { self }
     }
 }
 
@@ -326,6 +333,14 @@ impl<const N: usize> Scalar for Dual<N> {
         }
         Self { v, g }
     }
+    #[inline(always)]
+    fn at_least(self, o: Self) -> Self {
+        if o.v > self.v { o } else { self }
+    }
+    #[inline(always)]
+    fn any_below(self, v: f64) -> bool {
+        self.v < v
+    }
 }
 
 /// Correction-force constants of one cell (docs/model.md steps 4-5).
@@ -371,6 +386,9 @@ pub(crate) struct CellParams {
     /// Stiffness of the hourglass control on the lattice's three mechanisms
     /// (N/m per unit hourglass amplitude; 0 for none).
     pub k_hourglass: f64,
+    /// Energy scale `kappa` (J) of the corner barrier `kappa psi(J_n)` on each
+    /// of the 8 corner Jacobians ([`corner_barrier_law`]; 0 for none).
+    pub corner_barrier: f64,
 }
 
 pub(crate) type V3<T> = [T; 3];
@@ -781,6 +799,142 @@ pub(crate) fn cell_forces_with_edges<T: Scalar>(
         spring(p.k_diag, w, d, a, b, f);
     }
     finish_cell(p, x, axis_sum, f);
+    if p.corner_barrier != 0.0 {
+        add_corner_barrier_forces(p, x, f);
+    }
+}
+
+/// Below this corner volume ratio the corner barrier acts
+/// ([`corner_barrier_law`]); above it the barrier is exactly zero, so no
+/// small or moderate strain sees it.
+pub(crate) const CORNER_BARRIER_START: f64 = 0.2;
+
+/// The corner barrier's strength: its energy at `J_n = 0` in units of
+/// `kappa` ([`corner_barrier_law`]).
+pub(crate) const CORNER_BARRIER_DEPTH: f64 = 2.0;
+
+/// The cell's edges at each corner, along x, y and z (indices into
+/// [`CELL_EDGES`], whose edge vectors all point along `+x`, `+y`, `+z`): the
+/// trilinear map's gradient at corner `n` has these edge vectors over `h` as
+/// its columns.
+pub(crate) const CORNER_EDGE_IDS: [[usize; 3]; 8] = [
+    [0, 4, 8],
+    [0, 5, 9],
+    [1, 5, 10],
+    [1, 4, 11],
+    [2, 6, 8],
+    [2, 7, 9],
+    [3, 7, 10],
+    [3, 6, 11],
+];
+
+/// The corner barrier's law `psi(J) = D ((S - J) / S)^3` below
+/// `S` = [`CORNER_BARRIER_START`], zero above it (with zero slope and
+/// curvature at `S`: twice continuously differentiable), `D` =
+/// [`CORNER_BARRIER_DEPTH`]: `(psi, psi', psi'')`. A polynomial rather than
+/// a law that is infinite at `J = 0`: its stiffness grows only linearly
+/// with depth, which an explicit step can follow through an impact, while
+/// its push (`-3 D / S` at `J = 0`, as steep as the centre's barrier near
+/// its knee) keeps quasi-static scenes unfolded (docs/robustness.md).
+pub(crate) fn corner_barrier_law(j: f64) -> (f64, f64, f64) {
+    const S: f64 = CORNER_BARRIER_START;
+    const D: f64 = CORNER_BARRIER_DEPTH;
+    let u = (S - j).max(0.0) / S;
+    (D * u * u * u, -3.0 * D * u * u / S, 6.0 * D * u / (S * S))
+}
+
+/// `psi'` of [`corner_barrier_law`] without a branch (as
+/// [`fast_barrier_slope`]): every number type computes the same operations.
+#[inline(always)]
+fn corner_barrier_slope<T: Scalar>(j: T) -> T {
+    const S: f64 = CORNER_BARRIER_START;
+    let u = (T::cst(S) - j).at_least(T::cst(0.0));
+    -(u * u).scale(3.0 * CORNER_BARRIER_DEPTH / (S * S * S))
+}
+
+/// The 12 edge vectors of a cell ([`CELL_EDGES`] order) and its 8 corner
+/// Jacobians `J_n = det(e_x, e_y, e_z) / h^3` (the trilinear map's
+/// determinant at each corner, 1 at rest), given `1 / h^3`.
+#[inline(always)]
+pub(crate) fn corner_jacobians<T: Scalar>(x: &[V3<T>; 8], inv_h3: f64) -> ([V3<T>; 12], [T; 8]) {
+    let mut edges = [[T::cst(0.0); 3]; 12];
+    for (e, &(a, b, _)) in edges.iter_mut().zip(&CELL_EDGES) {
+        *e = sub(x[b], x[a]);
+    }
+    let mut jac = [T::cst(0.0); 8];
+    for (j, ids) in jac.iter_mut().zip(&CORNER_EDGE_IDS) {
+        let [ex, ey, ez] = ids.map(|i| edges[i]);
+        *j = dot(ex, cross(ey, ez)).scale(inv_h3);
+    }
+    (edges, jac)
+}
+
+/// Adds the forces of the corner barrier `kappa sum_n psi(J_n)`: the
+/// one-point volumetric term sees only the centre, where a cell can keep a
+/// healthy volume while a corner folds through (docs/robustness.md). Skipped,
+/// exactly, for groups of cells where no corner is below the barrier's start.
+#[inline(always)]
+fn add_corner_barrier_forces<T: Scalar>(p: &CellParams, x: &[V3<T>; 8], f: &mut [V3<T>; 8]) {
+    let inv_h3 = 1.0 / (p.rest_edge * p.rest_edge * p.rest_edge);
+    let (edges, jac) = corner_jacobians(x, inv_h3);
+    if !jac.iter().any(|j| j.any_below(CORNER_BARRIER_START)) {
+        return;
+    }
+    for (j, ids) in jac.iter().zip(&CORNER_EDGE_IDS) {
+        let coef = corner_barrier_slope(*j).scale(-p.corner_barrier * inv_h3);
+        let [ex, ey, ez] = ids.map(|i| edges[i]);
+        let cof = [cross(ey, ez), cross(ez, ex), cross(ex, ey)];
+        for (&e, c) in ids.iter().zip(cof) {
+            let (a, b, _) = CELL_EDGES[e];
+            let fc = mul_s(c, coef);
+            add_to(&mut f[b], fc);
+            sub_from(&mut f[a], fc);
+        }
+    }
+}
+
+/// Adds the corner barrier's part of the cell Jacobian (minus its Hessian):
+/// per corner `kappa (psi'' g g^T + psi' d^2 J_n / de^2)` with `g` the
+/// gradient of `J_n` with respect to its three edge vectors, mapped to the
+/// edges' end nodes.
+fn add_corner_barrier_jacobian(p: &CellParams, x: &[V3<f64>; 8], jac: &mut [[f64; 24]; 24]) {
+    let inv_h3 = 1.0 / (p.rest_edge * p.rest_edge * p.rest_edge);
+    let (edges, corner_jac) = corner_jacobians(x, inv_h3);
+    for (&j, ids) in corner_jac.iter().zip(&CORNER_EDGE_IDS) {
+        if j >= CORNER_BARRIER_START {
+            continue;
+        }
+        let (_, slope, curvature) = corner_barrier_law(j);
+        let e = ids.map(|i| edges[i]);
+        let grad =
+            [cross(e[1], e[2]), cross(e[2], e[0]), cross(e[0], e[1])].map(|c| mul_s(c, inv_h3));
+        for (a, &ea) in ids.iter().enumerate() {
+            for (b, &eb) in ids.iter().enumerate() {
+                let mut block: [[f64; 3]; 3] = std::array::from_fn(|r| {
+                    std::array::from_fn(|c| curvature * grad[a][r] * grad[b][c])
+                });
+                if a != b {
+                    // d^2 J / (de_a de_b) = -eps_abl [e_l]x / h^3.
+                    let l = 3 - a - b;
+                    let eps = if (a + 1) % 3 == b { 1.0 } else { -1.0 };
+                    let sk = skew(e[l]);
+                    for (r, row) in block.iter_mut().enumerate() {
+                        for (c, v) in row.iter_mut().enumerate() {
+                            *v -= slope * eps * sk[r][c] * inv_h3;
+                        }
+                    }
+                }
+                // Edge `ea` runs from node `a0` to `a1`: d e / d x_a1 = I, d e / d x_a0 = -I.
+                let (a0, a1, _) = CELL_EDGES[ea];
+                let (b0, b1, _) = CELL_EDGES[eb];
+                let k = -p.corner_barrier;
+                add_block(jac, a1, b1, k, &block);
+                add_block(jac, a0, b0, k, &block);
+                add_block(jac, a1, b0, -k, &block);
+                add_block(jac, a0, b1, -k, &block);
+            }
+        }
+    }
 }
 
 /// Potential energy of the cell's springs, volumetric term and hourglass
@@ -808,6 +962,10 @@ pub(crate) fn cell_energy(p: &CellParams, x: &[V3<f64>; 8]) -> f64 {
         let (axes, _) = cell_axes(&axis_sums(x));
         let (_, q) = hourglass_amplitudes(x, &axes);
         e += 0.5 * p.k_hourglass * dot(q, q);
+    }
+    if p.corner_barrier != 0.0 {
+        let (_, jac) = corner_jacobians(x, 1.0 / p.rest_edge.powi(3));
+        e += p.corner_barrier * jac.iter().map(|&j| corner_barrier_law(j).0).sum::<f64>();
     }
     e
 }
@@ -990,6 +1148,9 @@ pub(crate) fn cell_jacobian_closed_form(p: &CellParams, x: &[V3<f64>; 8]) -> [[f
             }
         }
     }
+    if p.corner_barrier != 0.0 {
+        add_corner_barrier_jacobian(p, x, &mut jac);
+    }
     jac
 }
 
@@ -1159,6 +1320,19 @@ impl<E: Element, const L: usize> Scalar for Lanes<E, L> {
     fn barrier_slope(self) -> Self {
         fast_barrier_slope(self)
     }
+    #[inline(always)]
+    fn at_least(self, o: Self) -> Self {
+        let mut r = self.0;
+        for (r, (a, b)) in r.iter_mut().zip(self.0.into_iter().zip(o.0)) {
+            *r = if b > a { b } else { a };
+        }
+        Self(r)
+    }
+    #[inline(always)]
+    fn any_below(self, v: f64) -> bool {
+        let v = E::from_f64(v);
+        self.0.iter().any(|&a| a < v)
+    }
 }
 
 impl<E: Element, const L: usize> SplitExponent for Lanes<E, L> {
@@ -1169,14 +1343,6 @@ impl<E: Element, const L: usize> SplitExponent for Lanes<E, L> {
             (*m, *k) = v.split();
         }
         (Self(m), Self(k))
-    }
-    #[inline(always)]
-    fn at_least(self, o: Self) -> Self {
-        let mut r = self.0;
-        for (r, (a, b)) in r.iter_mut().zip(self.0.into_iter().zip(o.0)) {
-            *r = if b > a { b } else { a };
-        }
-        Self(r)
     }
 }
 
@@ -1404,7 +1570,8 @@ mod avx2 {
             $(#[$doc:meta])* $name:ident($reg:ty, $e:ty, $n:literal),
             add $add:ident, sub $sub:ident, mul $mul:ident, div $div:ident,
             xor $xor:ident, set1 $set1:ident, sqrt $sqrt:ident,
-            load $load:ident, store $store:ident, max $max:ident, split $split:ident
+            load $load:ident, store $store:ident, max $max:ident, split $split:ident,
+            cmp $cmp:ident, movemask $movemask:ident
         ) => {
             $(#[$doc])*
             #[derive(Clone, Copy)]
@@ -1476,6 +1643,16 @@ mod avx2 {
                 fn barrier_slope(self) -> Self {
                     super::fast_barrier_slope(self)
                 }
+                #[inline(always)]
+                fn at_least(self, o: Self) -> Self {
+                    // SAFETY: AVX is available (see `avx_vector`).
+                    Self(unsafe { $max(o.0, self.0) })
+                }
+                #[inline(always)]
+                fn any_below(self, v: f64) -> bool {
+                    // SAFETY: AVX is available (see `avx_vector`).
+                    unsafe { $movemask($cmp::<_CMP_LT_OQ>(self.0, $set1(v as $e))) != 0 }
+                }
             }
             impl SplitExponent for $name {
                 #[inline(always)]
@@ -1483,11 +1660,6 @@ mod avx2 {
                     // SAFETY: AVX2 is available (see `avx_vector`).
                     let (m, k) = unsafe { $split(self.0) };
                     (Self(m), Self(k))
-                }
-                #[inline(always)]
-                fn at_least(self, o: Self) -> Self {
-                    // SAFETY: AVX is available (see `avx_vector`).
-                    Self(unsafe { $max(o.0, self.0) })
                 }
             }
             impl Pack for $name {
@@ -1515,14 +1687,16 @@ mod avx2 {
         F64x4(__m256d, f64, 4),
         add _mm256_add_pd, sub _mm256_sub_pd, mul _mm256_mul_pd, div _mm256_div_pd,
         xor _mm256_xor_pd, set1 _mm256_set1_pd, sqrt _mm256_sqrt_pd,
-        load _mm256_loadu_pd, store _mm256_storeu_pd, max _mm256_max_pd, split split_f64x4
+        load _mm256_loadu_pd, store _mm256_storeu_pd, max _mm256_max_pd, split split_f64x4,
+        cmp _mm256_cmp_pd, movemask _mm256_movemask_pd
     );
     avx_vector!(
         /// Eight cells' values in single precision, one AVX register.
         F32x8(__m256, f32, 8),
         add _mm256_add_ps, sub _mm256_sub_ps, mul _mm256_mul_ps, div _mm256_div_ps,
         xor _mm256_xor_ps, set1 _mm256_set1_ps, sqrt _mm256_sqrt_ps,
-        load _mm256_loadu_ps, store _mm256_storeu_ps, max _mm256_max_ps, split split_f32x8
+        load _mm256_loadu_ps, store _mm256_storeu_ps, max _mm256_max_ps, split split_f32x8,
+        cmp _mm256_cmp_ps, movemask _mm256_movemask_ps
     );
 
     /// [`SplitExponent::split_exponent`] of four `f64`, with the same bits
@@ -2061,6 +2235,15 @@ mod tests {
             vol_barrier,
             grad_scale: 1.0 / (4.0 * h),
             k_hourglass,
+            corner_barrier: 0.0,
+        }
+    }
+
+    /// `p` with the corner barrier at a strength comparable to its springs'.
+    fn with_corner_barrier(p: CellParams) -> CellParams {
+        CellParams {
+            corner_barrier: 4e-4,
+            ..p
         }
     }
 
@@ -2088,14 +2271,37 @@ mod tests {
             with_correction(params(0.0, false, 0.0), -0.5),
             with_correction(params(0.02, true, 40.0), -0.5),
             with_correction(params(0.02, false, 0.0), 0.4),
+            with_corner_barrier(params(0.0, false, 0.0)),
+            with_corner_barrier(with_correction(params(0.02, true, 40.0), -0.5)),
         ];
-        for amplitude in [0.0, 0.05, 0.2, 0.5] {
-            for _ in 0..20 {
+        // Corners seen in the barrier's range and folded.
+        let (mut in_barrier, mut past_knee) = (0, 0);
+        for amplitude in [0.0f64, 0.05, 0.2, 0.5] {
+            for trial in 0..20 {
+                // Some cells with one corner pushed in along the diagonal by
+                // `push` h: its Jacobian is 1 - 3 push (0.4 to -0.5).
+                let (pushed, push) = (trial % 8, [0.0, 0.2, 0.25, 0.32, 0.5][trial % 5]);
                 let x: [V3<f64>; 8] = std::array::from_fn(|n| {
                     std::array::from_fn(|d| {
-                        (CORNER_OFFSETS[n][d] as f64 + amplitude * noise(&mut seed)) * h
+                        let o = CORNER_OFFSETS[n][d] as f64;
+                        let inward = if n == pushed {
+                            push * (1.0 - 2.0 * o)
+                        } else {
+                            0.0
+                        };
+                        // Pushed cells get little noise, others the amplitude.
+                        let a = if push > 0.0 {
+                            amplitude.min(0.05)
+                        } else {
+                            amplitude
+                        };
+                        (o + inward + a * noise(&mut seed)) * h
                     })
                 });
+                for j in corner_jacobians(&x, 1.0 / (h * h * h)).1 {
+                    in_barrier += usize::from(j < CORNER_BARRIER_START);
+                    past_knee += usize::from(j < 0.0);
+                }
                 for p in &sets {
                     let closed = cell_jacobian_closed_form(p, &x);
                     let dual = cell_jacobian_dual(p, &x);
@@ -2111,5 +2317,44 @@ mod tests {
                 }
             }
         }
+        assert!(in_barrier > 10 && past_knee > 5, "{in_barrier} {past_knee}");
+    }
+
+    /// The corner barrier's law: zero from its start on, its slope and
+    /// curvature the derivatives of its energy (continuous through the
+    /// start), and the branch-free slope of every number type the same as
+    /// the law's.
+    #[test]
+    fn corner_barrier_law_is_smooth_and_its_slope_consistent() {
+        let s = CORNER_BARRIER_START;
+        assert_eq!(corner_barrier_law(s), (0.0, 0.0, 0.0));
+        assert_eq!(corner_barrier_law(2.0), (0.0, 0.0, 0.0));
+        assert_eq!(corner_barrier_law(0.0).0, CORNER_BARRIER_DEPTH);
+        let eps = 1e-6;
+        for j in [-0.5, -0.01, 0.0, 0.01, 0.1, 0.15, s - 1e-3] {
+            let (e, slope, curvature) = corner_barrier_law(j);
+            assert!(e > 0.0 && slope < 0.0 && curvature > 0.0, "{j}");
+            let de = (corner_barrier_law(j + eps).0 - corner_barrier_law(j - eps).0) / (2.0 * eps);
+            let ds = (corner_barrier_law(j + eps).1 - corner_barrier_law(j - eps).1) / (2.0 * eps);
+            assert!(
+                (de - slope).abs() <= 1e-6 * slope.abs().max(1.0),
+                "{j}: {de} {slope}"
+            );
+            assert!(
+                (ds - curvature).abs() <= 1e-5 * curvature.max(1.0),
+                "{j}: {ds} {curvature}"
+            );
+            let fast = corner_barrier_slope(j);
+            assert!(
+                (fast - slope).abs() <= 1e-13 * slope.abs(),
+                "{j}: {fast} {slope}"
+            );
+            let lanes = corner_barrier_slope(Lanes::<f64, 4>([j; 4]));
+            assert_eq!(lanes.0.map(f64::to_bits), [fast.to_bits(); 4]);
+        }
+        // Continuous through the start (value, slope and curvature).
+        let (la, lb) = (corner_barrier_law(s - 1e-9), corner_barrier_law(s + 1e-9));
+        assert!(la.0 < 1e-20 && la.1.abs() < 1e-12 && la.2 < 1e-5, "{la:?}");
+        assert_eq!(lb, (0.0, 0.0, 0.0));
     }
 }

@@ -246,6 +246,12 @@ pub struct Explicit {
     f_contact: Vec<Vec3>,
     /// Nodes whose entry of `f_contact` may be non-zero.
     contact_touched: Vec<u32>,
+    /// Entries of `contact_touched` after the last sub-step: more after a
+    /// sub-step means something new touched (an impact), and the step is
+    /// checked at once, as an impact can crush cells within a few sub-steps.
+    touching: u32,
+    /// `touching` at the start of the step being taken (to retry it).
+    start_touching: u32,
     /// Node points that touch (or were anchored) at the start of the
     /// sub-step under way, then those that touch at its end.
     candidates: Vec<u32>,
@@ -357,6 +363,8 @@ impl Explicit {
             },
             // Every node point may touch at once: no growth while stepping.
             contact_touched: Vec::with_capacity(node_points),
+            touching: 0,
+            start_touching: 0,
             candidates: Vec::with_capacity(node_points),
             g_start: Vec::with_capacity(node_points),
             mark: vec![0; problem.contact().map_or(0, Contact::num_points)],
@@ -456,8 +464,11 @@ impl Explicit {
             if !ok {
                 return Attempt::Failed(Divergence::NonFinite);
             }
+            let touching = u32::try_from(self.contact_touched.len()).unwrap_or(u32::MAX);
+            let new_touch = touching > self.touching;
+            self.touching = touching;
             let last = s + 1 == self.substeps;
-            if self.since_check >= self.check_every || (last && self.check_at_end) {
+            if self.since_check >= self.check_every || new_touch || (last && self.check_at_end) {
                 if let Some(reason) = self.check(problem.model(), state) {
                     return Attempt::Failed(reason);
                 }
@@ -497,6 +508,7 @@ impl Explicit {
             self.save_good(state);
         }
         self.since_check = 0;
+        self.touching = self.start_touching;
         self.cache_valid = false;
         self.contact_fresh = true;
     }
@@ -928,7 +940,7 @@ fn positions_key(x: &[Vec3]) -> u64 {
 
 /// Layout of [`Explicit`]'s [`IntegratorMemory`](super::IntegratorMemory)
 /// (changed whenever its counters change).
-const EXPLICIT_MEMORY_VERSION: u64 = 3;
+const EXPLICIT_MEMORY_VERSION: u64 = 4;
 
 impl Integrator for Explicit {
     fn name(&self) -> &'static str {
@@ -969,6 +981,7 @@ impl Integrator for Explicit {
                 self.last_time.to_bits(),
                 self.cache_time.to_bits(),
                 self.cache_key,
+                u64::from(self.touching),
             ],
             values,
             states: vec![self.good.clone()],
@@ -997,6 +1010,7 @@ impl Integrator for Explicit {
             last_time,
             cache_time,
             cache_key,
+            touching,
         ] = memory.counters.as_slice()
         else {
             return Err(bad("wrong number of counters"));
@@ -1045,6 +1059,7 @@ impl Integrator for Explicit {
         self.last_time = f64::from_bits(last_time);
         self.cache_time = f64::from_bits(cache_time);
         self.cache_key = cache_key;
+        self.touching = u32::try_from(touching).map_err(|_| bad("touching count"))?;
         self.substeps = self.wished_substeps();
         self.dt_sub = self.dt / f64::from(self.substeps);
         self.good.clone_from(good);
@@ -1087,6 +1102,7 @@ impl Explicit {
         self.start_pending = true;
         self.start.contact.clone_from(&state.contact);
         self.start.time = state.time;
+        self.start_touching = self.touching;
         let good_before = self.good.time;
         loop {
             let reason = match self.advance(problem, state, t_end) {

@@ -44,7 +44,14 @@ fn energy_of_a_uniform_compression_is_the_barrier_law() {
     for j in [1.3f64, 0.9, 0.5, 0.2, 0.1] {
         // A uniform compression along z only: J = j, springs identical in both.
         let x = deformed(&a, Mat3::from_diagonal(&Vec3::new(1.0, 1.0, j)));
-        let expected = lambda_h3 * (0.5 * j.ln().powi(2) - 0.5 * (j - 1.0).powi(2));
+        // Uniform: every corner Jacobian is j too, and below 0.2 the corner
+        // barrier (lambda + 2 mu) h^3 / 8 psi(J_n) adds its share at each of
+        // the 8 corners, psi(J) = 2 ((0.2 - J) / 0.2)^3 (docs/model.md).
+        let corner = (m.lambda() + 2.0 * m.shear_modulus())
+            * h.powi(3)
+            * 2.0
+            * ((0.2 - j).max(0.0) / 0.2).powi(3);
+        let expected = lambda_h3 * (0.5 * j.ln().powi(2) - 0.5 * (j - 1.0).powi(2)) + corner;
         let got = b.energy(&x) - a.energy(&x);
         assert!(
             (got - expected).abs() <= 1e-12 * lambda_h3,
