@@ -285,6 +285,10 @@ class Model:
         """Energy of the springs and the volumetric term (J)."""
     def inverted_cells(self, x: Points) -> list[int]:
         """Cells turned inside out at positions x."""
+    def folded_cells(self, x: Points) -> list[int]:
+        """Cells folded at a corner (a corner Jacobian <= 0) at positions x."""
+    def corner_jacobians(self, x: Points) -> FloatArray:
+        """Per cell, the smallest of its 8 corner Jacobians (1 at rest)."""
     def affine_deviation(self, x: Points) -> FloatArray:
         """Per cell, distance of its nodes from the best affine map, / h."""
 

@@ -255,6 +255,32 @@ impl PyModel {
         Ok(detached(py, || m.inverted_cells(&x)))
     }
 
+    /// folded_cells(x)
+    ///
+    /// Indices of the cells folded at a corner at node positions x: a
+    /// corner Jacobian <= 0 (the trilinear map turned inside out near that
+    /// corner) while the centre may look healthy.
+    fn folded_cells(&self, py: Python<'_>, x: &Bound<'_, PyAny>) -> PyResult<Vec<u32>> {
+        let x = vec3_in("x", x, self.model.num_nodes())?;
+        let m = Arc::clone(&self.model);
+        Ok(detached(py, || m.folded_cells(&x)))
+    }
+
+    /// corner_jacobians(x)
+    ///
+    /// Per cell, the smallest of its 8 corner Jacobians at node positions x
+    /// (1 at rest, <= 0 where the cell is folded at that corner).
+    fn corner_jacobians<'py>(
+        &self,
+        py: Python<'py>,
+        x: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, numpy::PyArray1<f64>>> {
+        let x = vec3_in("x", x, self.model.num_nodes())?;
+        let m = Arc::clone(&self.model);
+        let j = detached(py, || m.corner_jacobians(&x));
+        Ok(numpy::PyArray1::from_vec(py, j))
+    }
+
     /// affine_deviation(x)
     ///
     /// Per cell, how far its 8 nodes are from the best affine map of the

@@ -217,3 +217,20 @@ def test_static_solve_follows_a_pressing_obstacle_from_rest():
     assert push(followed) < 4 * push(at_once) < 0
     with pytest.raises(ValueError, match="obstacles_from"):
         hexmss.solve_static(problem, start, obstacles_from=float("nan"))
+
+
+def test_a_corner_pushed_through_is_folded_not_inverted():
+    # One cell; its corner 0 pushed along the diagonal by 0.4 h: that corner's
+    # Jacobian is 1 - 3 * 0.4 < 0 while the centre's stays positive.
+    model = hexmss.Model(
+        hexmss.Lattice.block((1, 1, 1), 0.01),
+        hexmss.Material(1e5, 0.3, 1000.0),
+        "volumetric-barrier+hg",
+    )
+    x = np.array(model.rest_positions)
+    corner = int(np.argmin(x.sum(axis=1)))
+    assert model.folded_cells(x) == [] and model.corner_jacobians(x)[0] == pytest.approx(1.0)
+    x[corner] += 0.004
+    assert model.corner_jacobians(x)[0] == pytest.approx(1.0 - 3 * 0.4)
+    assert model.folded_cells(x) == [0]
+    assert model.inverted_cells(x) == []
