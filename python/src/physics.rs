@@ -131,6 +131,22 @@ pub struct PyModel {
     pub model: Arc<Model>,
 }
 
+impl PyModel {
+    /// A per-cell figure of the model at node positions `x`, computed
+    /// without the GIL, as a numpy array.
+    fn per_cell<'py>(
+        &self,
+        py: Python<'py>,
+        x: &Bound<'py, PyAny>,
+        figure: fn(&Model, &[Vec3]) -> Vec<f64>,
+    ) -> PyResult<Bound<'py, numpy::PyArray1<f64>>> {
+        let x = vec3_in("x", x, self.model.num_nodes())?;
+        let m = Arc::clone(&self.model);
+        let values = detached(py, || figure(&m, &x));
+        Ok(numpy::PyArray1::from_vec(py, values))
+    }
+}
+
 #[pymethods]
 impl PyModel {
     #[new]
@@ -275,10 +291,7 @@ impl PyModel {
         py: Python<'py>,
         x: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, numpy::PyArray1<f64>>> {
-        let x = vec3_in("x", x, self.model.num_nodes())?;
-        let m = Arc::clone(&self.model);
-        let j = detached(py, || m.corner_jacobians(&x));
-        Ok(numpy::PyArray1::from_vec(py, j))
+        self.per_cell(py, x, Model::corner_jacobians)
     }
 
     /// affine_deviation(x)
@@ -290,10 +303,7 @@ impl PyModel {
         py: Python<'py>,
         x: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, numpy::PyArray1<f64>>> {
-        let x = vec3_in("x", x, self.model.num_nodes())?;
-        let m = Arc::clone(&self.model);
-        let d = detached(py, || m.affine_deviation(&x));
-        Ok(numpy::PyArray1::from_vec(py, d))
+        self.per_cell(py, x, Model::affine_deviation)
     }
 
     fn __repr__(&self) -> String {
