@@ -49,6 +49,9 @@ pub enum LoadCheck {
         relative_displacement: f64,
         /// Smallest volume ratio `J` at a cell centre at the equilibrium.
         min_jacobian: f64,
+        /// Smallest corner Jacobian `J_n` at the equilibrium (`<= 0`: a cell
+        /// folded at a corner, `mss_core::Model::folded_cells`).
+        min_corner_jacobian: f64,
         /// Worst cell's deviation from the affine map of its corners, as a
         /// fraction of the cell size.
         worst_affine_deviation: f64,
@@ -140,6 +143,10 @@ impl LoadCheck {
                     .iter()
                     .map(|d| 1.0 + d.volumetric_strain)
                     .fold(f64::INFINITY, f64::min);
+                let min_corner_jacobian = model
+                    .corner_jacobians(&state.x)
+                    .into_iter()
+                    .fold(f64::INFINITY, f64::min);
                 let worst = model
                     .affine_deviation(&state.x)
                     .into_iter()
@@ -153,6 +160,7 @@ impl LoadCheck {
                     max_displacement,
                     relative_displacement: max_displacement / extent,
                     min_jacobian,
+                    min_corner_jacobian,
                     worst_affine_deviation: worst,
                 }
             }
@@ -204,17 +212,23 @@ impl LoadCheck {
                 max_displacement,
                 relative_displacement,
                 min_jacobian,
+                min_corner_jacobian,
                 worst_affine_deviation,
             } => format!(
                 "{} static equilibrium: largest displacement {max_displacement:.3e} m \
-                 ({:.1} % of the body's size), smallest volume ratio {min_jacobian:.3}, \
-                 worst cell {:.1} % of h off affine",
+                 ({:.1} % of the body's size), smallest volume ratio {min_jacobian:.3} \
+                 ({min_corner_jacobian:.3} at a corner{}), worst cell {:.1} % of h off affine",
                 match stable {
                     Some(true) => "stable",
                     Some(false) => "UNSTABLE",
                     None => "untested",
                 },
                 100.0 * relative_displacement,
+                if *min_corner_jacobian <= 0.0 {
+                    ": cells folded"
+                } else {
+                    ""
+                },
                 100.0 * worst_affine_deviation
             ),
             LoadCheck::LoadLimit { load_factor } => format!(
