@@ -9,7 +9,7 @@ use serde::Serialize;
 
 use mss_core::solver::State;
 
-use crate::job::Job;
+use crate::job::{Job, LoadCheckBudget};
 pub use crate::load_check::{
     LOAD_CHECK_MAX_NODES, LOAD_CHECK_MIN_INCREMENT, LoadCheck, RUN_MODE_CHECK_MAX_NODES,
     run_counts_modes,
@@ -303,7 +303,7 @@ impl CheckReport {
                     .to_owned(),
             };
             (skipped, None)
-        } else if let Some(Some(budget)) = run_budget {
+        } else if let LoadCheckBudget::AtMost(budget) = run_budget {
             // The run stops its check after `budget` seconds: its memory is
             // this process's peak at that time, not at the end of the check.
             let done = AtomicBool::new(false);
@@ -329,9 +329,9 @@ impl CheckReport {
         // The run solves the same load before its first step, for as long
         // as its budget lets it.
         let run_check_seconds = match run_budget {
-            None => 0.0,
-            Some(None) => check_seconds,
-            Some(Some(budget)) => check_seconds.min(budget),
+            LoadCheckBudget::None => 0.0,
+            LoadCheckBudget::ToTheVerdict => check_seconds,
+            LoadCheckBudget::AtMost(budget) => check_seconds.min(budget),
         };
         let folds = load_check_folds(&load_check);
         let mut memory_bytes =
@@ -344,7 +344,7 @@ impl CheckReport {
         // factorization's dense kernels keep per-thread buffers sized by the
         // host's caches (57 MiB resident for the default job on a host
         // reporting a 480 MiB L3) that no count of cells predicts.
-        let run_solves = job.plan.is_static || run_budget.is_some();
+        let run_solves = job.plan.is_static || run_budget != LoadCheckBudget::None;
         if run_solves && !matches!(load_check, LoadCheck::Skipped { .. }) {
             memory_bytes = memory_bytes.max(peak_at_budget.unwrap_or(0));
         }

@@ -176,6 +176,21 @@ impl std::fmt::Debug for Job {
     }
 }
 
+/// How a dynamic run checks its load statically before its first step
+/// ([`Job::run_load_check_budget`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum LoadCheckBudget {
+    /// It does not check (a static run, `[solver] accept_unstable`, or the
+    /// default kind of model on a body nothing holds).
+    None,
+    /// It waits for the verdict (a model the check may refuse).
+    ToTheVerdict,
+    /// It waits at most these seconds ([`Limits::load_check_seconds`]: the
+    /// default kind of model, hourglass control and the barrier, whose check
+    /// only warns).
+    AtMost(f64),
+}
+
 /// Figures of a finished run (printed by the CLI, written as `summary.json`).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct RunSummary {
@@ -555,26 +570,24 @@ impl Job {
     }
 
     /// Whether a dynamic run of this job solves its load statically before
-    /// its first step (see [`Job::run`]), and for how long at most: `None`
-    /// when it does not (a static run, `[solver] accept_unstable`, or the
-    /// default kind of model on a body nothing holds), `Some(None)` when it
-    /// waits for the verdict (a model the check may refuse),
-    /// `Some(Some(seconds))` when it waits at most
-    /// [`Limits::load_check_seconds`] (the default kind of model, hourglass
-    /// control and the barrier, whose check only warns). A resumed run does
-    /// not check.
-    pub fn run_load_check_budget(&self) -> Option<Option<f64>> {
+    /// its first step (see [`Job::run`]), and for how long at most. A
+    /// resumed run does not check.
+    pub fn run_load_check_budget(&self) -> LoadCheckBudget {
         if self.input.scene.solver.accept_unstable || self.plan.is_static {
-            return None;
+            return LoadCheckBudget::None;
         }
         let model = self.problem.model();
         let default_kind = model_has_barrier(model) && mss_core::modes::cells_are_rigid(model);
         // A free body (held by obstacles or by nothing) has no static
         // equilibrium to check: its rigid motions are no defect.
         if default_kind && problem_is_free(&self.problem) {
-            return None;
+            return LoadCheckBudget::None;
         }
-        Some(default_kind.then_some(self.limits.load_check_seconds))
+        if default_kind {
+            LoadCheckBudget::AtMost(self.limits.load_check_seconds)
+        } else {
+            LoadCheckBudget::ToTheVerdict
+        }
     }
 
     /// Before a dynamic run with a model that is not the default's kind
@@ -595,8 +608,10 @@ impl Job {
     ) -> Result<Option<String>, JobError> {
         let model = self.problem.model();
         let barrier = model_has_barrier(model);
-        let Some(budget) = self.run_load_check_budget() else {
-            return Ok(None);
+        let budget = match self.run_load_check_budget() {
+            LoadCheckBudget::None => return Ok(None),
+            LoadCheckBudget::ToTheVerdict => None,
+            LoadCheckBudget::AtMost(seconds) => Some(seconds),
         };
         let default_kind = budget.is_some();
         let free_body = problem_is_free(&self.problem);

@@ -80,7 +80,9 @@ pub use error::JobError;
 /// The libraries a front end needs beside the scene layer, re-exported so
 /// that a front end depends on `mss-scene` alone.
 pub use hexmesh;
-pub use job::{Cancel, Job, Progress, ProgressFn, RunSummary, no_progress, write_summary};
+pub use job::{
+    Cancel, Job, LoadCheckBudget, Progress, ProgressFn, RunSummary, no_progress, write_summary,
+};
 pub use mss_core;
 pub use mss_io;
 pub use registry::Registry;

@@ -5,7 +5,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use mss_core::solver::{Integrator, IntegratorSettings, Problem, SolverError, State, StepInfo};
-use mss_scene::{Cancel, Job, Progress, Registry, SceneInput, no_progress};
+use mss_scene::{Cancel, Job, LoadCheckBudget, Progress, Registry, SceneInput, no_progress};
 
 fn scene(extra: &str) -> String {
     format!(
@@ -1012,12 +1012,12 @@ fn the_run_reports_its_load_check_and_does_not_wait_past_its_limit() {
             .unwrap()
             .run_load_check_budget()
     };
-    assert_eq!(budget(short), Some(Some(7.0)));
-    assert_eq!(budget(&springs), Some(None));
-    assert_eq!(budget(&accepted), None);
+    assert_eq!(budget(short), LoadCheckBudget::AtMost(7.0));
+    assert_eq!(budget(&springs), LoadCheckBudget::ToTheVerdict);
+    assert_eq!(budget(&accepted), LoadCheckBudget::None);
     assert_eq!(
         budget(&short.replace("[solver]\n", "[solver]\nkind = \"static\"\n")),
-        None
+        LoadCheckBudget::None
     );
 }
 
