@@ -1491,6 +1491,7 @@ impl Model {
                         correction: None,
                         vol_lambda_h3: 0.0,
                         k_hourglass: 0.0,
+                        corner_barrier: 0.0,
                         ..*p
                     };
                     kernel::cell_forces(&q, &xc, &mut springs);
@@ -1501,6 +1502,7 @@ impl Model {
                             k_edge: 0.0,
                             k_diag: 0.0,
                             k_hourglass: 0.0,
+                            corner_barrier: 0.0,
                             ..*p
                         };
                         kernel::cell_forces(&r, &xc, &mut vol);

@@ -808,3 +808,26 @@ fn single_precision_forces_are_close_and_reproducible() {
         );
     }
 }
+
+/// The corner barrier is the barrier law's, not a correction force: on a
+/// cell with a corner pushed into it (corner Jacobian 0.1), the correction
+/// diagnostic of `volumetric-barrier` equals that of `volumetric` (the same
+/// corrections, without either barrier), and their forces differ.
+#[test]
+fn the_corner_barrier_is_not_counted_as_a_correction() {
+    let l = Lattice::block([1, 1, 1], 0.1, [0.0; 3]).unwrap();
+    let m = Material::new(50.0, 0.3, 1.0).unwrap();
+    let plain = Model::new(&l, m, &Volumetric).unwrap();
+    let barrier = Model::new(&l, m, &VolumetricBarrier).unwrap();
+    let mut x = plain.rest_positions().to_vec();
+    // Corner 0 along the diagonal by 0.3 h: J_0 = 1 - 3 * 0.3.
+    x[0] += Vec3::new(0.03, 0.03, 0.03);
+    assert!((barrier.corner_jacobians(&x)[0] - 0.1).abs() < 1e-12);
+    let (dp, db) = (plain.cell_diagnostics(&x), barrier.cell_diagnostics(&x));
+    assert!(dp[0].correction_force > 0.0);
+    assert!(
+        (dp[0].correction_force - db[0].correction_force).abs() < 1e-12 * dp[0].correction_force
+    );
+    let gap = forces(&barrier, &x)[0] - forces(&plain, &x)[0];
+    assert!(gap.norm() > 1e-3 * forces(&plain, &x)[0].norm(), "{gap:?}");
+}
