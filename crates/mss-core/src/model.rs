@@ -1577,39 +1577,55 @@ impl Model {
     /// along their length, and their transverse stiffening when folded is
     /// left to the step control's retries.
     pub fn stiffness_growth(&self, x: &[Vec3]) -> f64 {
+        self.stiffness_growth_and_lowest_corner(x).0
+    }
+
+    /// [`Model::stiffness_growth`] and, for models with the corner barrier,
+    /// the lowest corner Jacobian of any cell (infinite without it), from
+    /// the same pass: the explicit step checks more often as a corner nears
+    /// the barrier, whose stiffness rises quickly once it is reached.
+    pub fn stiffness_growth_and_lowest_corner(&self, x: &[Vec3]) -> (f64, f64) {
         assert_eq!(x.len(), self.num_nodes(), "positions: one per node");
         if self
             .growth_shares
             .iter()
             .all(|w| *w == GrowthShares::default())
         {
-            return 1.0;
+            return (1.0, f64::INFINITY);
         }
         // The cheap estimate over every cell; the worst cells by it are then
         // measured exactly (their Jacobians' Gershgorin bounds against rest).
-        let worst = (0..self.cells.len())
+        let (worst, lowest_corner) = (0..self.cells.len())
             .into_par_iter()
             .with_min_len(CHUNK)
-            .fold(Worst::default, |mut worst, c| {
-                let shares = self.growth_shares[self.param_index(c)];
-                if shares != GrowthShares::default() {
-                    let (p, xc) = (self.params_of(c), self.corners(x, c));
-                    let w = shares.volumetric;
-                    let mut g = 1.0 - w;
-                    if w != 0.0 {
-                        g += w * kernel::volumetric_growth(p, &xc);
+            .fold(
+                || (Worst::default(), f64::INFINITY),
+                |(mut worst, mut lowest_corner), c| {
+                    let shares = self.growth_shares[self.param_index(c)];
+                    if shares != GrowthShares::default() {
+                        let (p, xc) = (self.params_of(c), self.corners(x, c));
+                        let w = shares.volumetric;
+                        let mut g = 1.0 - w;
+                        if w != 0.0 {
+                            g += w * kernel::volumetric_growth(p, &xc);
+                        }
+                        if shares.corner_barrier != 0.0 {
+                            let (_, jac) = kernel::corner_jacobians(&xc, 1.0 / p.rest_edge.powi(3));
+                            let lowest = jac.into_iter().fold(f64::INFINITY, f64::min);
+                            lowest_corner = lowest_corner.min(lowest);
+                            let (_, slope, curvature) = kernel::corner_barrier_law(lowest);
+                            g += 8.0 * shares.corner_barrier * (curvature + slope.abs());
+                        }
+                        worst.offer(g, c as u32);
                     }
-                    if shares.corner_barrier != 0.0 {
-                        let (_, jac) = kernel::corner_jacobians(&xc, 1.0 / p.rest_edge.powi(3));
-                        let lowest = jac.into_iter().fold(f64::INFINITY, f64::min);
-                        let (_, slope, curvature) = kernel::corner_barrier_law(lowest);
-                        g += 8.0 * shares.corner_barrier * (curvature + slope.abs());
-                    }
-                    worst.offer(g, c as u32);
-                }
-                worst
-            })
-            .reduce(Worst::default, Worst::merge);
+                    (worst, lowest_corner)
+                },
+            )
+            // The minimum is the same in any order: deterministic.
+            .reduce(
+                || (Worst::default(), f64::INFINITY),
+                |(a, la), (b, lb)| (Worst::merge(a, b), la.min(lb)),
+            );
         // Element by element: omega^2 <= max over cells of the cell's
         // stiffness bound over its corner mass (the cell's share of its
         // nodes' lumped masses), here for the cells most likely to set it.
@@ -1626,7 +1642,10 @@ impl Model {
                 kernel::gershgorin(&jac) / corner_mass
             })
             .fold(0.0, f64::max);
-        (worst_cell_omega_sq / self.omega_max_sq).max(1.0)
+        (
+            (worst_cell_omega_sq / self.omega_max_sq).max(1.0),
+            lowest_corner,
+        )
     }
 
     /// Cells whose Jacobian `J = det F` at the centre is `<= 0` (inverted):

@@ -63,6 +63,7 @@ use super::{
 };
 use crate::contact::Contact;
 use crate::model::ForceWorkspace;
+use crate::model::kernel::CORNER_BARRIER_START;
 use crate::{BlockCsr, Model, Precision, Vec3};
 
 /// Nodes per parallel task.
@@ -252,6 +253,8 @@ pub struct Explicit {
     touching: u32,
     /// `touching` at the start of the step being taken (to retry it).
     start_touching: u32,
+    /// The largest strain a cell took in one sub-step, at the last check.
+    last_strain: f64,
     /// Node points that touch (or were anchored) at the start of the
     /// sub-step under way, then those that touch at its end.
     candidates: Vec<u32>,
@@ -365,6 +368,7 @@ impl Explicit {
             contact_touched: Vec::with_capacity(node_points),
             touching: 0,
             start_touching: 0,
+            last_strain: 0.0,
             candidates: Vec::with_capacity(node_points),
             g_start: Vec::with_capacity(node_points),
             mark: vec![0; problem.contact().map_or(0, Contact::num_points)],
@@ -433,12 +437,23 @@ impl Explicit {
         if self.opts.unchecked {
             return self.base_substeps;
         }
-        let stiffness_growth = model.stiffness_growth(x);
+        let (stiffness_growth, lowest_corner) = model.stiffness_growth_and_lowest_corner(x);
         self.check_every = if stiffness_growth >= 2.0 {
             ((f64::from(self.opts.check_interval) / stiffness_growth) as u32).max(1)
         } else {
             self.opts.check_interval
         };
+        // The corner barrier's stiffness rises from zero within a few
+        // sub-steps of a fast fold: check before the lowest corner can reach
+        // it. A corner Jacobian changes per sub-step by about three times the
+        // strain a cell takes in one (the last check's).
+        if lowest_corner.is_finite() && self.last_strain > 0.0 {
+            let room = (lowest_corner - CORNER_BARRIER_START).max(0.0);
+            let reach = room / (3.0 * self.last_strain);
+            if reach < f64::from(self.check_every) {
+                self.check_every = (reach as u32).max(1);
+            }
+        }
         // Growth may use up half the safety margin (in the step's logarithm)
         // before the sub-step shrinks, so that small vibrations, which
         // change the stiffness by their amplitude, do not shrink it; a step
@@ -893,8 +908,9 @@ impl Explicit {
         contact.update_body_anchors(x, v, &mut state.contact);
     }
 
-    fn check(&self, model: &Model, state: &State) -> Option<Divergence> {
+    fn check(&mut self, model: &Model, state: &State) -> Option<Divergence> {
         let (cell, strain) = max_cell_velocity_change(model, &state.v, self.dt_sub);
+        self.last_strain = strain;
         if strain.is_nan() || strain > 0.25 {
             return Some(Divergence::Explosion {
                 cell,
@@ -1092,6 +1108,7 @@ impl Explicit {
             // back on, and it may already be far from rest.
             self.save_good(state);
             self.since_check = 0;
+            self.last_strain = 0.0;
             self.growth_substeps = self.substeps_for_growth(problem.model(), &state.x);
             self.update_substep();
         }
