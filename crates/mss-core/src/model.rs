@@ -1610,8 +1610,7 @@ impl Model {
                             g += w * kernel::volumetric_growth(p, &xc);
                         }
                         if shares.corner_barrier != 0.0 {
-                            let (_, jac) = kernel::corner_jacobians(&xc, 1.0 / p.rest_edge.powi(3));
-                            let lowest = jac.into_iter().fold(f64::INFINITY, f64::min);
+                            let lowest = Self::lowest_corner(p, &xc);
                             lowest_corner = lowest_corner.min(lowest);
                             let (_, slope, curvature) = kernel::corner_barrier_law(lowest);
                             g += 8.0 * shares.corner_barrier * (curvature + slope.abs());

@@ -293,10 +293,11 @@ impl RunTotals {
     /// Counts the cells folded at a corner at a frame (`Model::folded_cells`)
     /// and warns the first time there are any: the run goes on (the corner
     /// barrier may unfold them), but the user learns where it happened.
-    fn note_folds(&mut self, scene: &str, model: &mss_core::Model, state: &State) {
+    /// Returns the count.
+    fn note_folds(&mut self, scene: &str, model: &mss_core::Model, state: &State) -> usize {
         let folded = model.folded_cells(&state.x);
         if folded.is_empty() {
-            return;
+            return 0;
         }
         if self.most_folded.0 == 0 {
             log::warn!(
@@ -312,6 +313,7 @@ impl RunTotals {
         if folded.len() > self.most_folded.0 {
             self.most_folded = (folded.len(), state.time);
         }
+        folded.len()
     }
 }
 
@@ -851,7 +853,7 @@ impl Job {
                     }
                     if plan.frame_after(k) {
                         writer.write(problem, &state)?;
-                        totals.note_folds(&name, problem.model(), &state);
+                        let _ = totals.note_folds(&name, problem.model(), &state);
                     }
                     if checkpoint_steps.is_some_and(|n| k % n == 0) && k < plan.steps {
                         checkpoint(k, &state, totals, integrator.as_ref(), &writer)?;
@@ -875,8 +877,7 @@ impl Job {
         let model = problem.model();
         let max_displacement = largest_displacement(model, &state.x);
         // The end state of a static solve (or a run ending between frames).
-        totals.note_folds(&name, model, &state);
-        let folded_cells = model.folded_cells(&state.x).len();
+        let folded_cells = totals.note_folds(&name, model, &state);
         let (files, bytes) = writer.files_and_bytes();
         let held_nodes = (0..model.num_nodes())
             .filter(|&n| problem.constraints().mask(n).iter().any(|&h| h))

@@ -913,15 +913,11 @@ fn add_corner_barrier_jacobian(p: &CellParams, x: &[V3<f64>; 8], jac: &mut [[f64
                 let mut block: [[f64; 3]; 3] = std::array::from_fn(|r| {
                     std::array::from_fn(|c| curvature * grad[a][r] * grad[b][c])
                 });
-                if a != b {
-                    // d^2 J / (de_a de_b) = -eps_abl [e_l]x / h^3.
-                    let l = 3 - a - b;
-                    let eps = if (a + 1) % 3 == b { 1.0 } else { -1.0 };
-                    let sk = skew(e[l]);
-                    for (r, row) in block.iter_mut().enumerate() {
-                        for (c, v) in row.iter_mut().enumerate() {
-                            *v -= slope * eps * sk[r][c] * inv_h3;
-                        }
+                // J_n = det(e) / h^3.
+                let second = det_second_derivative(&e, a, b);
+                for (row, srow) in block.iter_mut().zip(second) {
+                    for (v, sv) in row.iter_mut().zip(srow) {
+                        *v += slope * sv * inv_h3;
                     }
                 }
                 // Edge `ea` runs from node `a0` to `a1`: d e / d x_a1 = I, d e / d x_a0 = -I.
@@ -988,6 +984,18 @@ fn add_block(jac: &mut [[f64; 24]; 24], n: usize, m: usize, k: f64, block: &[[f6
             jac[3 * n + e][3 * m + d] += k * v;
         }
     }
+}
+
+/// `d^2 det / (dc_j dc_k)` of the determinant of the columns `c`: zero for
+/// `j = k`, else `-eps_jkl [c_l]x`.
+fn det_second_derivative(cols: &[V3<f64>; 3], j: usize, k: usize) -> [[f64; 3]; 3] {
+    if j == k {
+        return [[0.0; 3]; 3];
+    }
+    let l = 3 - j - k;
+    let eps = if (j + 1) % 3 == k { 1.0 } else { -1.0 };
+    let sk = skew(cols[l]);
+    std::array::from_fn(|e| std::array::from_fn(|d| -eps * sk[e][d]))
 }
 
 /// The skew matrix `[v]x` (`[v]x w = v x w`).
@@ -1070,19 +1078,8 @@ pub(crate) fn cell_jacobian_closed_form(p: &CellParams, x: &[V3<f64>; 8]) -> [[f
             }
             g
         });
-        // H_jk = d^2 J / (df_j df_k): zero for j = k, -eps_jkl [f_l]x else.
-        let mut h = [[[[0.0; 3]; 3]; 3]; 3];
-        for (j, hj) in h.iter_mut().enumerate() {
-            for (k, hjk) in hj.iter_mut().enumerate() {
-                if j == k {
-                    continue;
-                }
-                let l = 3 - j - k;
-                let eps = if (j + 1) % 3 == k { 1.0 } else { -1.0 };
-                let sk = skew(cols[l]);
-                *hjk = std::array::from_fn(|e| std::array::from_fn(|d| -eps * sk[e][d]));
-            }
-        }
+        let h: [[[[f64; 3]; 3]; 3]; 3] =
+            std::array::from_fn(|j| std::array::from_fn(|k| det_second_derivative(&cols, j, k)));
         let lam = p.vol_lambda_h3;
         for n in 0..8 {
             for m in 0..8 {
