@@ -383,8 +383,10 @@ impl PlaneJob {
             let low = rest.iter().map(|p| p.y).fold(f64::INFINITY, f64::min);
             let mut obstacles = Vec::new();
             let mut paths = Vec::new();
-            let mut friction = None;
-            let mut stiffness = None;
+            let mut settings = Vec::new();
+            // The body's stiffest node sets the default penalty (N/m per
+            // node); friction 0.5 and damping ratio 0.2 as in 3D.
+            let default_stiffness = problem.model.max_node_stiffness();
             for (i, o) in scene.obstacles.iter().enumerate() {
                 let key = format!("[[obstacles]] #{} shape", i + 1);
                 let shape: crate::obstacles::BuiltinShape = o
@@ -402,31 +404,30 @@ impl PlaneJob {
                     ));
                 }
                 paths.push(o.path().map_err(|e| setting(&motion_key, e.message))?);
-                friction = friction.or(o.friction);
-                stiffness = stiffness.or(o.stiffness);
+                let friction = o.friction.or(scene.contact.friction).unwrap_or(0.5);
+                let s = mss_core::plane::PlaneContactSettings {
+                    stiffness: o
+                        .stiffness
+                        .or(scene.contact.stiffness)
+                        .unwrap_or(default_stiffness),
+                    friction_static: friction,
+                    friction_kinetic: o
+                        .friction_kinetic
+                        .or(scene.contact.friction_kinetic)
+                        .unwrap_or(friction),
+                    damping_ratio: o
+                        .damping_ratio
+                        .or(scene.contact.damping_ratio)
+                        .unwrap_or(0.2),
+                };
+                s.validate()
+                    .map_err(|e| setting(&format!("[[obstacles]] #{}", i + 1), e.0))?;
+                settings.push(s);
             }
-            let friction = friction.or(scene.contact.friction).unwrap_or(0.5);
-            let stiffness = stiffness
-                .or(scene.contact.stiffness)
-                .unwrap_or_else(|| problem.model.max_node_stiffness());
-            if !(friction.is_finite()
-                && friction >= 0.0
-                && stiffness.is_finite()
-                && stiffness > 0.0)
-            {
-                return Err(setting(
-                    "[[obstacles]]",
-                    format!(
-                        "friction {friction} and stiffness {stiffness} N/m must be >= 0 and > 0"
-                    ),
-                ));
-            }
-            problem.contact = Some(mss_core::plane::PlaneContact {
-                obstacles,
-                paths,
-                stiffness,
-                friction,
-            });
+            problem.contact = Some(
+                mss_core::plane::PlaneContact::new(obstacles, paths, settings)
+                    .map_err(|e| setting("[[obstacles]]", e.0))?,
+            );
         }
         let (dt, steps, frame_every) = if scene.solver.is_static() {
             (0.0, 0, usize::MAX)

@@ -481,14 +481,6 @@ impl Scene {
         if self.image.is_some() {
             return not_yet("[image]", "a label image");
         }
-        for (i, o) in self.obstacles.iter().enumerate() {
-            if o.damping_ratio.is_some() || o.friction_kinetic.is_some() {
-                return not_yet(
-                    &format!("[[obstacles]] #{}", i + 1),
-                    "contact damping or a kinetic friction of its own",
-                );
-            }
-        }
         in_plane(
             "[[motions]]",
             "displacement",

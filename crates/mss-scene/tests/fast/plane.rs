@@ -103,7 +103,30 @@ fn the_bracket_dropped_on_the_ground_stays_on_it() {
     let c = p.contact.as_ref().unwrap();
     let ground = -0.2 - 0.01;
     assert!(
-        matches!(c.obstacles[0], mss_core::plane::PlaneObstacle::HalfPlane { point, .. } if (point[1] - ground).abs() < 1e-9)
+        matches!(c.obstacles()[0], mss_core::plane::PlaneObstacle::HalfPlane { point, .. } if (point[1] - ground).abs() < 1e-9)
+    );
+    // Defaults as in 3D: friction 0.5 sticking and sliding, damping ratio
+    // 0.2; each obstacle takes its own.
+    let s = c.settings()[0];
+    assert_eq!(
+        (s.friction_static, s.friction_kinetic, s.damping_ratio),
+        (0.5, 0.5, 0.2)
+    );
+    let own = text
+        + "\n[[obstacles]]\nshape = { kind = \"sphere\", centre = [1.0, 0.0, 0.0], radius = 0.1 }\n\
+           friction = 0.8\nfriction_kinetic = 0.4\ndamping_ratio = 0.7\nstiffness = 3.0e4\n";
+    let job = prepare(&own).unwrap();
+    let settings = job.problem.contact.as_ref().unwrap().settings().to_vec();
+    assert_eq!(settings[0].friction_static, 0.5);
+    let s = settings[1];
+    assert_eq!(
+        (
+            s.friction_static,
+            s.friction_kinetic,
+            s.damping_ratio,
+            s.stiffness
+        ),
+        (0.8, 0.4, 0.7, 3.0e4)
     );
 }
 
@@ -178,6 +201,14 @@ fn what_a_2d_body_cannot_take_is_refused_by_key() {
     let e = prepare(&moving).unwrap_err();
     assert!(
         e.contains("[[obstacles]] #1 motion") && e.contains("2D"),
+        "{e}"
+    );
+    let sliding_harder = format!(
+        "{text}\n[[obstacles]]\nshape = {{ kind = \"ground\" }}\nfriction = 0.3\nfriction_kinetic = 0.5\n"
+    );
+    let e = prepare(&sliding_harder).unwrap_err();
+    assert!(
+        e.contains("[[obstacles]] #1") && e.contains("kinetic friction 0.5"),
         "{e}"
     );
     let capsule = format!(

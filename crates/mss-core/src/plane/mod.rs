@@ -50,10 +50,13 @@ use hexmesh::plane::RectLattice;
 use rayon::prelude::*;
 use thiserror::Error;
 
-use crate::contact::Path;
 use crate::solver::{LinearSolver, LinearSolverKind};
 use crate::solver::{NewtonFailure, NewtonOptions, NonlinearSystem, newton};
 use crate::{BlockCsr, Material, Vec3};
+
+mod contact;
+
+pub use contact::{PlaneContact, PlaneContactError, PlaneContactSettings, PlaneObstacle};
 
 /// The 2D variants.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -685,140 +688,6 @@ fn cell_forces(k: &PlaneCoefficients, size: [f64; 2], p: &[[f64; 2]; 4]) -> [[f6
     f
 }
 
-/// A rigid obstacle in the plane: the solid a node must stay out of.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum PlaneObstacle {
-    /// The half-plane behind the line through `point` with outward `normal`
-    /// (unit length).
-    HalfPlane {
-        /// A point of the line (m).
-        point: [f64; 2],
-        /// Outward unit normal.
-        normal: [f64; 2],
-    },
-    /// A disc.
-    Disc {
-        /// Centre (m).
-        centre: [f64; 2],
-        /// Radius (m).
-        radius: f64,
-    },
-    /// An axis-aligned rectangle.
-    Rect {
-        /// Lower-left corner (m).
-        min: [f64; 2],
-        /// Upper-right corner (m).
-        max: [f64; 2],
-    },
-}
-
-impl PlaneObstacle {
-    /// How deep `p` lies inside (m, > 0) and the outward normal of the
-    /// surface nearest to it; `None` outside.
-    pub fn penetration(&self, p: [f64; 2]) -> Option<(f64, [f64; 2])> {
-        self.within(p, 0.0)
-    }
-
-    /// [`PlaneObstacle::penetration`], counting points up to `margin` (m)
-    /// outside too (with a negative depth).
-    pub fn within(&self, p: [f64; 2], margin: f64) -> Option<(f64, [f64; 2])> {
-        match *self {
-            PlaneObstacle::HalfPlane { point, normal } => {
-                let d = (point[0] - p[0]) * normal[0] + (point[1] - p[1]) * normal[1];
-                (d > -margin).then_some((d, normal))
-            }
-            PlaneObstacle::Disc { centre, radius } => {
-                let r = [p[0] - centre[0], p[1] - centre[1]];
-                let len = norm(r);
-                (len < radius + margin).then(|| {
-                    let n = if len > 0.0 {
-                        [r[0] / len, r[1] / len]
-                    } else {
-                        [0.0, 1.0]
-                    };
-                    (radius - len, n)
-                })
-            }
-            PlaneObstacle::Rect { min, max } => {
-                let inside = p[0] > min[0] - margin
-                    && p[0] < max[0] + margin
-                    && p[1] > min[1] - margin
-                    && p[1] < max[1] + margin;
-                inside.then(|| {
-                    // Out through the nearest side.
-                    [
-                        (p[0] - min[0], [-1.0, 0.0]),
-                        (max[0] - p[0], [1.0, 0.0]),
-                        (p[1] - min[1], [0.0, -1.0]),
-                        (max[1] - p[1], [0.0, 1.0]),
-                    ]
-                    .into_iter()
-                    .min_by(|a, b| a.0.total_cmp(&b.0))
-                    .expect("four sides")
-                })
-            }
-        }
-    }
-}
-
-/// Contact of a 2D body's nodes with rigid obstacles: a penalty along the
-/// obstacle's normal, and Coulomb friction applied to the velocities of
-/// the explicit step (a node sticks while the friction an impulse can give
-/// stops it, else slides against it). Obstacles may move along paths.
-#[derive(Debug, Clone, PartialEq)]
-pub struct PlaneContact {
-    /// The obstacles, where they are at t = 0.
-    pub obstacles: Vec<PlaneObstacle>,
-    /// Each obstacle's translation in time (its x and y; none: it stays).
-    pub paths: Vec<Path>,
-    /// Penalty stiffness per node (N/m).
-    pub stiffness: f64,
-    /// Coulomb friction coefficient.
-    pub friction: f64,
-}
-
-impl PlaneContact {
-    /// Each obstacle with `p` (m) in the frame it had at t = 0, at time `t`.
-    fn placed(
-        &self,
-        p: [f64; 2],
-        t: f64,
-    ) -> impl Iterator<Item = (usize, &PlaneObstacle, [f64; 2])> {
-        self.obstacles.iter().enumerate().map(move |(i, o)| {
-            let d = self
-                .paths
-                .get(i)
-                .map_or(Vec3::zeros(), |path| path.offset(t));
-            (i, o, [p[0] - d.x, p[1] - d.y])
-        })
-    }
-
-    /// The velocity of obstacle `i` at time `t` (m/s).
-    fn velocity(&self, i: usize, t: f64) -> [f64; 2] {
-        let v = self
-            .paths
-            .get(i)
-            .map_or(Vec3::zeros(), |path| path.velocity(t));
-        [v.x, v.y]
-    }
-
-    /// The contact force on a node at `p` (N) at time `t`, and the normal
-    /// force's size.
-    fn force(&self, p: [f64; 2], t: f64) -> ([f64; 2], f64) {
-        let mut f = [0.0; 2];
-        let mut normal = 0.0;
-        for (_, o, q) in self.placed(p, t) {
-            if let Some((depth, n)) = o.penetration(q) {
-                let fn_ = self.stiffness * depth;
-                f[0] += fn_ * n[0];
-                f[1] += fn_ * n[1];
-                normal += fn_;
-            }
-        }
-        (f, normal)
-    }
-}
-
 /// A 2D problem's static residual under a fraction `load` of its loads,
 /// and its Jacobian (the penalty's tangent included), for [`newton`].
 struct StaticSystem<'a> {
@@ -831,7 +700,7 @@ struct StaticSystem<'a> {
 impl NonlinearSystem for StaticSystem<'_> {
     fn residual(&mut self, x: &[Vec3], r: &mut [Vec3]) -> f64 {
         let p = self.p;
-        p.forces_under(x, self.load, self.time, r);
+        p.forces_under(x, None, self.load, self.time, r);
         let weight: f64 = p
             .model
             .masses
@@ -843,28 +712,7 @@ impl NonlinearSystem for StaticSystem<'_> {
         (weight + applied).max(1e-3 * reactions).max(1e-300)
     }
     fn jacobian(&mut self, x: &[Vec3]) -> BlockCsr {
-        let mut j = self.p.model.tangent(x);
-        if let Some(c) = &self.p.contact {
-            // The penalty's tangent along each touching normal
-            // (exact for lines; a disc's turning normal is left out),
-            // for nodes within 1 % of a cell of touching too: a body
-            // that rests on an obstacle at its start is held by it
-            // from the first Newton step.
-            let margin = 0.01 * self.p.model.size[0].min(self.p.model.size[1]);
-            for (i, p) in x.iter().enumerate() {
-                for (_, o, q) in c.placed([p.x, p.y], self.time) {
-                    if let Some((_, n)) = o.within(q, margin) {
-                        let k = j.find(i, i).expect("the diagonal is in the pattern");
-                        for e in 0..2 {
-                            for d in 0..2 {
-                                j.blocks[k][(e, d)] -= c.stiffness * n[e] * n[d];
-                            }
-                        }
-                    }
-                }
-            }
-        }
-        j
+        self.p.tangent_at(x, self.time, None)
     }
 }
 
@@ -999,31 +847,57 @@ impl PlaneProblem {
                 .iter()
                 .copied()
                 .fold(f64::INFINITY, f64::min);
-            c.stiffness / lightest
+            let (stiffness, zeta) = c.stiffest();
+            // The contact's damper is explicit in the step: a damped
+            // oscillator stays stable up to `omega dt = 2 (sqrt(1 + z^2) - z)`.
+            let shrink = (1.0 + zeta * zeta).sqrt() - zeta;
+            stiffness / lightest / (shrink * shrink)
         });
         safety * 2.0 / (omega * omega + contact).sqrt()
     }
 
     /// Internal plus external forces at `x` (N) at time `t` (s; where the
-    /// moving obstacles are).
-    pub fn total_forces(&self, t: f64, x: &[Vec3], out: &mut [Vec3]) {
-        self.forces_under(x, 1.0, t, out);
+    /// moving obstacles are), the nodes moving at `v` (`None`: at rest; the
+    /// contact's dampers act on the velocity).
+    pub fn total_forces(&self, t: f64, x: &[Vec3], v: Option<&[Vec3]>, out: &mut [Vec3]) {
+        self.forces_under(x, v, 1.0, t, out);
     }
 
     /// Internal and contact forces (the obstacles at time `t`) plus `load`
-    /// times gravity and the nodal forces, at `x` (N).
-    fn forces_under(&self, x: &[Vec3], load: f64, t: f64, out: &mut [Vec3]) {
+    /// times gravity and the nodal forces, at `x` moving at `v` (N).
+    fn forces_under(&self, x: &[Vec3], v: Option<&[Vec3]>, load: f64, t: f64, out: &mut [Vec3]) {
         self.model.internal_forces(x, out);
         for (i, f) in out.iter_mut().enumerate() {
             let m = self.model.masses[i];
             f.x += load * (m * self.gravity[0] + self.forces[i][0]);
             f.y += load * (m * self.gravity[1] + self.forces[i][1]);
             if let Some(c) = &self.contact {
-                let (g, _) = c.force([x[i].x, x[i].y], t);
+                let vel = v.map(|v| [v[i].x, v[i].y]);
+                let g = c.force([x[i].x, x[i].y], vel, m, t);
                 f.x += g[0];
                 f.y += g[1];
             }
         }
+    }
+
+    /// The Jacobian of the forces at `x` (obstacles at time `t`): the
+    /// model's tangent and the contact's (its dampers' through the velocity
+    /// `(x - x0) / dt` of an implicit step: `moving = (x0, dt)`), for nodes
+    /// within 1 % of a cell of touching too.
+    fn tangent_at(&self, x: &[Vec3], t: f64, moving: Option<(&[Vec3], f64)>) -> BlockCsr {
+        let mut j = self.model.tangent(x);
+        if let Some(c) = &self.contact {
+            let margin = 0.01 * self.model.size[0].min(self.model.size[1]);
+            for (i, p) in x.iter().enumerate() {
+                let v = moving.map(|(x0, dt)| {
+                    let v = (p - x0[i]) / dt;
+                    ([v.x, v.y], dt)
+                });
+                let m = self.model.masses[i];
+                c.add_tangent(&mut j, i, [p.x, p.y], v, m, t, margin);
+            }
+        }
+        j
     }
 
     /// The free dofs in the 3D layout `newton` takes (z always held).
@@ -1133,10 +1007,15 @@ impl PlaneProblem {
             dt: f64,
             /// The step's end (s).
             t_end: f64,
+            /// The velocity the step ends with, `(x - x0) / dt` (scratch).
+            v_end: Vec<Vec3>,
         }
         impl NonlinearSystem for Step<'_> {
             fn residual(&mut self, x: &[Vec3], r: &mut [Vec3]) -> f64 {
-                self.p.total_forces(self.t_end, x, r);
+                for ((v, x), x0) in self.v_end.iter_mut().zip(x).zip(&self.x0) {
+                    *v = (x - x0) / self.dt;
+                }
+                self.p.total_forces(self.t_end, x, Some(&self.v_end), r);
                 let (dt, c) = (self.dt, self.p.damping);
                 let mut scale = 0.0;
                 for i in 0..x.len() {
@@ -1149,12 +1028,7 @@ impl PlaneProblem {
                 scale
             }
             fn jacobian(&mut self, x: &[Vec3]) -> BlockCsr {
-                let mut j = StaticSystem {
-                    p: self.p,
-                    load: 1.0,
-                    time: self.t_end,
-                }
-                .jacobian(x);
+                let mut j = self.p.tangent_at(x, self.t_end, Some((&self.x0, self.dt)));
                 let (dt, c) = (self.dt, self.p.damping);
                 for i in 0..x.len() {
                     let k = j.find(i, i).expect("the diagonal is in the pattern");
@@ -1194,6 +1068,7 @@ impl PlaneProblem {
                     v0: v.to_vec(),
                     dt: sub_dt,
                     t_end,
+                    v_end: vec![Vec3::zeros(); x.len()],
                 };
                 // Predictor: the current velocity; moved nodes where their
                 // motions have them at the step's end.
@@ -1226,8 +1101,14 @@ impl PlaneProblem {
                 for i in 0..x.len() {
                     v[i] = (x[i] - sys.x0[i]) / sub_dt;
                     if let Some(c) = &self.contact {
-                        let dt_over_m = sub_dt / self.model.masses[i];
-                        self.apply_friction(c, t_end, x[i], &mut v[i], dt_over_m);
+                        let before = v[i];
+                        c.apply_friction(t_end, x[i], &mut v[i], self.model.masses[i], sub_dt);
+                        // The step's motion follows the friction: a node
+                        // that sticks stays where the step began (else
+                        // it creeps by a step's slip each step).
+                        if v[i] != before {
+                            x[i] = sys.x0[i] + v[i] * sub_dt;
+                        }
                     }
                     self.hold_velocity(i, &mut v[i]);
                 }
@@ -1242,30 +1123,6 @@ impl PlaneProblem {
         for (vd, &held) in v.iter_mut().zip(&self.held[i]) {
             if held {
                 *vd = 0.0;
-            }
-        }
-    }
-
-    /// Coulomb friction on a touching node's velocity: the impulse
-    /// `friction * normal force * dt` stops its tangential motion if it can
-    /// (sticking), else slows it by that much (sliding).
-    /// The obstacles are where they are at time `t`, and the tangential
-    /// velocity is relative to theirs.
-    fn apply_friction(&self, c: &PlaneContact, t: f64, x: Vec3, v: &mut Vec3, dt_over_m: f64) {
-        if c.friction == 0.0 {
-            return;
-        }
-        for (i, o, q) in c.placed([x.x, x.y], t) {
-            if let Some((depth, n)) = o.penetration(q) {
-                let w = c.velocity(i, t);
-                let r = [v.x - w[0], v.y - w[1]];
-                let vn = r[0] * n[0] + r[1] * n[1];
-                let vt = [r[0] - vn * n[0], r[1] - vn * n[1]];
-                let speed = norm(vt);
-                let stop = c.friction * c.stiffness * depth * dt_over_m;
-                let scale = if speed <= stop { 1.0 } else { stop / speed };
-                v.x -= scale * vt[0];
-                v.y -= scale * vt[1];
             }
         }
     }
@@ -1285,7 +1142,7 @@ impl PlaneProblem {
         let keep = 1.0 / (1.0 + dt * self.damping);
         for step in 0..steps {
             let t = t0 + step as f64 * dt;
-            self.total_forces(t, x, &mut f);
+            self.total_forces(t, x, Some(v), &mut f);
             for i in 0..x.len() {
                 let inv_m = 1.0 / self.model.masses[i];
                 for d in 0..2 {
@@ -1296,7 +1153,7 @@ impl PlaneProblem {
                     };
                 }
                 if let Some(c) = &self.contact {
-                    self.apply_friction(c, t, x[i], &mut v[i], dt * inv_m);
+                    c.apply_friction(t, x[i], &mut v[i], self.model.masses[i], dt);
                     self.hold_velocity(i, &mut v[i]);
                 }
                 for d in 0..2 {
