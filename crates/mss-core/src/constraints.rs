@@ -262,6 +262,11 @@ pub enum ConstraintError {
         /// Its value.
         value: f64,
     },
+    /// The selector names what a 2D body does not have (its z faces).
+    #[error(
+        "the node selector `{0}` selects nothing of a 2D body: it has no z faces; use x-, x+, y- or y+"
+    )]
+    NotInPlane(String),
     /// A dof mask string is not made of the letters x, y, z.
     #[error(
         "dofs \"{0}\": use a non-empty combination of the letters x, y, z (e.g. \"xyz\" or \"z\")"

@@ -48,7 +48,7 @@ use std::time::Instant;
 use hexmesh::outline::{OutlineEmbedding, load_outline};
 use hexmesh::plane::{Outline, RectLattice, rasterize};
 use mss_core::Vec3;
-use mss_core::constraints::{Face, NodeSelector};
+use mss_core::constraints::NodeSelector;
 use mss_core::plane::{PlaneModel, PlaneMotion, PlaneProblem};
 use mss_io::vtk::{Field, PvdWriter, VtuEncoding, write_quads_vtu};
 use serde::Serialize;
@@ -123,8 +123,18 @@ pub struct PlaneSummary {
 }
 
 impl PlaneJob {
-    /// Reads the outline, rasterizes it and builds the problem.
+    /// Reads the outline, rasterizes it and builds the problem, with the
+    /// built-in load kinds.
     pub fn prepare(input: SceneInput) -> Result<Self, JobError> {
+        Self::prepare_with(input, &crate::scene::LoadKinds::default())
+    }
+
+    /// [`PlaneJob::prepare`], resolving `[[loads.custom]]` against
+    /// `load_kinds` (their 2D forms: [`crate::scene::LoadKinds::register_plane`]).
+    pub fn prepare_with(
+        input: SceneInput,
+        load_kinds: &crate::scene::LoadKinds,
+    ) -> Result<Self, JobError> {
         let scene = &input.scene;
         let name = input.name();
         let setting = |key: &str, message: String| JobError::Setting {
@@ -274,31 +284,11 @@ impl PlaneJob {
         }
         let mut problem = PlaneProblem::new(model);
         let rest = problem.model.rest_positions().to_vec();
-        let h = cell[0].min(cell[1]);
         let select = |s: &NodeSelector, key: &str| -> Result<Vec<u32>, JobError> {
-            let nodes = match s {
-                NodeSelector::LowestLayer => {
-                    let low = rest.iter().map(|p| p.y).fold(f64::INFINITY, f64::min);
-                    (0..rest.len() as u32)
-                        .filter(|&i| rest[i as usize].y <= low + 1e-9 * h)
-                        .collect()
-                }
-                NodeSelector::Face {
-                    face: Face::ZMin | Face::ZMax,
-                } => {
-                    return Err(setting(
-                        key,
-                        "a 2D body has no z faces: use x-, x+, y- or y+".into(),
-                    ));
-                }
-                other => other
-                    .select_checked(&rest, h)
-                    .map_err(|e| setting(key, e.to_string()))?,
-            };
-            if nodes.is_empty() {
-                return Err(setting(key, "selects no node of the lattice".into()));
-            }
-            Ok(nodes)
+            problem
+                .model
+                .select_nodes(s)
+                .map_err(|e| setting(key, e.to_string()))
         };
         for (i, s) in scene.fixed.iter().enumerate() {
             for n in select(s, &format!("[[fixed]] #{}", i + 1))? {
@@ -316,64 +306,35 @@ impl PlaneJob {
                 ramp: m.ramp.unwrap_or(scene.solver.duration),
             });
         }
-        if !scene.loads.tractions.is_empty() {
-            // Dead tractions on the boundary edges (sides of one cell)
-            // whose midpoints lie in the box: each edge carries the
-            // traction times its length and the thickness, half at each end.
-            let cells = problem.model.cells();
-            let mut edges: std::collections::HashMap<(u32, u32), u32> = Default::default();
-            for c in cells {
-                for k in 0..4 {
-                    let (a, b) = (c[k], c[(k + 1) % 4]);
-                    *edges.entry((a.min(b), a.max(b))).or_default() += 1;
-                }
-            }
-            let mut boundary: Vec<(u32, u32)> = edges
-                .into_iter()
-                .filter(|&(_, n)| n == 1)
-                .map(|(e, _)| e)
-                .collect();
-            // A fixed order: the sums below do not depend on the hash.
-            boundary.sort_unstable();
-            let thickness = problem.model.thickness();
-            let tol = 1e-9 * h;
-            for (i, t) in scene.loads.tractions.iter().enumerate() {
-                let mut loaded = 0;
-                for &(a, b) in &boundary {
-                    let (pa, pb) = (rest[a as usize], rest[b as usize]);
-                    let mid = [0.5 * (pa.x + pb.x), 0.5 * (pa.y + pb.y), 0.0];
-                    if !(0..3).all(|k| mid[k] >= t.min[k] - tol && mid[k] <= t.max[k] + tol) {
-                        continue;
-                    }
-                    let half = 0.5 * (pb - pa).norm() * thickness;
-                    for n in [a, b] {
-                        problem.forces[n as usize][0] += t.traction[0] * half;
-                        problem.forces[n as usize][1] += t.traction[1] * half;
-                    }
-                    loaded += 1;
-                }
-                if loaded == 0 {
-                    return Err(setting(
-                        &format!("[[loads.tractions]] #{}", i + 1),
-                        format!(
-                            "no boundary edge has its midpoint in the box {:?}..{:?} (z = 0 must be in it); widen the box",
-                            t.min, t.max
-                        ),
-                    ));
-                }
-            }
+        let mut dead = Vec::new();
+        for (i, t) in scene.loads.tractions.iter().enumerate() {
+            let key = format!("[[loads.tractions]] #{}", i + 1);
+            let forces = crate::scene::plane_traction(t, &problem.model)
+                .map_err(|e| setting(&key, e.to_string()))?;
+            dead.extend(forces);
         }
         for (i, f) in scene.loads.forces.iter().enumerate() {
-            let nodes = select(&f.select, &format!("[[loads.forces]] #{}", i + 1))?;
-            let share = if f.per_node {
-                1.0
-            } else {
-                1.0 / nodes.len() as f64
-            };
-            for n in nodes {
-                problem.forces[n as usize][0] += f.force[0] * share;
-                problem.forces[n as usize][1] += f.force[1] * share;
-            }
+            let key = format!("[[loads.forces]] #{}", i + 1);
+            let forces = crate::scene::plane_force(f, &problem.model)
+                .map_err(|e| setting(&key, e.to_string()))?;
+            dead.extend(forces);
+        }
+        for (n, f) in dead {
+            problem.forces[n as usize][0] += f[0];
+            problem.forces[n as usize][1] += f[1];
+        }
+        for (i, d) in scene.loads.drags.iter().enumerate() {
+            let key = format!("[[loads.drags]] #{}", i + 1);
+            let drag = crate::scene::plane_drag(d, &problem.model)
+                .map_err(|e| setting(&key, e.to_string()))?;
+            problem.loads.push(std::sync::Arc::new(drag));
+        }
+        for (i, table) in scene.loads.custom.iter().enumerate() {
+            let key = format!("[[loads.custom]] #{}", i + 1);
+            let load = load_kinds
+                .build_plane(table, &problem.model)
+                .map_err(|e| setting(&key, e.to_string()))?;
+            problem.loads.push(std::sync::Arc::from(load));
         }
         if let Some(g) = scene.loads.gravity {
             problem.gravity = [g[0], g[1]];

@@ -50,13 +50,16 @@ use hexmesh::plane::RectLattice;
 use rayon::prelude::*;
 use thiserror::Error;
 
+use crate::constraints::{ConstraintError, Face, NodeSelector};
 use crate::solver::{LinearSolver, LinearSolverKind};
 use crate::solver::{NewtonFailure, NewtonOptions, NonlinearSystem, newton};
 use crate::{BlockCsr, Material, Vec3};
 
 mod contact;
+mod loads;
 
 pub use contact::{PlaneContact, PlaneContactError, PlaneContactSettings, PlaneObstacle};
+pub use loads::{PlaneDrag, PlaneLoad, PlaneNodalForces};
 
 /// The 2D variants.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -539,6 +542,81 @@ impl PlaneModel {
         worst.sqrt()
     }
 
+    /// The nodes `selector` picks among the rest positions, ascending. The
+    /// lowest layer is the nodes of least y (the plane's "down"); the z
+    /// faces do not exist in the plane. An empty selection is an error.
+    pub fn select_nodes(&self, selector: &NodeSelector) -> Result<Vec<u32>, ConstraintError> {
+        let h = self.size[0].min(self.size[1]);
+        let rest = &self.rest;
+        let nodes = match selector {
+            NodeSelector::LowestLayer => {
+                let low = rest.iter().map(|p| p.y).fold(f64::INFINITY, f64::min);
+                (0..rest.len() as u32)
+                    .filter(|&i| rest[i as usize].y <= low + 1e-9 * h)
+                    .collect()
+            }
+            NodeSelector::Face {
+                face: Face::ZMin | Face::ZMax,
+            } => return Err(ConstraintError::NotInPlane(selector.to_string())),
+            other => other.select_checked(rest, h)?,
+        };
+        if nodes.is_empty() {
+            return Err(ConstraintError::EmptySelection {
+                selector: selector.to_string(),
+                min: crate::constraints::node_bounds(rest).min,
+                max: crate::constraints::node_bounds(rest).max,
+            });
+        }
+        Ok(nodes)
+    }
+
+    /// The lattice's boundary edges (sides of one cell only) as node pairs
+    /// `(a, b)` with `a < b`, sorted: sums over them do not depend on a
+    /// hash order.
+    pub fn boundary_edges(&self) -> Vec<(u32, u32)> {
+        let mut edges: std::collections::HashMap<(u32, u32), u32> = Default::default();
+        for c in &self.cells {
+            for k in 0..4 {
+                let (a, b) = (c[k], c[(k + 1) % 4]);
+                *edges.entry((a.min(b), a.max(b))).or_default() += 1;
+            }
+        }
+        let mut boundary: Vec<(u32, u32)> = edges
+            .into_iter()
+            .filter(|&(_, n)| n == 1)
+            .map(|(e, _)| e)
+            .collect();
+        boundary.sort_unstable();
+        boundary
+    }
+
+    /// The nodal forces (N) of a dead traction `traction` (Pa, in the
+    /// plane) on the boundary edges whose midpoints lie in the box
+    /// `min..max` (z = 0 must be in it): each edge carries the traction
+    /// times its length and the thickness, half at each end. `None` when
+    /// no edge is in the box.
+    pub fn traction_forces(
+        &self,
+        min: [f64; 3],
+        max: [f64; 3],
+        traction: [f64; 2],
+    ) -> Option<Vec<(u32, [f64; 2])>> {
+        let tol = 1e-9 * self.size[0].min(self.size[1]);
+        let mut forces = Vec::new();
+        for (a, b) in self.boundary_edges() {
+            let (pa, pb) = (self.rest[a as usize], self.rest[b as usize]);
+            let mid = [0.5 * (pa.x + pb.x), 0.5 * (pa.y + pb.y), 0.0];
+            if !(0..3).all(|k| mid[k] >= min[k] - tol && mid[k] <= max[k] + tol) {
+                continue;
+            }
+            let half = 0.5 * (pb - pa).norm() * self.thickness;
+            for n in [a, b] {
+                forces.push((n, [traction[0] * half, traction[1] * half]));
+            }
+        }
+        (!forces.is_empty()).then_some(forces)
+    }
+
     /// The largest stiffness of a node at rest (N/m): the scale of a
     /// contact penalty that keeps the body out of obstacles without
     /// shortening the step much.
@@ -693,6 +771,9 @@ fn cell_forces(k: &PlaneCoefficients, size: [f64; 2], p: &[[f64; 2]; 4]) -> [[f6
 struct StaticSystem<'a> {
     p: &'a PlaneProblem,
     load: f64,
+    /// The size of the forces of `p.loads` where the solve starts (N):
+    /// part of the residual's scale.
+    loads_at_start: f64,
     /// Where the moving obstacles are (s).
     time: f64,
 }
@@ -707,12 +788,17 @@ impl NonlinearSystem for StaticSystem<'_> {
             .iter()
             .map(|m| self.load * m * p.gravity[0].hypot(p.gravity[1]))
             .sum();
-        let applied: f64 = p.forces.iter().map(|f| self.load * f[0].hypot(f[1])).sum();
+        let applied: f64 = p
+            .forces
+            .iter()
+            .map(|f| self.load * f[0].hypot(f[1]))
+            .sum::<f64>()
+            + self.load * self.loads_at_start;
         let reactions: f64 = r.iter().map(|v| v.norm()).sum();
         (weight + applied).max(1e-3 * reactions).max(1e-300)
     }
     fn jacobian(&mut self, x: &[Vec3]) -> BlockCsr {
-        self.p.tangent_at(x, self.time, None)
+        self.p.tangent_at(x, self.time, self.load, None)
     }
 }
 
@@ -759,6 +845,9 @@ pub struct PlaneProblem {
     /// Held nodes moved along prescribed paths ([`PlaneMotion`]); their
     /// nodes are held (`held`) too.
     pub motions: Vec<PlaneMotion>,
+    /// Further loads: drag springs, custom loads ([`PlaneLoad`]); scaled
+    /// by the static solve's load factor like gravity and `forces`.
+    pub loads: Vec<std::sync::Arc<dyn PlaneLoad>>,
 }
 
 /// Held nodes moved by `displacement` (m), reached linearly from t = 0 to
@@ -813,6 +902,7 @@ impl PlaneProblem {
             damping: 0.0,
             contact: None,
             motions: Vec::new(),
+            loads: Vec::new(),
         }
     }
 
@@ -867,6 +957,9 @@ impl PlaneProblem {
     /// times gravity and the nodal forces, at `x` moving at `v` (N).
     fn forces_under(&self, x: &[Vec3], v: Option<&[Vec3]>, load: f64, t: f64, out: &mut [Vec3]) {
         self.model.internal_forces(x, out);
+        for l in &self.loads {
+            l.add_forces(&self.model, t, x, load, out);
+        }
         for (i, f) in out.iter_mut().enumerate() {
             let m = self.model.masses[i];
             f.x += load * (m * self.gravity[0] + self.forces[i][0]);
@@ -880,12 +973,21 @@ impl PlaneProblem {
         }
     }
 
-    /// The Jacobian of the forces at `x` (obstacles at time `t`): the
-    /// model's tangent and the contact's (its dampers' through the velocity
+    /// The Jacobian of the forces at `x` (obstacles at time `t`, `load`
+    /// times the loads): the model's tangent, the loads' and the contact's (its dampers' through the velocity
     /// `(x - x0) / dt` of an implicit step: `moving = (x0, dt)`), for nodes
     /// within 1 % of a cell of touching too.
-    fn tangent_at(&self, x: &[Vec3], t: f64, moving: Option<(&[Vec3], f64)>) -> BlockCsr {
+    fn tangent_at(
+        &self,
+        x: &[Vec3],
+        t: f64,
+        load: f64,
+        moving: Option<(&[Vec3], f64)>,
+    ) -> BlockCsr {
         let mut j = self.model.tangent(x);
+        for l in &self.loads {
+            l.add_jacobian(&self.model, t, x, load, &mut j);
+        }
         if let Some(c) = &self.contact {
             let margin = 0.01 * self.model.size[0].min(self.model.size[1]);
             for (i, p) in x.iter().enumerate() {
@@ -898,6 +1000,18 @@ impl PlaneProblem {
             }
         }
         j
+    }
+
+    /// The sum of the sizes of the nodal forces of `loads` at `(t, x)` (N).
+    fn loads_size(&self, x: &[Vec3], t: f64) -> f64 {
+        if self.loads.is_empty() {
+            return 0.0;
+        }
+        let mut f = vec![Vec3::zeros(); x.len()];
+        for l in &self.loads {
+            l.add_forces(&self.model, t, x, 1.0, &mut f);
+        }
+        f.iter().map(|v| v.norm()).sum()
     }
 
     /// The free dofs in the 3D layout `newton` takes (z always held).
@@ -974,6 +1088,7 @@ impl PlaneProblem {
                 p: self,
                 load,
                 time,
+                loads_at_start: self.loads_size(x, time),
             },
             x,
             &free,
@@ -1028,7 +1143,9 @@ impl PlaneProblem {
                 scale
             }
             fn jacobian(&mut self, x: &[Vec3]) -> BlockCsr {
-                let mut j = self.p.tangent_at(x, self.t_end, Some((&self.x0, self.dt)));
+                let mut j = self
+                    .p
+                    .tangent_at(x, self.t_end, 1.0, Some((&self.x0, self.dt)));
                 let (dt, c) = (self.dt, self.p.damping);
                 for i in 0..x.len() {
                     let k = j.find(i, i).expect("the diagonal is in the pattern");

@@ -932,3 +932,78 @@ fn regions_that_do_not_fit_are_refused() {
         "{missing}"
     );
 }
+
+/// A strip (nu = 0) held at x = 0 and dragged at its far face toward a
+/// target 1 cm beyond it: the strip and the drag spring in series, so the
+/// face moves `K d / (K + k_s)` with `k_s = E t H / L`; the static solve,
+/// the damped explicit and the implicit runs agree; a free body dragged
+/// whole goes rigidly to the target.
+#[test]
+fn a_drag_spring_pulls_in_series_with_the_strip() {
+    use mss_core::constraints::{Face, NodeSelector};
+    use mss_core::plane::PlaneDrag;
+    use std::sync::Arc;
+    let lattice = RectLattice::block([8, 2], [0.02, 0.02], [0.0, 0.0]).unwrap();
+    let material = Material::new(1.0e5, 0.0, 1000.0).unwrap();
+    let model =
+        PlaneModel::new(&lattice, material, 0.01, PlaneParameterization::Paper, None).unwrap();
+    let strip_stiffness = 1.0e5 * 0.01 * 0.04 / 0.16;
+    let drag_stiffness = strip_stiffness;
+    let face = model.select_nodes(&NodeSelector::face(Face::XMax)).unwrap();
+    let held = model.select_nodes(&NodeSelector::face(Face::XMin)).unwrap();
+    let drag = PlaneDrag::new(&model, face.clone(), [0.17, 0.02], drag_stiffness).unwrap();
+    let mut p = PlaneProblem::new(model);
+    for &n in &held {
+        p.held[n as usize] = [true, true];
+    }
+    p.loads.push(Arc::new(drag));
+    p.damping = 60.0;
+    let face_x =
+        |x: &[Vec3]| face.iter().map(|&n| x[n as usize].x - 0.16).sum::<f64>() / face.len() as f64;
+    let series = drag_stiffness * 0.01 / (drag_stiffness + strip_stiffness);
+    let mut xs = p.model.rest_positions().to_vec();
+    p.solve_static(0.0, &mut xs).unwrap();
+    assert!(
+        (face_x(&xs) / series - 1.0).abs() < 0.02,
+        "static {} vs {series}",
+        face_x(&xs)
+    );
+    let mut x = p.model.rest_positions().to_vec();
+    let mut v = vec![Vec3::zeros(); x.len()];
+    let dt = p.stable_time_step(0.8);
+    p.step_explicit(0.0, &mut x, &mut v, dt, (1.0 / dt) as usize)
+        .unwrap();
+    assert!(
+        (face_x(&x) - face_x(&xs)).abs() < 1e-3 * face_x(&xs),
+        "explicit {} static {}",
+        face_x(&x),
+        face_x(&xs)
+    );
+    let mut x = p.model.rest_positions().to_vec();
+    let mut v = vec![Vec3::zeros(); x.len()];
+    p.step_implicit(0.0, &mut x, &mut v, 0.01, 100).unwrap();
+    assert!(
+        (face_x(&x) - face_x(&xs)).abs() < 1e-3 * face_x(&xs),
+        "implicit {} static {}",
+        face_x(&x),
+        face_x(&xs)
+    );
+    // Free and dragged whole: a rigid move to the target, no strain.
+    let mut free = PlaneProblem::new(p.model.clone());
+    let all: Vec<u32> = (0..free.model.num_nodes() as u32).collect();
+    free.loads.push(Arc::new(
+        PlaneDrag::new(&free.model, all, [0.1, 0.05], 10.0).unwrap(),
+    ));
+    let mut x = free.model.rest_positions().to_vec();
+    free.solve_static(0.0, &mut x).unwrap();
+    for (q, r) in x.iter().zip(free.model.rest_positions()) {
+        assert!(
+            (q - r - Vec3::new(0.02, 0.03, 0.0)).norm() < 1e-9,
+            "{q:?} from {r:?}"
+        );
+    }
+    // Bad values are typed errors.
+    assert!(PlaneDrag::new(&free.model, vec![], [0.0; 2], 1.0).is_err());
+    assert!(PlaneDrag::new(&free.model, vec![0], [0.0; 2], -1.0).is_err());
+    assert!(PlaneDrag::new(&free.model, vec![9999], [0.0; 2], 1.0).is_err());
+}

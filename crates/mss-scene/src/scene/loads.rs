@@ -6,6 +6,7 @@ use std::sync::Arc;
 use mss_core::Model;
 use mss_core::constraints::NodeSelector;
 use mss_core::loads::{ForceDistribution, Load, LoadError, LoadSpec};
+use mss_core::plane::{PlaneDrag, PlaneLoad, PlaneModel, PlaneNodalForces};
 use mss_registry::Named;
 use serde::Deserialize;
 
@@ -40,8 +41,16 @@ pub struct LoadsSection {
 pub type LoadFactory =
     Arc<dyn Fn(&KindTable, &Model) -> Result<Box<dyn Load>, LoadError> + Send + Sync>;
 
+/// Builds a load for a 2D body from its `[[loads.custom]]` table: the 2D
+/// form of an entry of [`LoadKinds`].
+pub type PlaneLoadFactory =
+    Arc<dyn Fn(&KindTable, &PlaneModel) -> Result<Box<dyn PlaneLoad>, LoadError> + Send + Sync>;
+
 /// The loads a scene can name in `[[loads.custom]] kind = ...`: the
 /// built-ins and any a program registers (see the `custom_load` example).
+/// A kind has a 3D form ([`LoadKinds::register`]) and may have a 2D one
+/// ([`LoadKinds::register_plane`]) for scenes with `[model] dimension = 2`;
+/// the built-ins have both.
 ///
 /// ```
 /// use mss_scene::kind_table::KindTable;
@@ -61,6 +70,7 @@ pub type LoadFactory =
 #[derive(Clone, Debug)]
 pub struct LoadKinds {
     entries: Named<LoadFactory>,
+    plane: Named<PlaneLoadFactory>,
 }
 
 /// `kind = "gravity"`'s keys.
@@ -74,6 +84,7 @@ impl Default for LoadKinds {
     fn default() -> Self {
         let mut kinds = LoadKinds {
             entries: Named::new(),
+            plane: Named::new(),
         };
         kinds.register(
             "gravity",
@@ -94,8 +105,113 @@ impl Default for LoadKinds {
             "drag",
             Arc::new(|t, model| LoadSpec::from(&t.keys_as::<DragSpec>()?).resolve(model)),
         );
+        kinds.register_plane(
+            "gravity",
+            Arc::new(|t, model| {
+                let keys: GravityKeys = t.keys_as()?;
+                let g = in_plane("gravity", "g", keys.g)?;
+                let forces = (0..model.num_nodes() as u32)
+                    .zip(model.masses())
+                    .map(|(n, m)| (n, [m * g[0], m * g[1]]))
+                    .collect();
+                Ok(Box::new(PlaneNodalForces::new("gravity", model, forces)?))
+            }),
+        );
+        kinds.register_plane(
+            "force",
+            Arc::new(|t, model| {
+                let forces = plane_force(&t.keys_as::<ForceSpec>()?, model)?;
+                Ok(Box::new(PlaneNodalForces::new("force", model, forces)?))
+            }),
+        );
+        kinds.register_plane(
+            "traction",
+            Arc::new(|t, model| {
+                let forces = plane_traction(&t.keys_as::<TractionSpec>()?, model)?;
+                Ok(Box::new(PlaneNodalForces::new("traction", model, forces)?))
+            }),
+        );
+        kinds.register_plane(
+            "drag",
+            Arc::new(|t, model| Ok(Box::new(plane_drag(&t.keys_as::<DragSpec>()?, model)?))),
+        );
         kinds
     }
+}
+
+/// The in-plane part of `v`, or the error saying that `key` of `load`
+/// leaves the plane.
+fn in_plane(load: &str, key: &str, v: [f64; 3]) -> Result<[f64; 2], LoadError> {
+    if v[2] != 0.0 || !v.iter().all(|c| c.is_finite()) {
+        return Err(LoadError::Invalid {
+            load: load.into(),
+            message: format!(
+                "{key} = {v:?}; a 2D body takes finite vectors in the x-y plane (z = 0)"
+            ),
+        });
+    }
+    Ok([v[0], v[1]])
+}
+
+/// The nodes `select` picks of a 2D body, or the error naming `load`.
+fn plane_nodes(
+    load: &str,
+    select: &NodeSelector,
+    model: &PlaneModel,
+) -> Result<Vec<u32>, LoadError> {
+    model
+        .select_nodes(select)
+        .map_err(|source| LoadError::Selection {
+            load: load.into(),
+            source,
+        })
+}
+
+/// A force table's nodal forces on a 2D body.
+pub fn plane_force(
+    spec: &ForceSpec,
+    model: &PlaneModel,
+) -> Result<Vec<(u32, [f64; 2])>, LoadError> {
+    let force = in_plane("force", "force", spec.force)?;
+    let nodes = plane_nodes("force", &spec.select, model)?;
+    let share = if spec.per_node {
+        1.0
+    } else {
+        1.0 / nodes.len() as f64
+    };
+    Ok(nodes
+        .into_iter()
+        .map(|n| (n, [force[0] * share, force[1] * share]))
+        .collect())
+}
+
+/// A traction table's nodal forces on a 2D body (its boundary edges whose
+/// midpoints lie in the box, times the thickness).
+pub fn plane_traction(
+    spec: &TractionSpec,
+    model: &PlaneModel,
+) -> Result<Vec<(u32, [f64; 2])>, LoadError> {
+    let traction = in_plane("traction", "traction", spec.traction)?;
+    check_box(&spec.min, &spec.max).map_err(|e| LoadError::Invalid {
+        load: "traction".into(),
+        message: format!("{}: {}", e.key, e.message),
+    })?;
+    model
+        .traction_forces(spec.min, spec.max, traction)
+        .ok_or_else(|| LoadError::Invalid {
+            load: "traction".into(),
+            message: format!(
+                "no boundary edge has its midpoint in the box {:?}..{:?} (z = 0 must be in it); widen the box",
+                spec.min, spec.max
+            ),
+        })
+}
+
+/// A drag table's spring on a 2D body.
+pub fn plane_drag(spec: &DragSpec, model: &PlaneModel) -> Result<PlaneDrag, LoadError> {
+    let target = in_plane("drag", "target", spec.target)?;
+    let nodes = plane_nodes("drag", &spec.select, model)?;
+    PlaneDrag::new(model, nodes, target, spec.stiffness)
 }
 
 impl LoadKinds {
@@ -104,9 +220,42 @@ impl LoadKinds {
         self.entries.register(kind, factory);
     }
 
+    /// Registers (or replaces) the 2D form of the load called `kind`.
+    pub fn register_plane(&mut self, kind: &str, factory: PlaneLoadFactory) {
+        self.plane.register(kind, factory);
+    }
+
     /// The registered kinds, in registration order.
     pub fn names(&self) -> Vec<String> {
         self.entries.names()
+    }
+
+    /// The kinds with a 2D form, in registration order.
+    pub fn plane_names(&self) -> Vec<String> {
+        self.plane.names()
+    }
+
+    /// The 2D load `table` describes, for `model`.
+    pub fn build_plane(
+        &self,
+        table: &KindTable,
+        model: &PlaneModel,
+    ) -> Result<Box<dyn PlaneLoad>, LoadError> {
+        let factory = self.plane.lookup(&table.kind).map_err(|u| {
+            let message = if self.entries.lookup(&table.kind).is_ok() {
+                format!(
+                    "this load kind has no 2D form (kinds with one: {}); a program registers one with LoadKinds::register_plane",
+                    u.known
+                )
+            } else {
+                format!("unknown load kind (known in 2D: {})", u.known)
+            };
+            LoadError::Invalid {
+                load: u.name.clone(),
+                message,
+            }
+        })?;
+        factory(table, model)
     }
 
     /// The load `table` describes, for `model`.

@@ -490,9 +490,6 @@ impl Scene {
         if self.solver.precision != mss_core::Precision::F64 {
             return not_yet("[solver] precision", "a single-precision force pass");
         }
-        if !(self.loads.drags.is_empty() && self.loads.custom.is_empty()) {
-            return not_yet("[loads]", "a drag or custom load");
-        }
         in_plane(
             "[[loads.tractions]]",
             "traction",

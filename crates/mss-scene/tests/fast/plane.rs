@@ -432,3 +432,139 @@ fn a_traction_on_the_end_of_a_strip_stretches_it_by_sigma_l_over_e() {
         "{e}"
     );
 }
+
+/// Drag springs and custom loads in 2D: `[[loads.custom]] kind = "force"`
+/// is `[[loads.forces]]`; a drag pulls the arm toward its target; a load a
+/// program registers in 2D (here one lifting every node by its weight)
+/// runs; a kind with no 2D form, an unknown kind and a target off the
+/// plane are errors naming the entry.
+#[test]
+fn drags_and_custom_loads_act_on_a_2d_body() {
+    use mss_core::plane::{PlaneLoad, PlaneNodalForces};
+    use std::sync::Arc;
+    let statics = bracket_text().replace("kind = \"explicit\"", "kind = \"static\"");
+    let run = |text: &str, kinds: &mss_scene::scene::LoadKinds| {
+        let input = SceneInput::from_toml(text, "plane.toml").unwrap();
+        let job = PlaneJob::prepare_with(input, kinds).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let s = job.run(dir.path(), &Cancel::new()).unwrap();
+        (job, s)
+    };
+    let kinds = mss_scene::scene::LoadKinds::default();
+    let select = "select = { kind = \"face\", face = \"x+\" }";
+    let (_, forces) = run(
+        &format!("{statics}\n[[loads.forces]]\n{select}\nforce = [0.0, -2.0, 0.0]\n"),
+        &kinds,
+    );
+    let (_, custom) = run(
+        &format!(
+            "{statics}\n[[loads.custom]]\nkind = \"force\"\n{select}\nforce = [0.0, -2.0, 0.0]\n"
+        ),
+        &kinds,
+    );
+    let (_, weight_only) = run(&statics, &kinds);
+    assert!(forces.max_displacement > 1.2 * weight_only.max_displacement);
+    assert!(
+        (forces.max_displacement - custom.max_displacement).abs() < 1e-9 * forces.max_displacement,
+        "{} vs {}",
+        forces.max_displacement,
+        custom.max_displacement
+    );
+    // A drag of the arm's end 5 cm up: it rises toward the target.
+    let (job, _) = run(
+        &format!(
+            "{statics}\n[[loads.drags]]\n{select}\ntarget = [0.2, 0.1, 0.0]\nstiffness = 50.0\n"
+        ),
+        &kinds,
+    );
+    assert_eq!(job.problem.loads.len(), 1);
+    let p = &job.problem;
+    let face = p
+        .model
+        .select_nodes(&mss_core::constraints::NodeSelector::face(
+            mss_core::constraints::Face::XMax,
+        ))
+        .unwrap();
+    let face_y = |x: &[mss_core::Vec3]| {
+        face.iter().map(|&n| x[n as usize].y).sum::<f64>() / face.len() as f64
+    };
+    let rest = p.model.rest_positions().to_vec();
+    let mut dragged = rest.clone();
+    p.solve_static(0.0, &mut dragged).unwrap();
+    let mut sagging = rest.clone();
+    let mut no_drag = p.clone();
+    no_drag.loads.clear();
+    no_drag.solve_static(0.0, &mut sagging).unwrap();
+    assert!(face_y(&sagging) < face_y(&rest), "it sags without the drag");
+    assert!(
+        face_y(&dragged) > face_y(&rest) && face_y(&dragged) < 0.1,
+        "the drag lifts the arm's end toward y = 0.1: {} from {}",
+        face_y(&dragged),
+        face_y(&rest)
+    );
+    // A program's own 2D load: every node lifted by its weight.
+    let mut lifting = kinds.clone();
+    lifting.register_plane(
+        "uplift",
+        Arc::new(|_, model| {
+            let forces = (0..model.num_nodes() as u32)
+                .zip(model.masses())
+                .map(|(n, m)| (n, [0.0, 9.81 * m]))
+                .collect();
+            let load: Box<dyn PlaneLoad> =
+                Box::new(PlaneNodalForces::new("uplift", model, forces)?);
+            Ok(load)
+        }),
+    );
+    let (_, lifted) = run(
+        &format!("{statics}\n[[loads.custom]]\nkind = \"uplift\"\n"),
+        &lifting,
+    );
+    assert!(lifted.max_displacement < 1e-9, "{lifted:?}");
+    // Errors.
+    let mut only_3d = kinds.clone();
+    only_3d.register(
+        "wind",
+        Arc::new(|_, _| {
+            Ok(Box::new(mss_core::loads::Gravity {
+                g: mss_core::Vec3::zeros(),
+            }))
+        }),
+    );
+    for (text, kinds, key, words) in [
+        (
+            format!("{statics}\n[[loads.custom]]\nkind = \"wind\"\n"),
+            &only_3d,
+            "[[loads.custom]] #1",
+            "no 2D form",
+        ),
+        (
+            format!("{statics}\n[[loads.custom]]\nkind = \"gust\"\n"),
+            &kinds,
+            "[[loads.custom]] #1",
+            "unknown load kind",
+        ),
+        (
+            format!(
+                "{statics}\n[[loads.drags]]\n{select}\ntarget = [0.2, 0.1, 0.3]\nstiffness = 50.0\n"
+            ),
+            &kinds,
+            "[[loads.drags]] #1",
+            "x-y plane",
+        ),
+        (
+            format!(
+                "{statics}\n[[loads.custom]]\nkind = \"force\"\nselect = {{ kind = \"face\", face = \"z-\" }}\nforce = [1.0, 0.0, 0.0]\n"
+            ),
+            &kinds,
+            "[[loads.custom]] #1",
+            "no z faces",
+        ),
+    ] {
+        let input = SceneInput::from_toml(&text, "plane.toml").unwrap();
+        let e = PlaneJob::prepare_with(input, kinds)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(key) && e.contains(words), "{key}: {e}");
+    }
+}
