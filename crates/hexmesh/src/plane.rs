@@ -325,6 +325,25 @@ fn point_in_polygon(poly: &[[f64; 2]], p: [f64; 2]) -> bool {
 /// The cells of size `cell` (m) whose centres lie inside `outline`, on a
 /// grid fitted to its bounding box (one empty cell of margin).
 pub fn rasterize(outline: &Outline, cell: [f64; 2]) -> Result<RectLattice, PlaneError> {
+    let (origin, [nx, ny]) = fitted_grid(outline, cell)?;
+    let (nx, ny) = (nx as usize, ny as usize);
+    let mut occupied = vec![false; nx * ny];
+    for y in 0..ny {
+        for x in 0..nx {
+            let p = [
+                origin[0] + (x as f64 + 0.5) * cell[0],
+                origin[1] + (y as f64 + 0.5) * cell[1],
+            ];
+            occupied[x + nx * y] = outline.contains(p);
+        }
+    }
+    RectLattice::from_occupancy(origin, cell, [nx as u32, ny as u32], &occupied)
+}
+
+/// The grid of cells `cell` (m) that [`rasterize`] lays over `outline`:
+/// its bounding box and one empty cell of margin, centred; its origin (m)
+/// and cells per axis.
+pub fn fitted_grid(outline: &Outline, cell: [f64; 2]) -> Result<([f64; 2], [u32; 2]), PlaneError> {
     if !cell.iter().all(|c| c.is_finite() && *c > 0.0) {
         return Err(PlaneError::BadCellSize(cell));
     }
@@ -339,16 +358,5 @@ pub fn rasterize(outline: &Outline, cell: [f64; 2]) -> Result<RectLattice, Plane
     }
     let origin: [f64; 2] =
         std::array::from_fn(|k| 0.5 * (lo[k] + hi[k]) - 0.5 * cell[k] * dims[k] as f64);
-    let (nx, ny) = (dims[0] as usize, dims[1] as usize);
-    let mut occupied = vec![false; nx * ny];
-    for y in 0..ny {
-        for x in 0..nx {
-            let p = [
-                origin[0] + (x as f64 + 0.5) * cell[0],
-                origin[1] + (y as f64 + 0.5) * cell[1],
-            ];
-            occupied[x + nx * y] = outline.contains(p);
-        }
-    }
-    RectLattice::from_occupancy(origin, cell, [nx as u32, ny as u32], &occupied)
+    Ok((origin, [dims[0] as u32, dims[1] as u32]))
 }

@@ -69,6 +69,9 @@ pub struct PlaneJob {
     pub outline: Outline,
     /// The rectangles.
     pub lattice: RectLattice,
+    /// For a body made from a label image, the label covering most of each
+    /// cell (frames carry it as the cell field `label`).
+    pub cell_labels: Option<Vec<i32>>,
     /// Model, held nodes and loads.
     pub problem: PlaneProblem,
     /// The outline carried by the lattice.
@@ -142,47 +145,26 @@ impl PlaneJob {
             key: key.to_owned(),
             message,
         };
-        let mesh = scene.mesh.as_ref().ok_or_else(|| {
-            setting(
-                "[mesh]",
-                "a 2D body needs its outline: [mesh] path = \"shape.svg\"".into(),
-            )
-        })?;
-        let path = match Scene::source_of(&mesh.path, &input.origin) {
-            MeshSource::File(p) => p,
-            MeshSource::Builtin(b) => {
+        let vox = &scene.voxelize;
+        // The body's outline, and for an image the slice to resample.
+        let (outline_name, outline, slice, placement) = match (&scene.mesh, &scene.image) {
+            (Some(mesh), _) => {
+                let (name, outline) = mesh_outline(&input, mesh, &setting)?;
+                (name, outline, None, mesh.placement())
+            }
+            (None, Some(image)) => {
+                let (name, outline, slice) = image_outline(&input, image, &setting)?;
+                (name, outline, Some(slice), image.placement())
+            }
+            (None, None) => {
                 return Err(setting(
-                    "[mesh] path",
-                    format!(
-                        "= \"builtin:{b}\"; a 2D body needs an outline: an SVG drawing or a planar mesh file"
-                    ),
+                    "[mesh]",
+                    "a 2D body needs its outline: [mesh] path = \"shape.svg\", or a label image of one slice: [image] path = \"slice.nrrd\"".into(),
                 ));
             }
         };
-        let outline_name = path.display().to_string();
-        let raw = load_outline(&path).map_err(|e| setting("[mesh] path", e.to_string()))?;
-        // The placement's units, scale, rotation and translation, kept in
-        // the x-y plane.
-        let placement = mesh.placement();
-        let mut polygons = Vec::new();
-        for poly in raw.polygons() {
-            let mut placed = Vec::with_capacity(poly.len());
-            for p in poly {
-                let q = placement.apply_point([p[0], p[1], 0.0]);
-                if q[2].abs() > 1e-9 * (1.0 + q[0].abs() + q[1].abs()) {
-                    return Err(setting(
-                        "[mesh]",
-                        "the placement turns the outline out of the x-y plane: a 2D body's up and rotate keep z".into(),
-                    ));
-                }
-                placed.push([q[0], q[1]]);
-            }
-            polygons.push(placed);
-        }
-        let outline = Outline::new(polygons).map_err(|e| setting("[mesh] path", e.to_string()))?;
         let (lo, hi) = outline.bounds();
         let longest = (hi[0] - lo[0]).max(hi[1] - lo[1]);
-        let vox = &scene.voxelize;
         let cell = match (vox.cell_sides, vox.cell_size, vox.cells_per_axis, vox.cells) {
             (Some(s), ..) => s,
             (None, Some(h), ..) => [h, h],
@@ -206,8 +188,26 @@ impl PlaneJob {
                 ),
             ));
         }
-        let lattice =
-            rasterize(&outline, cell).map_err(|e| setting("[voxelize]", e.to_string()))?;
+        let (lattice, cell_labels) = match &slice {
+            None => (
+                rasterize(&outline, cell).map_err(|e| setting("[voxelize]", e.to_string()))?,
+                None,
+            ),
+            Some(slice) => {
+                let section = scene.image.as_ref().expect("a slice comes from [image]");
+                let (lattice, labels) = hexmesh::image::plane::resample_plane(
+                    &slice.image,
+                    section.labels.as_deref(),
+                    &slice.map,
+                    &outline,
+                    cell,
+                    section.threshold,
+                    vox.components,
+                )
+                .map_err(|e| setting("[image]", e.to_string()))?;
+                (lattice, Some(labels))
+            }
+        };
         if lattice.num_cells() as u64 > vox.max_cells {
             return Err(setting(
                 "[voxelize] max_cells",
@@ -252,7 +252,9 @@ impl PlaneJob {
                     .ok_or_else(|| setting("[voxelize]", "the lattice has no node".into()))?,
                 h: cell[0].min(cell[1]),
                 mesh_of: &mesh_of,
-                cell_labels: None,
+                cell_labels: cell_labels
+                    .as_deref()
+                    .map(|l| std::sync::Arc::new(crate::regions::CellLabels::plane(&lattice, l))),
             };
             let regions = crate::regions::assign_regions_at(
                 &centres,
@@ -430,6 +432,7 @@ impl PlaneJob {
             outline_name,
             outline,
             lattice,
+            cell_labels,
             problem,
             embedding,
             dt,
@@ -646,11 +649,16 @@ impl<'a> FrameWriter<'a> {
                     Field::vectors("internal_force", &force),
                     Field::flags("fixed", &fixed),
                 ],
-                &if p.model.cell_materials().is_empty() {
-                    Vec::new()
-                } else {
-                    // As a 3D frame's: 0 the scene's material, k the k-th region.
-                    vec![Field::ids("material", p.model.cell_materials())]
+                &{
+                    let mut cells = Vec::new();
+                    if !p.model.cell_materials().is_empty() {
+                        // As a 3D frame's: 0 the scene's material, k the k-th region.
+                        cells.push(Field::ids("material", p.model.cell_materials()));
+                    }
+                    if let Some(labels) = &self.job.cell_labels {
+                        cells.push(Field::labels("label", labels));
+                    }
+                    cells
                 },
                 VtuEncoding::Base64Zlib,
             )?;
@@ -680,4 +688,100 @@ impl<'a> FrameWriter<'a> {
         }
         Ok(())
     }
+}
+
+/// A one-slice label image, and its map from pixel indices to the plane.
+struct Slice {
+    image: hexmesh::image::LabelImage,
+    map: [[f64; 3]; 2],
+}
+
+/// The outline of a 2D body's `[mesh]` (an SVG drawing or a planar mesh),
+/// placed in the x-y plane, and the file's name.
+fn mesh_outline(
+    input: &SceneInput,
+    mesh: &crate::scene::MeshSection,
+    setting: &dyn Fn(&str, String) -> JobError,
+) -> Result<(String, Outline), JobError> {
+    let path = match Scene::source_of(&mesh.path, &input.origin) {
+        MeshSource::File(p) => p,
+        MeshSource::Builtin(b) => {
+            return Err(setting(
+                "[mesh] path",
+                format!(
+                    "= \"builtin:{b}\"; a 2D body needs an outline: an SVG drawing or a planar mesh file"
+                ),
+            ));
+        }
+    };
+    let raw = load_outline(&path).map_err(|e| setting("[mesh] path", e.to_string()))?;
+    // The placement's units, scale, rotation and translation, kept in the
+    // x-y plane.
+    let placement = mesh.placement();
+    let mut polygons = Vec::new();
+    for poly in raw.polygons() {
+        let mut placed = Vec::with_capacity(poly.len());
+        for p in poly {
+            let q = placement.apply_point([p[0], p[1], 0.0]);
+            if q[2].abs() > 1e-9 * (1.0 + q[0].abs() + q[1].abs()) {
+                return Err(setting(
+                    "[mesh]",
+                    "the placement turns the outline out of the x-y plane: a 2D body's up and rotate keep z".into(),
+                ));
+            }
+            placed.push([q[0], q[1]]);
+        }
+        polygons.push(placed);
+    }
+    let outline = Outline::new(polygons).map_err(|e| setting("[mesh] path", e.to_string()))?;
+    Ok((path.display().to_string(), outline))
+}
+
+/// A 2D body's `[image]`: the slice read (within the default memory
+/// limit), in the frame and unit asked, placed; the chosen pixels' boundary
+/// as its outline; and the file's name.
+fn image_outline(
+    input: &SceneInput,
+    section: &crate::scene::ImageSection,
+    setting: &dyn Fn(&str, String) -> JobError,
+) -> Result<(String, Outline, Slice), JobError> {
+    let path = match Scene::source_of(&section.path, &input.origin) {
+        MeshSource::File(p) => p,
+        MeshSource::Builtin(b) => {
+            return Err(setting(
+                "[image] path",
+                format!(
+                    "= \"builtin:{b}\"; built-in meshes are not images: give a label image file"
+                ),
+            ));
+        }
+    };
+    let limits = hexmesh::image::ImageLimits {
+        max_bytes: crate::limits::Limits::default().memory_bytes,
+    };
+    let mut image = hexmesh::image::load_image(&path, &limits)
+        .map_err(|e| setting("[image] path", e.to_string()))?;
+    if let Some(target) = section.space.target() {
+        image = image.in_space(&target);
+    }
+    let unit = section
+        .units
+        .map(|u| u.factor())
+        .unwrap_or_else(|| image.unit_metres_or_default());
+    let to_metres = image.to_metres(unit, &section.placement());
+    let map = hexmesh::image::plane::slice_to_plane(&image, &to_metres)
+        .map_err(|e| setting("[image]", e.to_string()))?;
+    let body = hexmesh::image::plane::pixel_outline(&image, section.labels.as_deref(), &map)
+        .map_err(|e| setting("[image] labels", e.to_string()))?;
+    log::info!(
+        "{}: {:?} pixels; labels and pixels in the body {:?}",
+        path.display(),
+        image.dims,
+        body.pixels_per_label
+    );
+    Ok((
+        path.display().to_string(),
+        body.outline,
+        Slice { image, map },
+    ))
 }

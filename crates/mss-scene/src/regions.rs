@@ -96,7 +96,8 @@ pub struct RegionContext<'a> {
 #[derive(Debug, Clone)]
 pub struct CellLabels {
     origin: [f64; 3],
-    h: f64,
+    /// Cell sides (m; a 2D lattice's z side is a unit slab around z = 0).
+    sides: [f64; 3],
     labels: std::collections::HashMap<[u32; 3], i32>,
 }
 
@@ -105,7 +106,7 @@ impl CellLabels {
     pub fn new(lattice: &Lattice, labels: &[i32]) -> Self {
         Self {
             origin: lattice.origin(),
-            h: lattice.h(),
+            sides: [lattice.h(); 3],
             labels: lattice
                 .cell_coords()
                 .iter()
@@ -115,11 +116,28 @@ impl CellLabels {
         }
     }
 
+    /// The labels of a 2D `lattice`'s cells, in its cell order (points
+    /// looked up at z = 0).
+    pub fn plane(lattice: &hexmesh::plane::RectLattice, labels: &[i32]) -> Self {
+        let [ox, oy] = lattice.origin();
+        let [lx, ly] = lattice.cell_size();
+        Self {
+            origin: [ox, oy, -0.5],
+            sides: [lx, ly, 1.0],
+            labels: lattice
+                .cell_coords()
+                .iter()
+                .map(|&[x, y]| [x, y, 0])
+                .zip(labels.iter().copied())
+                .collect(),
+        }
+    }
+
     /// The label of the cell holding `p` (m), if it is a cell.
     pub fn at(&self, p: [f64; 3]) -> Option<i32> {
         let mut c = [0u32; 3];
         for k in 0..3 {
-            let v = ((p[k] - self.origin[k]) / self.h).floor();
+            let v = ((p[k] - self.origin[k]) / self.sides[k]).floor();
             if !(0.0..u32::MAX as f64).contains(&v) {
                 return None;
             }

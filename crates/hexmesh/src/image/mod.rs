@@ -49,6 +49,7 @@ use thiserror::Error;
 
 mod nifti;
 mod nrrd;
+pub mod plane;
 pub mod resample;
 pub mod surface;
 

@@ -240,8 +240,15 @@ fn parse_header(lines: &[(usize, String)], name: &str) -> Result<Header, ImageEr
             }
         },
         (None, Some(d)) => match d.parse::<usize>() {
-            Ok(3) => 3,
-            _ => return Err(bad("space dimension", d, "must be 3 for a label volume")),
+            // A 2D image (a slice for a 2D body) lies in the plane z = 0.
+            Ok(n @ (2 | 3)) => n,
+            _ => {
+                return Err(bad(
+                    "space dimension",
+                    d,
+                    "must be 3 for a label volume (2 for a slice)",
+                ));
+            }
         },
         (None, None) => 0,
     };
@@ -254,11 +261,11 @@ fn parse_header(lines: &[(usize, String)], name: &str) -> Result<Header, ImageEr
     let mut directions: Vec<Option<[f64; 3]>> = vec![None; ndim];
     let mut spatial = vec![ndim <= 3; ndim];
     if let Some((_, text)) = get(&["space directions"]) {
-        if space_dim != 3 {
+        if space_dim < 2 {
             return Err(bad(
                 "space directions",
                 text,
-                "needs a 3D \"space\" or \"space dimension: 3\"",
+                "needs a 3D \"space\" or \"space dimension: 3\" (or 2)",
             ));
         }
         let items = split_vectors(text).ok_or_else(|| {
@@ -278,15 +285,15 @@ fn parse_header(lines: &[(usize, String)], name: &str) -> Result<Header, ImageEr
         for (a, item) in items.iter().enumerate() {
             match item {
                 None => spatial[a] = false,
-                Some(v) if v.len() == 3 && v.iter().all(|c| c.is_finite()) => {
+                Some(v) if v.len() == space_dim && v.iter().all(|c| c.is_finite()) => {
                     spatial[a] = true;
-                    directions[a] = Some([v[0], v[1], v[2]]);
+                    directions[a] = Some([v[0], v[1], v.get(2).copied().unwrap_or(0.0)]);
                 }
                 Some(_) => {
                     return Err(bad(
                         "space directions",
                         text,
-                        "each direction needs 3 finite components",
+                        &format!("each direction needs {space_dim} finite components"),
                     ));
                 }
             }
@@ -363,20 +370,42 @@ fn parse_header(lines: &[(usize, String)], name: &str) -> Result<Header, ImageEr
             linear[slot][slot] = spacings[a];
         }
     }
+    if spatial_axes.len() < 3 {
+        // A slice (or a line): the missing axes span one voxel across it,
+        // as thick as the mean of the others' spacings, so that the map
+        // stays invertible; a 2D body takes the slice's own plane.
+        let column = |c: usize| [linear[0][c], linear[1][c], linear[2][c]];
+        let norm = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        let (u, v) = (column(0), column(1));
+        let across = [
+            u[1] * v[2] - u[2] * v[1],
+            u[2] * v[0] - u[0] * v[2],
+            u[0] * v[1] - u[1] * v[0],
+        ];
+        if spatial_axes.len() == 2 && norm(across) > 0.0 {
+            let thick = 0.5 * (norm(u) + norm(v)) / norm(across);
+            for r in 0..3 {
+                linear[r][2] = across[r] * thick;
+            }
+        }
+    }
     let origin = match get(&["space origin"]) {
         Some((_, text)) => {
             let v = split_vectors(text)
                 .filter(|v| v.len() == 1)
                 .and_then(|v| v.into_iter().next().flatten())
-                .filter(|v| v.len() == 3 && v.iter().all(|c| c.is_finite()))
+                .filter(|v| {
+                    v.len() == if space_dim == 2 { 2 } else { 3 }
+                        && v.iter().all(|c| c.is_finite())
+                })
                 .ok_or_else(|| {
                     bad(
                         "space origin",
                         text,
-                        "must be one \"(x,y,z)\" of finite numbers",
+                        "must be one \"(x,y,z)\" of finite numbers (\"(x,y)\" with space dimension 2)",
                     )
                 })?;
-            [v[0], v[1], v[2]]
+            [v[0], v[1], v.get(2).copied().unwrap_or(0.0)]
         }
         None => [0.0; 3],
     };

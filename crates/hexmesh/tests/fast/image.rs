@@ -446,3 +446,135 @@ fn the_bundled_organ_loads_and_resamples() {
         out.stats.mesh_volume
     );
 }
+
+/// A 20 x 10 pixel slice (1 mm pixels) of label 1, its right half label 2,
+/// with a 4 x 4 hole and one stray pixel.
+fn slice_with_hole() -> LabelImage {
+    let (nx, ny) = (24usize, 10usize);
+    let mut labels = vec![0i32; nx * ny];
+    for j in 0..ny {
+        for i in 0..20 {
+            let hole = (4..8).contains(&i) && (3..7).contains(&j);
+            if !hole {
+                labels[i + nx * j] = if i >= 10 { 2 } else { 1 };
+            }
+        }
+    }
+    labels[23 + nx * 9] = 1; // a stray pixel
+    LabelImage {
+        dims: [nx, ny, 1],
+        labels,
+        affine: [
+            [1.0, 0.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0, 5.0],
+        ],
+        unit_metres: Some(1e-3),
+        space: Space::Other("slice".into()),
+        format: ImageFormat::Nrrd,
+    }
+}
+
+#[test]
+fn a_slice_becomes_rectangles_and_the_outline_of_its_pixels() {
+    use hexmesh::image::plane::{pixel_outline, resample_plane, slice_to_plane};
+    use hexmesh::voxelize::ComponentPolicy;
+    let image = slice_with_hole();
+    let to_metres = image.to_metres(1e-3, &hexmesh::Placement::default());
+    let map = slice_to_plane(&image, &to_metres).unwrap();
+    let body = pixel_outline(&image, None, &map).unwrap();
+    // The shape, its hole and the stray pixel; corners only.
+    assert_eq!(body.outline.polygons().len(), 3);
+    let mut sizes: Vec<usize> = body.outline.polygons().iter().map(Vec::len).collect();
+    sizes.sort_unstable();
+    assert_eq!(sizes, [4, 4, 4]);
+    assert!(
+        (body.outline.area() - 185e-6).abs() < 1e-15,
+        "{}",
+        body.outline.area()
+    );
+    assert_eq!(body.pixels_per_label, [(1, 85), (2, 100)]);
+    let resampled = |cell: [f64; 2], components| {
+        resample_plane(&image, None, &map, &body.outline, cell, 0.5, components).unwrap()
+    };
+    // Cells of 2 x 1 mm, aligned with the pixels here: every cell is full
+    // or empty, the stray pixel is its own group and is dropped.
+    let (lattice, labels) = resampled([2e-3, 1e-3], ComponentPolicy::LargestOnly);
+    assert_eq!(lattice.num_cells(), 92);
+    assert!((lattice.area() - 184e-6).abs() < 1e-15);
+    let nodes = lattice.nodes();
+    for (cell, &label) in lattice.cells().iter().zip(&labels) {
+        let x = cell.iter().map(|&n| nodes[n as usize][0]).sum::<f64>() / 4.0;
+        assert_eq!(label, if x > 9.5e-3 { 2 } else { 1 }, "cell at x = {x}");
+    }
+    // With every group the stray pixel's cell stays; label 2 alone is the
+    // right half.
+    assert_eq!(
+        resampled([2e-3, 1e-3], ComponentPolicy::All).0.num_cells(),
+        93
+    );
+    assert_eq!(
+        resampled([1e-3, 1e-3], ComponentPolicy::All).0.num_cells(),
+        185
+    );
+    let right = pixel_outline(&image, Some(&[2]), &map).unwrap();
+    assert!((right.outline.area() - 100e-6).abs() < 1e-15);
+    // Cells across the pixels: a boundary cell is kept when the pixels
+    // cover half of it, so the lattice's area is off by at most about half
+    // a cell along the boundary (76 mm long), and converges as cells shrink.
+    for cell in [2.7e-3, 1.3e-3, 0.33e-3, 0.1e-3] {
+        let (l, _) = resampled([cell, cell], ComponentPolicy::LargestOnly);
+        let error = (l.area() - 184e-6).abs();
+        assert!(
+            error <= 0.5 * 76e-3 * cell + 4.0 * cell * cell,
+            "cell {cell}: area {}",
+            l.area()
+        );
+    }
+}
+
+#[test]
+fn what_is_not_a_slice_in_the_plane_is_refused() {
+    use hexmesh::image::plane::{PlaneImageError, pixel_outline, slice_to_plane};
+    let mut image = slice_with_hole();
+    let turned = hexmesh::Placement {
+        rotate_degrees: [90.0, 0.0, 0.0],
+        ..hexmesh::Placement::default()
+    };
+    let e = slice_to_plane(&image, &image.to_metres(1e-3, &turned)).unwrap_err();
+    assert!(matches!(e, PlaneImageError::NotInPlane(_)), "{e}");
+    assert!(e.to_string().contains("rotate"), "{e}");
+    let map = slice_to_plane(&image, &image.to_metres(1e-3, &Default::default())).unwrap();
+    let e = pixel_outline(&image, Some(&[7]), &map).unwrap_err();
+    assert!(e.to_string().contains("(1, 85)"), "{e}");
+    image.dims = [24, 5, 2];
+    let e = slice_to_plane(&image, &image.to_metres(1e-3, &Default::default())).unwrap_err();
+    assert!(matches!(e, PlaneImageError::NotASlice(2, _)), "{e}");
+}
+
+#[test]
+fn a_2d_nrrd_with_a_2d_space_reads_as_a_slice() {
+    let mut bytes = nrrd_header(
+        "type: uint8\ndimension: 2\nsizes: 3 2\nspace dimension: 2\n\
+         space directions: (0.5,0) (0,2)\nspace origin: (10,20)\nencoding: raw\n",
+    );
+    bytes.extend([0, 1, 1, 0, 1, 0]);
+    let image = load_image_bytes(
+        &bytes,
+        ImageFormat::Nrrd,
+        "slice.nrrd",
+        &ImageLimits::default(),
+    )
+    .unwrap();
+    assert_eq!(image.dims, [3, 2, 1]);
+    assert_eq!(image.labels, [0, 1, 1, 0, 1, 0]);
+    assert_eq!(image.affine[0], [0.5, 0.0, 0.0, 10.0]);
+    assert_eq!(image.affine[1], [0.0, 2.0, 0.0, 20.0]);
+    assert_eq!(image.affine[2][3], 0.0);
+    let bad = nrrd_header(
+        "type: uint8\ndimension: 2\nsizes: 3 2\nspace dimension: 2\n\
+         space directions: (0.5,0,0) (0,2,0)\nencoding: raw\n",
+    );
+    let e = read_error(&bad, ImageFormat::Nrrd);
+    assert!(e.contains("2 finite components"), "{e}");
+}

@@ -478,9 +478,6 @@ impl Scene {
                 None => Ok(()),
             }
         };
-        if self.image.is_some() {
-            return not_yet("[image]", "a label image");
-        }
         in_plane(
             "[[motions]]",
             "displacement",

@@ -568,3 +568,95 @@ fn drags_and_custom_loads_act_on_a_2d_body() {
         assert!(e.contains(key) && e.contains(words), "{key}: {e}");
     }
 }
+
+const SECTION: &str = include_str!("../../../../data/scenes/section.toml");
+
+fn section_text() -> String {
+    let image = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../data/images/section.nrrd")
+        .canonicalize()
+        .unwrap();
+    SECTION.replace("../images/section.nrrd", &image.display().to_string())
+}
+
+/// The bundled section (a 2D label image): its cells carry the labels,
+/// the nodule's cells take the region's material, the vessel is a hole,
+/// the frames carry `label`; the probe's static press ends where the
+/// damped run does; a volume is refused as a 2D body's image.
+#[test]
+fn a_label_slice_becomes_a_2d_body() {
+    let job = prepare(&section_text()).unwrap();
+    let labels = job.cell_labels.as_ref().unwrap();
+    assert_eq!(labels.len(), job.lattice.num_cells());
+    let nodule = labels.iter().filter(|&&l| l == 2).count();
+    // A disc of 3 mm radius in cells of 1 mm^2.
+    assert!((20..=36).contains(&nodule), "{nodule}");
+    assert!(labels.iter().all(|&l| l == 1 || l == 2));
+    let materials = job.problem.model.cell_materials();
+    for (l, m) in labels.iter().zip(materials) {
+        assert_eq!(*m, u32::from(*l == 2));
+    }
+    // No cell within 1 mm of the vessel's centre (12, 10) mm.
+    let nodes = job.lattice.nodes();
+    for c in job.lattice.cells() {
+        let x = c.iter().map(|&n| nodes[n as usize][0]).sum::<f64>() / 4.0;
+        let y = c.iter().map(|&n| nodes[n as usize][1]).sum::<f64>() / 4.0;
+        assert!(
+            (x - 0.012).hypot(y - 0.010) > 1e-3,
+            "a cell at ({x}, {y}) in the vessel"
+        );
+    }
+    assert_eq!(
+        job.outline.polygons().len(),
+        2,
+        "the section and its vessel"
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let run = job.run(&dir.path().join("run"), &Cancel::new()).unwrap();
+    let vtk = vtkio::Vtk::import(dir.path().join("run/lattice_0001.vtu")).unwrap();
+    let vtkio::model::DataSet::UnstructuredGrid { pieces, .. } = vtk.data else {
+        panic!("not an unstructured grid");
+    };
+    let piece = pieces[0].load_piece_data(None).unwrap();
+    let names: Vec<String> = piece
+        .data
+        .cell
+        .iter()
+        .map(|a| a.name().to_owned())
+        .collect();
+    assert!(
+        names.contains(&"label".to_owned()) && names.contains(&"material".to_owned()),
+        "{names:?}"
+    );
+    // The probe goes 4 mm down; the tissue under it follows by most of it.
+    assert!(
+        run.max_displacement > 2e-3 && run.max_displacement < 4.5e-3,
+        "{run:?}"
+    );
+    let statics = prepare(&section_text().replace("kind = \"explicit\"", "kind = \"static\""))
+        .unwrap()
+        .run(&dir.path().join("static"), &Cancel::new())
+        .unwrap();
+    assert!(
+        (statics.max_displacement - run.max_displacement).abs() < 0.02 * statics.max_displacement,
+        "static {} dynamic {}",
+        statics.max_displacement,
+        run.max_displacement
+    );
+    // A volume is not a slice.
+    let organ = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../data/images/organ.nii.gz")
+        .canonicalize()
+        .unwrap();
+    let text = section_text().replace(
+        &PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+            .join("../../data/images/section.nrrd")
+            .canonicalize()
+            .unwrap()
+            .display()
+            .to_string(),
+        &organ.display().to_string(),
+    );
+    let e = prepare(&text).unwrap_err();
+    assert!(e.contains("[image]") && e.contains("one slice"), "{e}");
+}
