@@ -74,6 +74,7 @@ use std::time::{Duration, Instant};
 pub use mss_scene;
 
 pub mod live;
+mod plane_live;
 pub mod protocol;
 pub mod replay;
 pub mod server;

@@ -39,7 +39,30 @@ const POKE_RADIUS_CELLS: f64 = 2.5;
 /// frequency (as a fraction of omega_max squared, per node mass).
 const DRAG_FREQUENCY_FRACTION: f64 = 0.05;
 
-/// Everything built from the scene.
+/// A body the live source steps and draws: the 3D one ([`Body`]) or a
+/// 2D one (`crate::plane_live::PlaneBody`). The run loop and the page see
+/// only this.
+pub(crate) trait LiveBody {
+    /// Acts on a pick, drag, release, poke or unpoke.
+    fn handle(&mut self, message: &ClientMessage);
+    /// Moves the poking obstacle to its latest target, as if over `dt`.
+    fn steer(&mut self, dt: f64);
+    /// Advances `dt` of simulated time; the sub-steps taken.
+    fn advance(&mut self, dt: f64) -> Result<u32, String>;
+    /// The binary frame, the largest displacement and the grabbed nodes'
+    /// centroid.
+    fn frame(&mut self, generation: u64, seq: u64) -> (Vec<u8>, f64, Option<[f64; 3]>);
+    /// Simulated time (s).
+    fn time(&self) -> f64;
+    /// Where the grab pulls, if anything is grabbed.
+    fn grab_target(&self) -> Option<[f64; 3]>;
+    /// The poking obstacle's centre while it is in use.
+    fn poke_centre(&self) -> Option<[f64; 3]>;
+    /// The scene's obstacles' offsets from their rest placement.
+    fn obstacle_offsets(&self) -> Vec<[f64; 3]>;
+}
+
+/// The 3D body: everything built from the scene.
 struct Body {
     sim: Simulation,
     embedding: Embedding,
@@ -287,7 +310,7 @@ impl Body {
         nodes.iter().zip(w).map(|(&n, w)| x[n as usize] * w).sum()
     }
 
-    fn handle(&mut self, message: &ClientMessage) {
+    fn on_message(&mut self, message: &ClientMessage) {
         match *message {
             ClientMessage::Pick {
                 surface,
@@ -344,7 +367,7 @@ impl Body {
     }
 
     /// Moves the poking sphere to its latest target, as if over `dt`.
-    fn steer(&mut self, dt: f64) {
+    fn steer_poke(&mut self, dt: f64) {
         if let Some(t) = self.poke_target.take() {
             self.poke.move_to(t, dt);
         } else if self.poke_active {
@@ -354,7 +377,7 @@ impl Body {
         }
     }
 
-    fn frame(&mut self, generation: u64, seq: u64) -> (Vec<u8>, f64, Option<[f64; 3]>) {
+    fn draw(&mut self, generation: u64, seq: u64) -> (Vec<u8>, f64, Option<[f64; 3]>) {
         let model = self.sim.problem().model();
         let x = self.sim.positions();
         let rest = model.rest_positions();
@@ -437,7 +460,7 @@ impl Body {
         )
     }
 
-    fn obstacle_offsets(&self) -> Vec<[f64; 3]> {
+    fn offsets(&self) -> Vec<[f64; 3]> {
         let t = self.sim.state().time;
         self.sim
             .problem()
@@ -450,6 +473,48 @@ impl Body {
             })
             .unwrap_or_default()
     }
+}
+
+impl LiveBody for Body {
+    fn handle(&mut self, message: &ClientMessage) {
+        self.on_message(message);
+    }
+    fn steer(&mut self, dt: f64) {
+        self.steer_poke(dt);
+    }
+    fn advance(&mut self, dt: f64) -> Result<u32, String> {
+        self.sim
+            .step(dt)
+            .map(|info| info.substeps)
+            .map_err(|e| e.to_string())
+    }
+    fn frame(&mut self, generation: u64, seq: u64) -> (Vec<u8>, f64, Option<[f64; 3]>) {
+        self.draw(generation, seq)
+    }
+    fn time(&self) -> f64 {
+        self.sim.state().time
+    }
+    fn grab_target(&self) -> Option<[f64; 3]> {
+        self.grab_target.map(arr)
+    }
+    fn poke_centre(&self) -> Option<[f64; 3]> {
+        self.poke_active.then(|| arr(self.poke.offset()))
+    }
+    fn obstacle_offsets(&self) -> Vec<[f64; 3]> {
+        self.offsets()
+    }
+}
+
+/// The body a scene makes: 2D scenes (`[model] dimension = 2`) their own.
+type Built = (Box<dyn LiveBody>, SceneInfo, Vec<u8>);
+
+fn build_body(input: SceneInput, options: &crate::ViewOptions) -> Result<Built, String> {
+    if input.scene.is_plane() {
+        let (b, info, topology) = crate::plane_live::PlaneBody::build(input)?;
+        return Ok((Box::new(b), info, topology));
+    }
+    let (b, info, topology) = Body::build(input, options)?;
+    Ok((Box::new(b), info, topology))
 }
 
 /// The run's controls and figures, as the page sees them.
@@ -466,10 +531,10 @@ struct Run {
 
 impl Run {
     /// Publishes the body's current state as the next frame.
-    fn publish(&mut self, ctx: &SourceContext, body: &mut Body) {
+    fn publish(&mut self, ctx: &SourceContext, body: &mut dyn LiveBody) {
         self.seq += 1;
         let (binary, max_displacement, centroid) = body.frame(self.generation, self.seq);
-        let time = body.sim.state().time;
+        let time = body.time();
         let status = Status {
             kind: "status".into(),
             generation: self.generation,
@@ -485,9 +550,9 @@ impl Run {
             frame_ms: self.frame_ms,
             substeps: self.substeps,
             frame: 0,
-            grab_target: body.grab_target.map(arr),
+            grab_target: body.grab_target(),
             grab_centroid: centroid,
-            poke_centre: body.poke_active.then(|| arr(body.poke.offset())),
+            poke_centre: body.poke_centre(),
             obstacle_offsets: body.obstacle_offsets(),
             max_displacement,
             error: self.error.clone(),
@@ -511,7 +576,7 @@ pub(crate) fn run(source: Source, ctx: SourceContext) {
         error: None,
     };
     let mut rebuild = true;
-    let mut body: Option<Body> = None;
+    let mut body: Option<Box<dyn LiveBody>> = None;
     let mut next_tick = Instant::now();
     while !ctx.stopped() {
         if rebuild {
@@ -521,7 +586,7 @@ pub(crate) fn run(source: Source, ctx: SourceContext) {
             run.meter.reset();
             run.error = None;
             body = None;
-            let built = scene_input(&source).and_then(|input| Body::build(input, &ctx.options));
+            let built = scene_input(&source).and_then(|input| build_body(input, &ctx.options));
             match built {
                 Ok((mut b, mut info, topology)) => {
                     info.generation = run.generation;
@@ -533,7 +598,7 @@ pub(crate) fn run(source: Source, ctx: SourceContext) {
                     );
                     ctx.publish_scene(info, topology);
                     // The first frame shows the body at rest.
-                    run.publish(&ctx, &mut b);
+                    run.publish(&ctx, b.as_mut());
                     body = Some(b);
                 }
                 Err(e) => {
@@ -593,19 +658,19 @@ pub(crate) fn run(source: Source, ctx: SourceContext) {
             if changed {
                 // Paused: the page still sees what it changed (the pause
                 // itself, the scale, the grab, the sphere).
-                run.publish(&ctx, b);
+                run.publish(&ctx, b.as_mut());
             }
             continue;
         }
         let frame_dt = run.time_scale / ctx.options.frame_rate;
         b.steer(frame_dt);
         let started = Instant::now();
-        match b.sim.step(frame_dt) {
-            Ok(info) => run.substeps = info.substeps,
+        match b.advance(frame_dt) {
+            Ok(substeps) => run.substeps = substeps,
             Err(e) => {
                 let message = format!(
                     "the simulation stopped at t = {:.4} s: {e}; press Reset to start again",
-                    b.sim.state().time
+                    b.time()
                 );
                 log::error!("viewer: {message}");
                 run.error = Some(message);
@@ -613,7 +678,7 @@ pub(crate) fn run(source: Source, ctx: SourceContext) {
             }
         }
         run.frame_ms = started.elapsed().as_secs_f64() * 1e3;
-        run.publish(&ctx, b);
+        run.publish(&ctx, b.as_mut());
         // Real time: wait for the frame's slot; a slow frame starts the
         // next at once (the achieved factor shows it).
         next_tick += frame_period;

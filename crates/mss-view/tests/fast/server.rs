@@ -13,6 +13,22 @@ use mss_view::{Source, ViewError, ViewOptions, Viewer};
 
 const WAIT: Duration = Duration::from_secs(60);
 
+/// A page's pick of `triangle` of surface 0 at `point`.
+fn pick_message(triangle: usize, point: [f64; 3]) -> String {
+    format!(
+        r#"{{"type":"pick","surface":0,"triangle":{triangle},"point":[{},{},{}]}}"#,
+        point[0], point[1], point[2]
+    )
+}
+
+/// A page's message of `kind` whose `key` is the point `p`.
+fn point_message(kind: &str, key: &str, p: [f64; 3]) -> String {
+    format!(
+        r#"{{"type":"{kind}","{key}":[{},{},{}]}}"#,
+        p[0], p[1], p[2]
+    )
+}
+
 fn live(paused: bool) -> Viewer {
     let options = ViewOptions {
         paused,
@@ -204,22 +220,13 @@ async fn a_drag_moves_the_grabbed_nodes_toward_the_cursor_and_a_poke_pushes() {
         .position(|t| t.contains(&top))
         .unwrap();
     let p = surface.positions[top as usize].map(f64::from);
-    page.send(&format!(
-        r#"{{"type":"pick","surface":0,"triangle":{tri},"point":[{},{},{}]}}"#,
-        p[0], p[1], p[2]
-    ))
-    .await;
+    page.send(&pick_message(tri, p)).await;
     page.until(WAIT, "the grab", |s| s.grab_target.is_some())
         .await;
     let start = page.status.as_ref().unwrap().grab_centroid.unwrap();
     let lift = 0.25 * (scene.bounds[1][2] - scene.bounds[0][2]);
-    page.send(&format!(
-        r#"{{"type":"drag","target":[{},{},{}]}}"#,
-        p[0],
-        p[1],
-        p[2] + lift
-    ))
-    .await;
+    page.send(&point_message("drag", "target", [p[0], p[1], p[2] + lift]))
+        .await;
     page.until(WAIT, "the drag to lift the grab", |s| {
         s.grab_centroid
             .is_some_and(|c| c[2] > start[2] + 0.5 * lift)
@@ -251,18 +258,20 @@ async fn a_drag_moves_the_grabbed_nodes_toward_the_cursor_and_a_poke_pushes() {
     let r = page.scene.as_ref().unwrap().poke_radius;
     assert!(r > 0.0);
     let above = [p[0], p[1], p[2] + r * 1.05];
-    page.send(&format!(
-        r#"{{"type":"poke","centre":[{},{},{}]}}"#,
-        above[0], above[1], above[2]
+    page.send(&point_message(
+        "poke",
+        "centre",
+        [above[0], above[1], above[2]],
     ))
     .await;
     page.until(WAIT, "the sphere", |s| s.poke_centre.is_some())
         .await;
     let depth = 0.4 * r;
     let pushed = [p[0], p[1], p[2] + r - depth];
-    page.send(&format!(
-        r#"{{"type":"poke","centre":[{},{},{}]}}"#,
-        pushed[0], pushed[1], pushed[2]
+    page.send(&point_message(
+        "poke",
+        "centre",
+        [pushed[0], pushed[1], pushed[2]],
     ))
     .await;
     page.until(WAIT, "the sphere to move", |s| {
@@ -467,5 +476,107 @@ density = 1000.0
     let skin = scene.surfaces.last().unwrap();
     assert_eq!(skin.vertices, (6 * 9 + 2) + (6 * 16 + 2));
     assert_eq!(scene.surfaces[0].name, "surface");
+    tokio::task::spawn_blocking(move || v.stop()).await.unwrap();
+}
+
+/// A 2D scene in the live viewer: the strip stands upright (the plane's y
+/// is the page's z), one surface of two triangles per rectangle; a drag
+/// lifts the picked rectangle toward the cursor; the poking disc pushes the
+/// top down; the scene's obstacles are drawn.
+#[tokio::test(flavor = "current_thread")]
+async fn a_2d_body_is_shown_upright_dragged_and_poked() {
+    let dir = tempfile::tempdir().unwrap();
+    let svg = dir.path().join("strip.svg");
+    std::fs::write(
+        &svg,
+        r#"<svg><rect x="0" y="0" width="0.1" height="0.03"/></svg>"#,
+    )
+    .unwrap();
+    let text = format!(
+        "[mesh]\npath = {:?}\n[voxelize]\ncell_size = [0.01, 0.01]\n[model]\ndimension = 2\n\
+         thickness = 0.01\nparameterization = \"paper+hg\"\n[material]\nyoung = 1.0e5\n\
+         poisson = 0.3\ndensity = 1000.0\n[[fixed]]\nkind = \"face\"\nface = \"x-\"\n\
+         [[obstacles]]\nshape = {{ kind = \"sphere\", centre = [0.2, 0.0, 0.0], radius = 0.01 }}\n\
+         [solver]\nkind = \"explicit\"\ndamping = 10.0\nduration = 1.0\n",
+        svg.display().to_string()
+    );
+    let input = mss_view::mss_scene::SceneInput::from_toml(&text, "strip.toml").unwrap();
+    let v = tokio::task::spawn_blocking(move || {
+        let v = Viewer::start(Source::Input(Box::new(input)), ViewOptions::default()).unwrap();
+        assert!(v.wait_for_frame(WAIT).is_some(), "no first frame");
+        v
+    })
+    .await
+    .unwrap();
+    let mut page = Page::connect(v.addr(), v.token()).await;
+    assert!(page.next_frame(WAIT).await);
+    let scene = page.scene.clone().unwrap();
+    assert!(scene.error.is_none(), "{:?}", scene.error);
+    assert_eq!(scene.cells, 30);
+    assert_eq!(scene.surfaces.len(), 1);
+    assert_eq!(scene.surfaces[0].triangles, 60);
+    assert_eq!(scene.obstacles.len(), 1);
+    // Upright: the strip's height (3 cm) is the page's z, its depth 0.
+    assert!((scene.bounds[1][2] - scene.bounds[0][2] - 0.03).abs() < 1e-9);
+    assert!((scene.bounds[1][1] - scene.bounds[0][1]).abs() < 1e-12);
+    // Grab the free end's top corner and lift it by 2 cm.
+    let frame = page.frame.clone().unwrap();
+    let surface = &frame.surfaces[0];
+    let corner = (0..surface.positions.len())
+        .max_by(|&a, &b| {
+            let s = |i: usize| surface.positions[i][0] + surface.positions[i][2];
+            s(a).total_cmp(&s(b))
+        })
+        .unwrap() as u32;
+    let tri = page.topology.as_ref().unwrap()[0]
+        .iter()
+        .position(|t| t.contains(&corner))
+        .unwrap();
+    let p = surface.positions[corner as usize].map(f64::from);
+    page.send(&pick_message(tri, p)).await;
+    page.until(WAIT, "the grab", |s| s.grab_target.is_some())
+        .await;
+    let start = page.status.as_ref().unwrap().grab_centroid.unwrap();
+    let lift = 0.02;
+    page.send(&point_message("drag", "target", [p[0], p[1], p[2] + lift]))
+        .await;
+    page.until(WAIT, "the drag to lift the end", |s| {
+        s.grab_centroid
+            .is_some_and(|c| c[2] > start[2] + 0.3 * lift)
+    })
+    .await;
+    page.send(r#"{"type":"release"}"#).await;
+    page.until(WAIT, "the release", |s| s.grab_target.is_none())
+        .await;
+    // Poke the free end's top from above, from rest.
+    page.send(r#"{"type":"reset"}"#).await;
+    let g = scene.generation;
+    page.until(WAIT, "the reset", |s| s.generation > g).await;
+    let r = page.scene.as_ref().unwrap().poke_radius;
+    let above = [p[0] - 0.005, 0.0, p[2] + r * 1.05];
+    page.send(&point_message(
+        "poke",
+        "centre",
+        [above[0], above[1], above[2]],
+    ))
+    .await;
+    page.until(WAIT, "the disc", |s| s.poke_centre.is_some())
+        .await;
+    let depth = 0.4 * r;
+    page.send(&point_message(
+        "poke",
+        "centre",
+        [above[0], above[1], p[2] + r - depth],
+    ))
+    .await;
+    let t0 = page.status.as_ref().unwrap().time;
+    page.until(WAIT, "the push", |s| s.time > t0 + 0.3).await;
+    let after = f64::from(page.frame.clone().unwrap().surfaces[0].positions[corner as usize][2]);
+    assert!(
+        after < p[2] - 0.3 * depth,
+        "the disc did not push the end down: {} -> {after}",
+        p[2]
+    );
+    assert!(page.status.as_ref().unwrap().error.is_none());
     tokio::task::spawn_blocking(move || v.stop()).await.unwrap();
 }
