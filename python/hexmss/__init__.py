@@ -22,6 +22,14 @@ Two ways in:
       state = hexmss.State(problem)
       hexmss.Integrator(problem, "explicit").step(state, n=100)
 
+- the paper's 2D element (plane stress, rectangles of any aspect ratio)::
+
+      lattice = hexmss.RectLattice.block((8, 2), (0.02, 0.01))
+      model = hexmss.PlaneModel(lattice, hexmss.Material(1e6, 0.3, 1000.0), thickness=0.01)
+      problem = hexmss.PlaneProblem(model, fixed=[{"kind": "face", "face": "x-"}],
+                                    gravity=[0, -9.81, 0])
+      x = problem.solve_static()
+
 - segmented images (NIfTI, NRRD) instead of meshes::
 
       image = hexmss.load_image("seg.nii.gz")        # labels, affine
@@ -44,7 +52,10 @@ from ._hexmss import (
     Material,
     Mesh,
     Model,
+    PlaneModel,
+    PlaneProblem,
     Problem,
+    RectLattice,
     Scene,
     Simulation,
     Skin,
@@ -96,7 +107,10 @@ __all__ = [
     "Model",
     "ModelError",
     "OutputError",
+    "PlaneModel",
+    "PlaneProblem",
     "Problem",
+    "RectLattice",
     "ResourceError",
     "Scene",
     "SceneError",

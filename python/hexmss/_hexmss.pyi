@@ -256,6 +256,9 @@ class Model:
         one: the bundled default scene's "volumetric-barrier+hg" with
         hourglass 1.0."""
     @property
+    def dimension(self) -> int:
+        """3 (a PlaneModel's is 2)."""
+    @property
     def masses(self) -> FloatArray:
         """Node masses (N,) (kg)."""
     @property
@@ -291,6 +294,116 @@ class Model:
         """Per cell, the smallest of its 8 corner Jacobians (1 at rest)."""
     def affine_deviation(self, x: Points) -> FloatArray:
         """Per cell, distance of its nodes from the best affine map, / h."""
+
+class RectLattice:
+    """Rectangles lx x ly (any aspect ratio) on a grid of the x-y plane,
+    for the paper's 2D element."""
+
+    @staticmethod
+    def block(n: Sequence[int], cell: Sequence[float], origin: Sequence[float] = (0.0, 0.0)) -> "RectLattice":
+        """A block of n = (nx, ny) cells of cell = (lx, ly) m from origin."""
+    @staticmethod
+    def rasterize(polygons: Sequence[Sequence[Sequence[float]]], cell: Sequence[float]) -> "RectLattice":
+        """The cells whose centres lie inside closed polygons of (x, y)
+        points (m; even-odd: a polygon inside another is a hole)."""
+    @property
+    def nodes(self) -> FloatArray:
+        """(N, 2) node positions (m)."""
+    @property
+    def cells(self) -> IndexArray:
+        """(C, 4) node indices, counter-clockwise from the lower left."""
+    @property
+    def cell_size(self) -> tuple[float, float]:
+        """(lx, ly) (m)."""
+    @property
+    def num_nodes(self) -> int: ...
+    @property
+    def num_cells(self) -> int: ...
+    @property
+    def area(self) -> float:
+        """(m^2)."""
+
+class PlaneModel:
+    """The paper's 2D element on a RectLattice (plane stress); positions are
+    (N, 3) arrays with z = 0, the methods those of Model."""
+
+    def __init__(
+        self,
+        lattice: RectLattice,
+        material: Material,
+        thickness: float,
+        parameterization: Optional[str] = None,
+        hourglass: Optional[float] = None,
+    ) -> None:
+        """``thickness`` (m); ``parameterization`` "paper", "springs" or
+        "areal", each optionally "+hg" (factor ``hourglass``, default 1);
+        None: "paper+hg"."""
+    @property
+    def dimension(self) -> int:
+        """2."""
+    @property
+    def masses(self) -> FloatArray:
+        """Node masses (N,) (kg)."""
+    @property
+    def rest_positions(self) -> FloatArray:
+        """(N, 3) with z = 0 (m)."""
+    @property
+    def num_nodes(self) -> int: ...
+    @property
+    def num_cells(self) -> int: ...
+    @property
+    def total_mass(self) -> float:
+        """(kg)."""
+    @property
+    def cell_size(self) -> tuple[float, float]:
+        """(lx, ly) (m)."""
+    @property
+    def thickness(self) -> float:
+        """(m)."""
+    @property
+    def parameterization(self) -> str: ...
+    @property
+    def stable_time_step(self) -> float:
+        """Stable explicit step of the undamped model at rest (s)."""
+    def internal_forces(self, x: Points) -> FloatArray:
+        """Internal forces (N, 3) at positions x (N; z = 0)."""
+    def energy(self, x: Points) -> float:
+        """Elastic energy (J)."""
+
+class PlaneProblem:
+    """A PlaneModel with held nodes, in-plane loads and damping; the
+    keywords take a 2D scene's tables."""
+
+    def __init__(
+        self,
+        model: PlaneModel,
+        *,
+        fixed: Optional[Sequence[Mapping[str, Any]]] = None,
+        gravity: Optional[Sequence[float]] = None,
+        forces: Optional[Sequence[Mapping[str, Any]]] = None,
+        tractions: Optional[Sequence[Mapping[str, Any]]] = None,
+        drags: Optional[Sequence[Mapping[str, Any]]] = None,
+        damping: float = 0.0,
+    ) -> None: ...
+    @property
+    def model(self) -> PlaneModel: ...
+    @property
+    def held_nodes(self) -> list[int]: ...
+    def stable_time_step(self, safety: float = 0.9) -> float:
+        """2 / omega_max times ``safety`` (s)."""
+    def solve_static(self, x: Optional[Points] = None, time: float = 0.0) -> FloatArray:
+        """The static equilibrium from x (default: rest), (N, 3)."""
+    def step(
+        self,
+        x: Points,
+        v: Points,
+        dt: float,
+        n: int = 1,
+        t0: float = 0.0,
+        implicit: bool = False,
+    ) -> tuple[FloatArray, FloatArray]:
+        """``n`` explicit (dt stable) or implicit (any dt) steps from (x, v)
+        at t0; the new (x, v)."""
 
 class Problem:
     """A model with boundary conditions, loads, damping and obstacles."""

@@ -26,6 +26,7 @@ mod geometry;
 mod image;
 mod io;
 mod physics;
+mod plane;
 mod progress;
 mod scene;
 mod threads;
@@ -40,6 +41,7 @@ fn _hexmss(m: &Bound<'_, PyModule>) -> PyResult<()> {
     geometry::register(m)?;
     image::register(m)?;
     physics::register(m)?;
+    plane::register(m)?;
     scene::register(m)?;
     io::register(m)?;
     view::register(m)?;

@@ -175,6 +175,11 @@ impl PyModel {
         })
     }
 
+    /// Always 3 (a PlaneModel's is 2).
+    #[getter]
+    fn dimension(&self) -> u32 {
+        3
+    }
     /// Node masses, (N,) float64 (kg).
     #[getter]
     fn masses<'py>(&self, py: Python<'py>) -> Bound<'py, numpy::PyArray1<f64>> {

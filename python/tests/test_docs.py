@@ -11,6 +11,8 @@ CLASSES = [
     hexmss.Material,
     hexmss.Model,
     hexmss.Problem,
+    hexmss.PlaneModel,
+    hexmss.PlaneProblem,
     hexmss.State,
     hexmss.Integrator,
     hexmss.Simulation,
