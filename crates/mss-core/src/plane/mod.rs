@@ -848,6 +848,9 @@ pub struct PlaneProblem {
     /// Further loads: drag springs, custom loads ([`PlaneLoad`]); scaled
     /// by the static solve's load factor like gravity and `forces`.
     pub loads: Vec<std::sync::Arc<dyn PlaneLoad>>,
+    /// The linear solver of Newton's iterations ([`LinearSolverKind::Auto`]:
+    /// direct for small lattices, multigrid-preconditioned Krylov above).
+    pub linear_solver: LinearSolverKind,
 }
 
 /// Held nodes moved by `displacement` (m), reached linearly from t = 0 to
@@ -903,6 +906,7 @@ impl PlaneProblem {
             contact: None,
             motions: Vec::new(),
             loads: Vec::new(),
+            linear_solver: LinearSolverKind::Auto,
         }
     }
 
@@ -1002,6 +1006,18 @@ impl PlaneProblem {
         j
     }
 
+    /// The linear solver of the Newton iterations, of the kind
+    /// `linear_solver` says (the multigrid coarsens the lattice's grid as
+    /// a cube lattice's; z is always held).
+    fn linear_solver(&self) -> LinearSolver {
+        LinearSolver::for_rect_lattice(
+            &self.model.cells_as_hex(),
+            &self.model.rest,
+            self.model.size,
+            self.linear_solver,
+        )
+    }
+
     /// The sum of the sizes of the nodal forces of `loads` at `(t, x)` (N).
     fn loads_size(&self, x: &[Vec3], t: f64) -> f64 {
         if self.loads.is_empty() {
@@ -1028,13 +1044,7 @@ impl PlaneProblem {
     /// Newton's method fails (large deformation), in increments that halve
     /// on failure and grow on success. Returns the Newton iterations.
     pub fn solve_static(&self, time: f64, x: &mut [Vec3]) -> Result<u32, PlaneSolveError> {
-        let h = self.model.size[0].min(self.model.size[1]);
-        let mut linear = LinearSolver::for_lattice(
-            &self.model.cells_as_hex(),
-            &self.model.rest,
-            h,
-            LinearSolverKind::Direct,
-        );
+        let mut linear = self.linear_solver();
         let (mut done, mut step) = (0.0f64, 1.0f64);
         let mut iterations = 0;
         while done < 1.0 {
@@ -1159,12 +1169,7 @@ impl PlaneProblem {
         }
         let free = self.free_dofs();
         let h = self.model.size[0].min(self.model.size[1]);
-        let mut linear = LinearSolver::for_lattice(
-            &self.model.cells_as_hex(),
-            &self.model.rest,
-            h,
-            LinearSolverKind::Direct,
-        );
+        let mut linear = self.linear_solver();
         let opts = NewtonOptions {
             max_iterations: 30,
             rtol: 1e-9,

@@ -323,6 +323,34 @@ impl LinearSolver {
         Self::with_coords(cells, super::multigrid::grid_coords(rest, h), kind)
     }
 
+    /// A solver for a 2D lattice of rectangles `size` (m) whose cells are
+    /// given as degenerate hexahedra (each quad twice, z held): the grid
+    /// indices are per axis, so the multigrid coarsens the plane as it
+    /// coarsens a cube lattice.
+    pub fn for_rect_lattice(
+        cells: &[[u32; 8]],
+        rest: &[Vec3],
+        size: [f64; 2],
+        kind: LinearSolverKind,
+    ) -> Self {
+        let (mut lx, mut ly) = (f64::INFINITY, f64::INFINITY);
+        for p in rest {
+            lx = lx.min(p.x);
+            ly = ly.min(p.y);
+        }
+        let coords = rest
+            .iter()
+            .map(|p| {
+                [
+                    ((p.x - lx) / size[0]).round() as i64,
+                    ((p.y - ly) / size[1]).round() as i64,
+                    0,
+                ]
+            })
+            .collect();
+        Self::with_coords(cells, coords, kind)
+    }
+
     fn with_coords(cells: &[[u32; 8]], coords: Vec<[i64; 3]>, kind: LinearSolverKind) -> Self {
         Self {
             kind,

@@ -1007,3 +1007,56 @@ fn a_drag_spring_pulls_in_series_with_the_strip() {
     assert!(PlaneDrag::new(&free.model, vec![0], [0.0; 2], -1.0).is_err());
     assert!(PlaneDrag::new(&free.model, vec![9999], [0.0; 2], 1.0).is_err());
 }
+
+/// A lattice above the direct solver's size (4,000 free dofs), of cells
+/// twice as long as high: the multigrid-preconditioned Krylov solve and
+/// the sparse LU give the same static answer (within Newton's tolerance)
+/// and the same implicit steps.
+#[test]
+fn multigrid_and_direct_solves_agree_in_2d() {
+    use mss_core::solver::LinearSolverKind;
+    let lattice = RectLattice::block([60, 40], [0.02, 0.01], [0.0, 0.0]).unwrap();
+    let material = Material::new(1.0e6, 0.3, 1000.0).unwrap();
+    let m = PlaneModel::new(
+        &lattice,
+        material,
+        0.01,
+        PlaneParameterization::Paper,
+        Some(1.0),
+    )
+    .unwrap();
+    let mut p = PlaneProblem::new(m);
+    for (i, r) in p.model.rest_positions().iter().enumerate() {
+        if r.x.abs() < 1e-12 {
+            p.held[i] = [true, true];
+        }
+    }
+    p.gravity = [0.0, -9.81];
+    let free = p.held.iter().filter(|h| !h[0]).count() * 2;
+    assert!(free > 4000, "{free}");
+    let mut answers = Vec::new();
+    for kind in [LinearSolverKind::Iterative, LinearSolverKind::Direct] {
+        p.linear_solver = kind;
+        let mut x = p.model.rest_positions().to_vec();
+        p.solve_static(0.0, &mut x).unwrap();
+        let mut y = p.model.rest_positions().to_vec();
+        let mut v = vec![Vec3::zeros(); y.len()];
+        p.step_implicit(0.0, &mut y, &mut v, 0.01, 3).unwrap();
+        answers.push((x, y));
+    }
+    let sag = tip_sag(&p, &answers[1].0);
+    assert!(sag > 1e-3, "{sag}");
+    for k in 0..2 {
+        let (a, b) = if k == 0 {
+            (&answers[0].0, &answers[1].0)
+        } else {
+            (&answers[0].1, &answers[1].1)
+        };
+        let diff = a
+            .iter()
+            .zip(b)
+            .map(|(a, b)| (a - b).norm())
+            .fold(0.0, f64::max);
+        assert!(diff < 1e-6 * sag, "{k}: {diff} against a sag of {sag}");
+    }
+}
