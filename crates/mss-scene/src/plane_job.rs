@@ -342,6 +342,7 @@ impl PlaneJob {
             problem.gravity = [g[0], g[1]];
         }
         problem.damping = scene.solver.damping;
+        problem.precision = scene.solver.precision;
         if !scene.obstacles.is_empty() {
             let low = rest.iter().map(|p| p.y).fold(f64::INFINITY, f64::min);
             let mut obstacles = Vec::new();

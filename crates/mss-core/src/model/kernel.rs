@@ -204,15 +204,13 @@ impl<E: Element> SplitExponent for E {
 
 /// Forward-mode dual number with `N` directional derivatives: the force
 /// kernel evaluated on them is the tests' reference for the closed-form
-/// Jacobian.
-#[cfg(test)]
+/// Jacobian, and the 2D element's tangent (`crate::plane`).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Dual<const N: usize> {
     pub v: f64,
     pub g: [f64; N],
 }
 
-#[cfg(test)]
 impl<const N: usize> Dual<N> {
     /// The variable number `i` (derivative 1 along direction `i`).
     pub fn var(v: f64, i: usize) -> Self {
@@ -222,7 +220,6 @@ impl<const N: usize> Dual<N> {
     }
 }
 
-#[cfg(test)]
 impl<const N: usize> Add for Dual<N> {
     type Output = Self;
     #[inline(always)]
@@ -234,7 +231,6 @@ impl<const N: usize> Add for Dual<N> {
         Self { v: self.v + o.v, g }
     }
 }
-#[cfg(test)]
 impl<const N: usize> Sub for Dual<N> {
     type Output = Self;
     #[inline(always)]
@@ -247,7 +243,6 @@ impl<const N: usize> Sub for Dual<N> {
     }
 }
 // The product rule: the derivative of a product is a sum.
-#[cfg(test)]
 #[allow(clippy::suspicious_arithmetic_impl)]
 impl<const N: usize> Mul for Dual<N> {
     type Output = Self;
@@ -260,7 +255,6 @@ impl<const N: usize> Mul for Dual<N> {
         Self { v: self.v * o.v, g }
     }
 }
-#[cfg(test)]
 impl<const N: usize> Div for Dual<N> {
     type Output = Self;
     #[inline(always)]
@@ -274,7 +268,6 @@ impl<const N: usize> Div for Dual<N> {
         Self { v, g }
     }
 }
-#[cfg(test)]
 impl<const N: usize> Neg for Dual<N> {
     type Output = Self;
     #[inline(always)]
@@ -286,21 +279,18 @@ impl<const N: usize> Neg for Dual<N> {
         Self { v: -self.v, g }
     }
 }
-#[cfg(test)]
 impl<const N: usize> AddAssign for Dual<N> {
     #[inline(always)]
     fn add_assign(&mut self, o: Self) {
         *self = *self + o;
     }
 }
-#[cfg(test)]
 impl<const N: usize> SubAssign for Dual<N> {
     #[inline(always)]
     fn sub_assign(&mut self, o: Self) {
         *self = *self - o;
     }
 }
-#[cfg(test)]
 impl<const N: usize> Scalar for Dual<N> {
     #[inline(always)]
     fn cst(v: f64) -> Self {

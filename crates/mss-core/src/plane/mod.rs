@@ -51,9 +51,10 @@ use rayon::prelude::*;
 use thiserror::Error;
 
 use crate::constraints::{ConstraintError, Face, NodeSelector};
+use crate::model::kernel::{Dual, Scalar};
 use crate::solver::{LinearSolver, LinearSolverKind};
 use crate::solver::{NewtonFailure, NewtonOptions, NonlinearSystem, newton};
-use crate::{BlockCsr, Material, Vec3};
+use crate::{BlockCsr, Material, Precision, Vec3};
 
 mod contact;
 mod loads;
@@ -451,11 +452,32 @@ impl PlaneModel {
     /// parallel, each node summing its cells in a fixed order: the result
     /// does not depend on the thread count.
     pub fn internal_forces(&self, x: &[Vec3], out: &mut [Vec3]) {
+        self.internal_forces_with(x, out, Precision::F64);
+    }
+
+    /// [`PlaneModel::internal_forces`] with the cell kernel in `precision`.
+    /// In `F32` each cell's corners are taken relative to its corner 0
+    /// before rounding (the forces do not depend on where the cell is, and
+    /// a body far from the origin loses nothing to its placement), and the
+    /// nodes' sums stay in `f64`, as the 3D force pass does.
+    pub fn internal_forces_with(&self, x: &[Vec3], out: &mut [Vec3], precision: Precision) {
         assert_eq!(x.len(), self.num_nodes(), "positions: one per node");
-        let per_cell: Vec<[[f64; 2]; 4]> = (0..self.cells.len())
-            .into_par_iter()
-            .map(|c| self.cell_forces(x, c))
-            .collect();
+        let per_cell: Vec<[[f64; 2]; 4]> = match precision {
+            Precision::F64 => (0..self.cells.len())
+                .into_par_iter()
+                .map(|c| self.cell_forces(x, c))
+                .collect(),
+            Precision::F32 => (0..self.cells.len())
+                .into_par_iter()
+                .map(|c| {
+                    let p = self.corners(x, c);
+                    let rel: [[f32; 2]; 4] = std::array::from_fn(|n| {
+                        std::array::from_fn(|d| (p[n][d] - p[0][d]) as f32)
+                    });
+                    cell_forces(self.coefficients_of(c), self.size, &rel).map(|f| f.map(f64::from))
+                })
+                .collect(),
+        };
         out.par_iter_mut().enumerate().for_each(|(i, f)| {
             let mut s = [0.0; 2];
             let span = self.node_offsets[i] as usize..self.node_offsets[i + 1] as usize;
@@ -484,24 +506,19 @@ impl PlaneModel {
     pub fn tangent(&self, x: &[Vec3]) -> BlockCsr {
         let hex = self.cells_as_hex();
         let mut m = BlockCsr::lattice_pattern(self.num_nodes(), &hex);
-        let step = 1e-6 * self.size[0].min(self.size[1]);
-        // Column `col` of each cell's 8 x 8 Jacobian: d f / d (dof col).
+        // Column `col` of each cell's 8 x 8 Jacobian, d f / d (dof col):
+        // the cell's forces on dual numbers, exact.
         let columns: Vec<[[f64; 8]; 8]> = (0..self.cells.len())
             .into_par_iter()
             .map(|c| {
                 let p = self.corners(x, c);
+                let dual: [[Dual<8>; 2]; 4] =
+                    std::array::from_fn(|n| std::array::from_fn(|d| Dual::var(p[n][d], 2 * n + d)));
+                let f = cell_forces(self.coefficients_of(c), self.size, &dual);
                 let mut columns = [[0.0; 8]; 8];
                 for (col, column) in columns.iter_mut().enumerate() {
-                    let (n, d) = (col / 2, col % 2);
-                    let mut plus = p;
-                    plus[n][d] += step;
-                    let mut minus = p;
-                    minus[n][d] -= step;
-                    let k = self.coefficients_of(c);
-                    let fp = cell_forces(k, self.size, &plus);
-                    let fm = cell_forces(k, self.size, &minus);
                     for (row, v) in column.iter_mut().enumerate() {
-                        *v = (fp[row / 2][row % 2] - fm[row / 2][row % 2]) / (2.0 * step);
+                        *v = f[row / 2][row % 2].g[col];
                     }
                 }
                 columns
@@ -687,16 +704,21 @@ fn cell_energy(k: &PlaneCoefficients, size: [f64; 2], p: &[[f64; 2]; 4]) -> f64 
     e
 }
 
-/// The internal forces of one cell on its corners.
-fn cell_forces(k: &PlaneCoefficients, size: [f64; 2], p: &[[f64; 2]; 4]) -> [[f64; 2]; 4] {
-    let mut f = [[0.0; 2]; 4];
+/// The internal forces of one cell on its corners, in any number type of
+/// the kernel: `f64`, `f32` (the single-precision force pass) or dual
+/// numbers (the exact tangent).
+fn cell_forces<T: Scalar>(k: &PlaneCoefficients, size: [f64; 2], p: &[[T; 2]; 4]) -> [[T; 2]; 4] {
+    let zero = T::cst(0.0);
+    let sub = |a: [T; 2], b: [T; 2]| [a[0] - b[0], a[1] - b[1]];
+    let norm = |a: [T; 2]| (a[0] * a[0] + a[1] * a[1]).sqrt();
+    let mut f = [[zero; 2]; 4];
     for (a, b, stiffness, rest) in springs(k, size) {
         let d = sub(p[b], p[a]);
         let len = norm(d);
-        if len == 0.0 {
+        if len.any_below(f64::MIN_POSITIVE) {
             continue;
         }
-        let s = stiffness * (len - rest) / len;
+        let s = (len - T::cst(rest)).scale(stiffness) / len;
         for c in 0..2 {
             f[a][c] += s * d[c];
             f[b][c] -= s * d[c];
@@ -704,47 +726,47 @@ fn cell_forces(k: &PlaneCoefficients, size: [f64; 2], p: &[[f64; 2]; 4]) -> [[f6
     }
     if k.c_xy != 0.0 || k.c_yx != 0.0 {
         // Current axes: the mean edge directions.
-        let ax = {
-            let v = [
-                p[1][0] - p[0][0] + p[2][0] - p[3][0],
-                p[1][1] - p[0][1] + p[2][1] - p[3][1],
-            ];
+        let unit = |v: [T; 2]| {
             let n = norm(v);
             [v[0] / n, v[1] / n]
         };
-        let ay = {
-            let v = [
-                p[3][0] - p[0][0] + p[2][0] - p[1][0],
-                p[3][1] - p[0][1] + p[2][1] - p[1][1],
-            ];
-            let n = norm(v);
-            [v[0] / n, v[1] / n]
-        };
+        let ax = unit([
+            p[1][0] - p[0][0] + p[2][0] - p[3][0],
+            p[1][1] - p[0][1] + p[2][1] - p[3][1],
+        ]);
+        let ay = unit([
+            p[3][0] - p[0][0] + p[2][0] - p[1][0],
+            p[3][1] - p[0][1] + p[2][1] - p[1][1],
+        ]);
         // Spring tension across each axis (positive when stretched).
-        let mut t = [0.0; 2];
+        let mut t = [zero; 2];
         for (n, s) in SIGNS.iter().enumerate() {
-            t[0] -= 0.5 * s[0] * (f[n][0] * ax[0] + f[n][1] * ax[1]);
-            t[1] -= 0.5 * s[1] * (f[n][0] * ay[0] + f[n][1] * ay[1]);
+            t[0] -= (f[n][0] * ax[0] + f[n][1] * ax[1]).scale(0.5 * s[0]);
+            t[1] -= (f[n][0] * ay[0] + f[n][1] * ay[1]).scale(0.5 * s[1]);
         }
         // Face forces N: N_x - c_xy N_y = T_x, N_y - c_yx N_x = T_y.
         let det = 1.0 - k.c_xy * k.c_yx;
-        let nx = (t[0] + k.c_xy * t[1]) / det;
-        let ny = (t[1] + k.c_yx * t[0]) / det;
-        let corr = [k.c_xy * ny, k.c_yx * nx];
+        let nx = (t[0] + t[1].scale(k.c_xy)).scale(1.0 / det);
+        let ny = (t[1] + t[0].scale(k.c_yx)).scale(1.0 / det);
+        let corr = [ny.scale(k.c_xy), nx.scale(k.c_yx)];
         for (n, s) in SIGNS.iter().enumerate() {
             for c in 0..2 {
-                f[n][c] += -0.5 * s[0] * corr[0] * ax[c] - 0.5 * s[1] * corr[1] * ay[c];
+                f[n][c] +=
+                    (corr[0] * ax[c]).scale(-0.5 * s[0]) - (corr[1] * ay[c]).scale(0.5 * s[1]);
             }
         }
     }
     if k.areal != 0.0 {
         let a0 = size[0] * size[1];
-        let j = area(p) / a0;
-        let scale = -k.areal * (j - 1.0);
+        let twice_area = (0..4).fold(zero, |acc, i| {
+            acc + p[i][0] * p[(i + 1) % 4][1] - p[(i + 1) % 4][0] * p[i][1]
+        });
+        let j = twice_area.scale(0.5 / a0);
+        let scale = (j - T::cst(1.0)).scale(-k.areal);
         for i in 0..4 {
             let (next, prev) = (p[(i + 1) % 4], p[(i + 3) % 4]);
-            f[i][0] += scale * 0.5 * (next[1] - prev[1]);
-            f[i][1] += scale * 0.5 * (prev[0] - next[0]);
+            f[i][0] += (scale * (next[1] - prev[1])).scale(0.5);
+            f[i][1] += (scale * (prev[0] - next[0])).scale(0.5);
         }
     }
     for (lo, hi, stiffness) in hourglass_pairs(k) {
@@ -754,13 +776,14 @@ fn cell_forces(k: &PlaneCoefficients, size: [f64; 2], p: &[[f64; 2]; 4]) -> [[f6
         let dl = sub(p[lo[1]], p[lo[0]]);
         let dh = sub(p[hi[1]], p[hi[0]]);
         let (ll, lh) = (norm(dl), norm(dh));
-        let s = -stiffness * (lh - ll);
+        let s = (lh - ll).scale(-stiffness);
         for c in 0..2 {
             // d(lh)/d p[hi[1]] = dh / lh, and the opposite at hi[0].
-            f[hi[1]][c] += s * dh[c] / lh;
-            f[hi[0]][c] -= s * dh[c] / lh;
-            f[lo[1]][c] -= s * dl[c] / ll;
-            f[lo[0]][c] += s * dl[c] / ll;
+            let (gh, gl) = (s * dh[c] / lh, s * dl[c] / ll);
+            f[hi[1]][c] += gh;
+            f[hi[0]][c] -= gh;
+            f[lo[1]][c] -= gl;
+            f[lo[0]][c] += gl;
         }
     }
     f
@@ -781,7 +804,7 @@ struct StaticSystem<'a> {
 impl NonlinearSystem for StaticSystem<'_> {
     fn residual(&mut self, x: &[Vec3], r: &mut [Vec3]) -> f64 {
         let p = self.p;
-        p.forces_under(x, None, self.load, self.time, r);
+        p.forces_under(x, None, self.load, self.time, Precision::F64, r);
         let weight: f64 = p
             .model
             .masses
@@ -851,6 +874,10 @@ pub struct PlaneProblem {
     /// The linear solver of Newton's iterations ([`LinearSolverKind::Auto`]:
     /// direct for small lattices, multigrid-preconditioned Krylov above).
     pub linear_solver: LinearSolverKind,
+    /// The precision of the explicit step's force pass
+    /// ([`PlaneModel::internal_forces_with`]); Newton's solves (static and
+    /// implicit) always take `f64`.
+    pub precision: Precision,
 }
 
 /// Held nodes moved by `displacement` (m), reached linearly from t = 0 to
@@ -907,6 +934,7 @@ impl PlaneProblem {
             motions: Vec::new(),
             loads: Vec::new(),
             linear_solver: LinearSolverKind::Auto,
+            precision: Precision::F64,
         }
     }
 
@@ -954,13 +982,21 @@ impl PlaneProblem {
     /// moving obstacles are), the nodes moving at `v` (`None`: at rest; the
     /// contact's dampers act on the velocity).
     pub fn total_forces(&self, t: f64, x: &[Vec3], v: Option<&[Vec3]>, out: &mut [Vec3]) {
-        self.forces_under(x, v, 1.0, t, out);
+        self.forces_under(x, v, 1.0, t, Precision::F64, out);
     }
 
     /// Internal and contact forces (the obstacles at time `t`) plus `load`
     /// times gravity and the nodal forces, at `x` moving at `v` (N).
-    fn forces_under(&self, x: &[Vec3], v: Option<&[Vec3]>, load: f64, t: f64, out: &mut [Vec3]) {
-        self.model.internal_forces(x, out);
+    fn forces_under(
+        &self,
+        x: &[Vec3],
+        v: Option<&[Vec3]>,
+        load: f64,
+        t: f64,
+        precision: Precision,
+        out: &mut [Vec3],
+    ) {
+        self.model.internal_forces_with(x, out, precision);
         for l in &self.loads {
             l.add_forces(&self.model, t, x, load, out);
         }
@@ -1264,7 +1300,7 @@ impl PlaneProblem {
         let keep = 1.0 / (1.0 + dt * self.damping);
         for step in 0..steps {
             let t = t0 + step as f64 * dt;
-            self.total_forces(t, x, Some(v), &mut f);
+            self.forces_under(x, Some(v), 1.0, t, self.precision, &mut f);
             for i in 0..x.len() {
                 let inv_m = 1.0 / self.model.masses[i];
                 for d in 0..2 {

@@ -1060,3 +1060,98 @@ fn multigrid_and_direct_solves_agree_in_2d() {
         assert!(diff < 1e-6 * sag, "{k}: {diff} against a sag of {sag}");
     }
 }
+
+/// The single-precision force pass: on the cantilever, the explicit damped
+/// run's tip sag in f32 is the f64 one's within 1e-4 (the corners taken
+/// relative to each cell's first, the sums in f64), and a body moved a
+/// kilometre away gives the same forces.
+#[test]
+fn the_f32_force_pass_costs_little_accuracy() {
+    use mss_core::Precision;
+    let mut p = cantilever([16, 4], [0.01, 0.01], 1.0e6, PlaneParameterization::Paper);
+    p.damping = 60.0;
+    let dt = p.stable_time_step(0.9);
+    let mut sags = Vec::new();
+    for precision in [Precision::F64, Precision::F32] {
+        p.precision = precision;
+        let mut x = p.model.rest_positions().to_vec();
+        let mut v = vec![Vec3::zeros(); x.len()];
+        p.step_explicit(0.0, &mut x, &mut v, dt, (0.5 / dt) as usize)
+            .unwrap();
+        sags.push(tip_sag(&p, &x));
+    }
+    assert!(sags[0] > 1e-4, "{sags:?}");
+    assert!((sags[1] / sags[0] - 1.0).abs() < 1e-4, "{sags:?}");
+    // Far from the origin: the same forces.
+    let x: Vec<Vec3> = p
+        .model
+        .rest_positions()
+        .iter()
+        .enumerate()
+        .map(|(i, r)| r + Vec3::new(1e-4 * (i % 3) as f64, 1e-4 * (i % 5) as f64, 0.0))
+        .collect();
+    let far: Vec<Vec3> = x
+        .iter()
+        .map(|q| q + Vec3::new(1000.0, -1000.0, 0.0))
+        .collect();
+    let (mut f, mut g, mut h) = (
+        vec![Vec3::zeros(); x.len()],
+        vec![Vec3::zeros(); x.len()],
+        vec![Vec3::zeros(); x.len()],
+    );
+    p.model.internal_forces_with(&x, &mut f, Precision::F32);
+    p.model.internal_forces_with(&far, &mut g, Precision::F32);
+    p.model.internal_forces_with(&x, &mut h, Precision::F64);
+    let scale = h.iter().map(|v| v.norm()).fold(0.0, f64::max);
+    for i in 0..x.len() {
+        assert!((f[i] - g[i]).norm() < 1e-3 * scale, "node {i}");
+        assert!((f[i] - h[i]).norm() < 1e-3 * scale, "node {i}");
+    }
+}
+
+/// The tangent (the cell's forces on dual numbers) is the forces' central
+/// difference quotient, on a sheared and stretched lattice, every variant.
+#[test]
+fn the_tangent_is_the_derivative_of_the_forces() {
+    for variant in [
+        PlaneParameterization::Paper,
+        PlaneParameterization::Springs,
+        PlaneParameterization::Areal,
+    ] {
+        let m = model([3, 2], [0.02, 0.01], 0.3, variant, Some(1.0));
+        let x: Vec<Vec3> = m
+            .rest_positions()
+            .iter()
+            .map(|r| {
+                Vec3::new(
+                    1.1 * r.x + 0.2 * r.y,
+                    0.9 * r.y + 0.05 * r.x * r.x / 0.02,
+                    0.0,
+                )
+            })
+            .collect();
+        let k = m.tangent(&x);
+        let n = x.len();
+        let step = 1e-7;
+        for j in 0..n {
+            for d in 0..2 {
+                let (mut plus, mut minus) = (x.clone(), x.clone());
+                plus[j][d] += step;
+                minus[j][d] -= step;
+                let (mut fp, mut fm) = (vec![Vec3::zeros(); n], vec![Vec3::zeros(); n]);
+                m.internal_forces(&plus, &mut fp);
+                m.internal_forces(&minus, &mut fm);
+                for i in 0..n {
+                    let quotient = (fp[i] - fm[i]) / (2.0 * step);
+                    let exact = k.find(i, j).map_or(Vec3::zeros(), |b| {
+                        Vec3::new(k.blocks[b][(0, d)], k.blocks[b][(1, d)], 0.0)
+                    });
+                    assert!(
+                        (quotient - exact).norm() < 1e-5 * (1.0 + exact.norm()),
+                        "{variant:?} d f_{i} / d x_{j}[{d}]: {exact:?} vs {quotient:?}"
+                    );
+                }
+            }
+        }
+    }
+}

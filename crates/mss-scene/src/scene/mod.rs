@@ -442,9 +442,9 @@ impl Scene {
         self.bodies.is_empty() && self.model.is_plane()
     }
 
-    /// What a 2D scene may hold: one body from `[mesh]` (an SVG or a planar
-    /// mesh), in-plane gravity and forces, held nodes, the explicit or the
-    /// static solver.
+    /// What a 2D scene may hold: one body (not `[[bodies]]`), vectors in
+    /// the x-y plane (gravity, forces, tractions, motions), the explicit,
+    /// implicit or static solver, single precision only for the explicit.
     fn check_plane(
         &self,
         invalid: &dyn Fn(String, String) -> SceneError,
@@ -458,12 +458,6 @@ impl Scene {
         if !self.is_plane() {
             return Ok(());
         }
-        let not_yet = |table: &str, what: &str| {
-            Err(invalid(
-                table.into(),
-                format!("{what} is not available for 2D bodies yet ([model] dimension = 2)"),
-            ))
-        };
         // The first entry of a list table whose vector leaves the plane.
         let in_plane = |list: &str,
                         field: &str,
@@ -484,8 +478,14 @@ impl Scene {
             "moves",
             &mut self.motions.iter().map(|m| m.displacement),
         )?;
-        if self.solver.precision != mss_core::Precision::F64 {
-            return not_yet("[solver] precision", "a single-precision force pass");
+        if self.solver.precision != mss_core::Precision::F64 && self.solver.kind == "implicit" {
+            return Err(invalid(
+                "[solver] precision".into(),
+                format!(
+                    "= \"{}\" with kind = \"implicit\"; the precision is the explicit step's: Newton's method needs f64 forces and tangents",
+                    self.solver.precision.name()
+                ),
+            ));
         }
         in_plane(
             "[[loads.tractions]]",

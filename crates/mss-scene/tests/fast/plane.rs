@@ -178,10 +178,10 @@ fn what_a_2d_body_cannot_take_is_refused_by_key() {
         (
             (
                 "kind = \"explicit\"",
-                "kind = \"explicit\"\nprecision = \"f32\"",
+                "kind = \"implicit\"\nprecision = \"f32\"",
             ),
             "[solver] precision",
-            "2D",
+            "Newton",
         ),
     ] {
         let e = prepare(&text.replace(change.0, change.1)).unwrap_err();
