@@ -268,7 +268,7 @@ impl PlaneJob {
                 .with_regions(hourglass, &regions.materials[1..], regions.cell_material)
                 .map_err(|e| setting("[[regions]]", e.to_string()))?;
         }
-        if hourglass.is_none() && model.all_coefficients().any(|c| c.k_l < 0.0 || c.k_h < 0.0) {
+        if model.unstable_in_bending() {
             // Without hourglass control such a lattice has bending modes of
             // negative stiffness: no stable equilibrium, a run that explodes.
             return Err(setting(

@@ -634,6 +634,15 @@ impl PlaneModel {
         (!forces.is_empty()).then_some(forces)
     }
 
+    /// Whether the lattice is unstable in bending: a cell without hourglass
+    /// control whose edge springs are negative (`k_l < 0` once
+    /// `l0 / h0 > sqrt(2 + 3 nu)`, or `k_h < 0` the other way), so that its
+    /// bending modes have negative stiffness and no equilibrium is stable.
+    pub fn unstable_in_bending(&self) -> bool {
+        self.all_coefficients()
+            .any(|c| c.hg_x == 0.0 && c.hg_y == 0.0 && (c.k_l < 0.0 || c.k_h < 0.0))
+    }
+
     /// The largest stiffness of a node at rest (N/m): the scale of a
     /// contact penalty that keeps the body out of obstacles without
     /// shortening the step much.

@@ -1155,3 +1155,33 @@ fn the_tangent_is_the_derivative_of_the_forces() {
         }
     }
 }
+
+/// Cells longer than `sqrt(2 + 3 nu)` times their height, without
+/// hourglass control, make a lattice unstable in bending (its edge springs
+/// negative); hourglass control or squarer cells do not.
+#[test]
+fn long_cells_without_hourglass_control_are_unstable_in_bending() {
+    for (ratio, hourglass, unstable) in [
+        (4.0, None, true),
+        (2.0, None, true),
+        (1.5, None, false),
+        (4.0, Some(1.0), false),
+        (0.25, None, true),
+    ] {
+        let lattice = RectLattice::block([4, 2], [0.01 * ratio, 0.01], [0.0, 0.0]).unwrap();
+        let material = Material::new(1.0e6, 0.3, 1000.0).unwrap();
+        let m = PlaneModel::new(
+            &lattice,
+            material,
+            0.01,
+            PlaneParameterization::Paper,
+            hourglass,
+        )
+        .unwrap();
+        assert_eq!(
+            m.unstable_in_bending(),
+            unstable,
+            "ratio {ratio}, {hourglass:?}"
+        );
+    }
+}
