@@ -246,7 +246,12 @@ pub fn resample_plane(
             }
         }
     }
-    let mut occupied: Vec<bool> = covered.iter().map(|&a| a >= threshold - 1e-9).collect();
+    // A cell no chosen pixel reaches is never kept, however small the
+    // threshold (it would have no label).
+    let mut occupied: Vec<bool> = covered
+        .iter()
+        .map(|&a| a > 0.0 && a >= threshold - 1e-9)
+        .collect();
     if components == ComponentPolicy::LargestOnly {
         keep_largest_group(&mut occupied, gx, gy);
     }

@@ -517,6 +517,20 @@ fn a_slice_becomes_rectangles_and_the_outline_of_its_pixels() {
         resampled([1e-3, 1e-3], ComponentPolicy::All).0.num_cells(),
         185
     );
+    // The smallest threshold keeps every cell a chosen pixel reaches, and
+    // no other (each with a label).
+    let (touched, labels) = resample_plane(
+        &image,
+        None,
+        &map,
+        &body.outline,
+        [3e-3, 3e-3],
+        1e-12,
+        ComponentPolicy::All,
+    )
+    .unwrap();
+    assert_eq!(labels.len(), touched.num_cells());
+    assert!(touched.area() >= 185e-6);
     let right = pixel_outline(&image, Some(&[2]), &map).unwrap();
     assert!((right.outline.area() - 100e-6).abs() < 1e-15);
     // Cells across the pixels: a boundary cell is kept when the pixels
