@@ -94,6 +94,12 @@ pub const FACING_COSINE: f64 = 0.25;
 /// Points per parallel task of the narrow phase.
 const POINT_CHUNK: usize = 256;
 
+/// The margin (in cells of the finest body) of the candidate lists: a
+/// search lists, per point, every triangle within reach plus this margin,
+/// and the next searches test only those while no point has moved more
+/// than half of it (a Verlet list).
+pub const CANDIDATE_SKIN: f64 = 0.2;
+
 #[derive(Debug, Clone, Copy)]
 struct Triangle {
     nodes: [u32; 3],
@@ -282,6 +288,89 @@ impl std::fmt::Debug for PairCache {
     }
 }
 
+/// Per point that may touch, the triangles it may touch while no point has
+/// moved more than half the skin since `reference` (a Verlet list).
+struct Candidates {
+    /// The points' positions when the lists were made.
+    reference: Vec<Vec3>,
+    /// Half the skin (m).
+    half_skin: f64,
+    /// The points that may touch (point indices, ascending).
+    near: Vec<u32>,
+    /// Per near point, its range of `triangles`.
+    offsets: Vec<u32>,
+    /// Candidate triangles, ascending per point.
+    triangles: Vec<u32>,
+    /// The triangles with a node among the near points (ascending): those
+    /// whose geometry a search builds.
+    needed: Vec<u32>,
+}
+
+impl Candidates {
+    /// Whether every point is within half the skin of where it was.
+    fn hold(&self, x: &[Vec3], points: &[u32]) -> bool {
+        let limit = self.half_skin * self.half_skin;
+        points
+            .iter()
+            .zip(&self.reference)
+            .all(|(&n, r)| (x[n as usize] - r).norm_squared() < limit)
+    }
+}
+
+/// The candidate lists of the last search, kept while they hold.
+#[derive(Default)]
+struct CandidateCache(std::sync::Mutex<Option<Candidates>>);
+
+impl Clone for CandidateCache {
+    fn clone(&self) -> Self {
+        Self::default()
+    }
+}
+
+impl std::fmt::Debug for CandidateCache {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("CandidateCache")
+    }
+}
+
+/// The search of the triangle nearest to a point: the best facing the
+/// point (its outward normal against theirs) and the best of the others.
+struct Nearest {
+    point: usize,
+    outward: Vec3,
+    facing: Option<(f64, Pair)>,
+    other: Option<(f64, Pair)>,
+}
+
+impl Nearest {
+    /// A search for point `point` whose own triangles' area-weighted
+    /// normals sum to `normals`.
+    fn new(point: usize, normals: Option<Vec3>) -> Self {
+        let sum = normals.unwrap_or_default();
+        let outward = if sum.norm() > 0.0 && sum.norm().is_finite() {
+            sum / sum.norm()
+        } else {
+            Vec3::zeros()
+        };
+        Self {
+            point,
+            outward,
+            facing: None,
+            other: None,
+        }
+    }
+
+    /// The nearest triangle by true distance (to its closest point), then
+    /// by the gap to its plane: continuous as the point moves from one
+    /// triangle's region to the next, edges and vertices included.
+    /// Triangles that face the point come first (FACING_COSINE); the
+    /// nearest of the others only when none faces it, so that nothing
+    /// passes through where surfaces meet at an angle.
+    fn pair(self) -> Option<Pair> {
+        self.facing.or(self.other).map(|(_, pair)| pair)
+    }
+}
+
 /// One point inside a body: the triangle it is pushed out of.
 #[derive(Debug, Clone, Copy)]
 struct Pair {
@@ -328,6 +417,7 @@ pub struct BodyContact {
     grid_size: f64,
     omega_sq_per_stiffness: f64,
     cache: PairCache,
+    candidates: CandidateCache,
 }
 
 /// Why body contact could not be set up.
@@ -480,6 +570,7 @@ impl BodyContact {
             grid_size,
             omega_sq_per_stiffness,
             cache: PairCache::default(),
+            candidates: CandidateCache::default(),
         })
     }
 
@@ -522,7 +613,9 @@ impl BodyContact {
     /// half of its cells: what another body's points must be inside to
     /// touch it (half a cell deep), and its triangles' nodes to be touched
     /// (a cell further).
-    fn body_boxes(&self, x: &[Vec3]) -> Vec<(Vec3, Vec3)> {
+    ///
+    /// Grown by `extra` (m) more: the boxes of the candidate lists.
+    fn body_boxes_grown(&self, x: &[Vec3], extra: f64) -> Vec<(Vec3, Vec3)> {
         let mut boxes =
             vec![(Vec3::repeat(f64::INFINITY), Vec3::repeat(f64::NEG_INFINITY)); self.body_h.len()];
         for (&node, &b) in self.points.iter().zip(&self.point_body) {
@@ -531,7 +624,7 @@ impl BodyContact {
             *hi = hi.sup(&x[node as usize]);
         }
         for (b, (lo, hi)) in boxes.iter_mut().enumerate() {
-            let grow = (DEPTH_LIMIT + 1.0) * self.body_h[b];
+            let grow = (DEPTH_LIMIT + 1.0) * self.body_h[b] + extra;
             *lo = lo.add_scalar(-grow);
             *hi = hi.add_scalar(grow);
         }
@@ -609,7 +702,12 @@ impl BodyContact {
     /// The points that may touch at `x` (inside another body's box, or of a
     /// body that touches itself), and the nodes that do, as a mask.
     fn near_points(&self, x: &[Vec3]) -> (Vec<u32>, Vec<bool>) {
-        let boxes = self.body_boxes(x);
+        self.near_points_within(x, 0.0)
+    }
+
+    /// [`BodyContact::near_points`] with the boxes grown by `extra` (m).
+    fn near_points_within(&self, x: &[Vec3], extra: f64) -> (Vec<u32>, Vec<bool>) {
+        let boxes = self.body_boxes_grown(x, extra);
         let mut near = vec![false; x.len()];
         let mut points = Vec::new();
         for (i, (&node, &b)) in self.points.iter().zip(&self.point_body).enumerate() {
@@ -638,7 +736,7 @@ impl BodyContact {
         {
             return pairs.clone();
         }
-        let pairs = std::sync::Arc::new(self.pairs_within(x, 0.0));
+        let pairs = std::sync::Arc::new(self.pairs_of_candidates(x));
         *cache = Some((key, pairs.clone()));
         pairs
     }
@@ -764,63 +862,200 @@ impl BodyContact {
         let cells = (first[0]..=last[0]).flat_map(|a| {
             (first[1]..=last[1]).flat_map(move |b| (first[2]..=last[2]).map(move |c| [a, b, c]))
         });
-        // The nearest triangle by true distance (to its closest point),
-        // then by the gap to its plane: continuous as the point moves from
-        // one triangle's region to the next, edges and vertices included.
-        // Triangles that face the point come first (FACING_COSINE); the
-        // nearest of the others only when none faces it, so that nothing
-        // passes through where surfaces meet at an angle.
-        let sum = keys.point_normals.get(i).copied().unwrap_or_default();
-        let outward = if sum.norm() > 0.0 && sum.norm().is_finite() {
-            sum / sum.norm()
-        } else {
-            Vec3::zeros()
-        };
-        let mut facing: Option<(f64, Pair)> = None;
-        let mut other: Option<(f64, Pair)> = None;
-        let own = self.point_body[i];
-        let touches_itself = self.self_contact[own as usize];
+        let mut best = Nearest::new(i, keys.point_normals.get(i).copied());
         for key in cells.map(grid_key) {
             for e in keys.bucket(key) {
-                if e.key != key || (e.body == own && !touches_itself) {
-                    continue;
-                }
-                let g = &keys.geometry[e.geometry as usize];
-                if (0..3).any(|k| p[k] < g.lo[k] || p[k] > g.hi[k]) {
-                    continue;
-                }
-                let t = g.triangle;
-                let tri = &self.triangles[t as usize];
-                if self.excluded(i, tri) {
-                    continue;
-                }
-                let faces = outward == Vec3::zeros() || outward.dot(&g.normal) < -FACING_COSINE;
-                let best = if faces { &mut facing } else { &mut other };
-                let beyond = best.as_ref().map_or(f64::INFINITY, |(d, _)| *d);
-                let Some(near) = g.closest(p, beyond) else {
-                    continue;
-                };
-                if near.distance >= DEPTH_LIMIT * self.body_h[tri.body as usize] {
-                    continue;
-                }
-                let better = best.as_ref().is_none_or(|(d, b)| {
-                    near.distance < *d || (near.distance == *d && near.gap.abs() < b.depth.abs())
-                });
-                if better {
-                    *best = Some((
-                        near.distance,
-                        Pair {
-                            point: i as u32,
-                            triangle: t,
-                            beta: near.beta,
-                            normal: near.normal,
-                            depth: -near.gap,
-                        },
-                    ));
+                if e.key == key {
+                    self.consider(&mut best, p, e.body, &keys.geometry[e.geometry as usize]);
                 }
             }
         }
-        facing.or(other).map(|(_, pair)| pair)
+        best.pair()
+    }
+
+    /// Counts triangle `g` (of body `body`) in `best`, the search of the
+    /// nearest triangle that `best`'s point at `p` projects onto.
+    fn consider(&self, best: &mut Nearest, p: Vec3, body: u32, g: &Geometry) {
+        let i = best.point;
+        let own = self.point_body[i];
+        if body == own && !self.self_contact[own as usize] {
+            return;
+        }
+        if (0..3).any(|k| p[k] < g.lo[k] || p[k] > g.hi[k]) {
+            return;
+        }
+        let t = g.triangle;
+        let tri = &self.triangles[t as usize];
+        if self.excluded(i, tri) {
+            return;
+        }
+        let faces = best.outward == Vec3::zeros() || best.outward.dot(&g.normal) < -FACING_COSINE;
+        let slot = if faces {
+            &mut best.facing
+        } else {
+            &mut best.other
+        };
+        let beyond = slot.as_ref().map_or(f64::INFINITY, |(d, _)| *d);
+        let Some(near) = g.closest(p, beyond) else {
+            return;
+        };
+        if near.distance >= DEPTH_LIMIT * self.body_h[tri.body as usize] {
+            return;
+        }
+        // Nearer, or as near and less deep, or (an exact tie, where two
+        // triangles share the closest point) the smaller triangle: the
+        // same pick in whatever order the triangles come.
+        let better = slot.as_ref().is_none_or(|(d, b)| {
+            near.distance < *d
+                || (near.distance == *d
+                    && (near.gap.abs() < b.depth.abs()
+                        || (near.gap.abs() == b.depth.abs() && t < b.triangle)))
+        });
+        if better {
+            *slot = Some((
+                near.distance,
+                Pair {
+                    point: i as u32,
+                    triangle: t,
+                    beta: near.beta,
+                    normal: near.normal,
+                    depth: -near.gap,
+                },
+            ));
+        }
+    }
+
+    /// Candidate lists at `x`: the points that may touch while no point
+    /// moves more than half the skin, and per point the triangles it may
+    /// touch then (their boxes grown by the skin hold it).
+    fn build_candidates(&self, x: &[Vec3]) -> Candidates {
+        let h_min = self.body_h.iter().copied().fold(f64::INFINITY, f64::min);
+        let skin = CANDIDATE_SKIN * h_min;
+        let (near, near_nodes) = self.near_points_within(x, skin);
+        let keys = self.broad_phase(x, &near_nodes);
+        let reach = DEPTH_LIMIT * self.grid_size / 2.0 + skin;
+        let lists: Vec<Vec<u32>> = near
+            .par_chunks(POINT_CHUNK)
+            .flat_map_iter(|chunk| {
+                chunk.iter().map(|&i| {
+                    let i = i as usize;
+                    let p = x[self.points[i] as usize];
+                    let mut list = Vec::new();
+                    if !p.iter().all(|v| v.is_finite()) {
+                        return list;
+                    }
+                    let first = grid_cell(p.add_scalar(-reach), self.grid_size);
+                    let last = grid_cell(p.add_scalar(reach), self.grid_size);
+                    for a in first[0]..=last[0] {
+                        for b in first[1]..=last[1] {
+                            for c in first[2]..=last[2] {
+                                let key = grid_key([a, b, c]);
+                                for e in keys.bucket(key) {
+                                    let g = &keys.geometry[e.geometry as usize];
+                                    let inside = (0..3)
+                                        .all(|k| p[k] >= g.lo[k] - skin && p[k] <= g.hi[k] + skin);
+                                    if e.key == key && inside {
+                                        list.push(g.triangle);
+                                    }
+                                }
+                            }
+                        }
+                    }
+                    list.sort_unstable();
+                    list.dedup();
+                    list
+                })
+            })
+            .collect();
+        let mut offsets = Vec::with_capacity(near.len() + 1);
+        offsets.push(0u32);
+        let mut triangles = Vec::new();
+        for list in lists {
+            triangles.extend(list);
+            offsets.push(triangles.len() as u32);
+        }
+        let needed = (0..self.triangles.len() as u32)
+            .filter(|&t| {
+                self.triangles[t as usize]
+                    .nodes
+                    .iter()
+                    .any(|&n| near_nodes[n as usize])
+            })
+            .collect();
+        Candidates {
+            reference: self.points.iter().map(|&n| x[n as usize]).collect(),
+            half_skin: 0.5 * skin,
+            near,
+            offsets,
+            triangles,
+            needed,
+        }
+    }
+
+    /// The points inside a body at `x` (as [`BodyContact::pairs_within`]
+    /// with no margin finds them), from the candidate lists, made again
+    /// when a point has moved more than half their skin.
+    fn pairs_of_candidates(&self, x: &[Vec3]) -> Vec<Pair> {
+        if self.points.is_empty() {
+            return Vec::new();
+        }
+        let mut held = self.candidates.0.lock().unwrap_or_else(|e| e.into_inner());
+        if !held.as_ref().is_some_and(|c| c.hold(x, &self.points)) {
+            *held = Some(self.build_candidates(x));
+        }
+        let c = held.as_ref().expect("made above");
+        // The needed triangles' geometry now, and the near points' normals
+        // (every triangle of a near point is needed), as the broad phase
+        // makes them.
+        let mut geometry_of = vec![u32::MAX; self.triangles.len()];
+        let mut geometry = Vec::with_capacity(c.needed.len());
+        let mut point_normals = vec![Vec3::zeros(); self.points.len()];
+        for &t in &c.needed {
+            let tri = &self.triangles[t as usize];
+            let corners = tri.nodes.map(|n| x[n as usize]);
+            if !corners.iter().all(|p| p.iter().all(|v| v.is_finite())) {
+                continue;
+            }
+            let grow = DEPTH_LIMIT * self.body_h[tri.body as usize];
+            let Some(g) = Geometry::new(t, corners, grow) else {
+                continue;
+            };
+            for &n in &tri.nodes {
+                if let Some(sum) = point_normals.get_mut(self.point_of_node[n as usize] as usize) {
+                    *sum += g.normal * g.area;
+                }
+            }
+            geometry_of[t as usize] = geometry.len() as u32;
+            geometry.push(g);
+        }
+        let per_chunk: Vec<Vec<Pair>> = (0..c.near.len())
+            .collect::<Vec<_>>()
+            .par_chunks(POINT_CHUNK)
+            .map(|chunk| {
+                let mut out = Vec::new();
+                for &k in chunk {
+                    let i = c.near[k] as usize;
+                    let p = x[self.points[i] as usize];
+                    if !p.iter().all(|v| v.is_finite()) {
+                        continue;
+                    }
+                    let mut best = Nearest::new(i, point_normals.get(i).copied());
+                    let list = &c.triangles[c.offsets[k] as usize..c.offsets[k + 1] as usize];
+                    for &t in list {
+                        let g = geometry_of[t as usize];
+                        if g != u32::MAX {
+                            let body = self.triangles[t as usize].body;
+                            self.consider(&mut best, p, body, &geometry[g as usize]);
+                        }
+                    }
+                    // Inside only (a point just outside is a candidate,
+                    // not a touch).
+                    out.extend(best.pair().filter(|pair| pair.depth > 0.0));
+                }
+                out
+            })
+            .collect();
+        per_chunk.into_iter().flatten().collect()
     }
 
     fn anchor_of(anchors: &[Option<Vec3>], i: usize) -> Option<(u32, f64, f64)> {
@@ -1140,4 +1375,92 @@ struct Closest {
     beta: [f64; 3],
     /// The triangle's unit normal.
     normal: Vec3,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::Material;
+    use crate::model::PaperModel;
+
+    fn cube(n: u32, h: f64, origin: [f64; 3]) -> Model {
+        let lattice = hexmesh::Lattice::block([n, n, n], h, origin).unwrap();
+        Model::new(
+            &lattice,
+            Material::new(1e5, 0.3, 1000.0).unwrap(),
+            &PaperModel,
+        )
+        .unwrap()
+    }
+
+    fn same(a: &[Pair], b: &[Pair]) -> bool {
+        a.len() == b.len()
+            && a.iter().zip(b).all(|(p, q)| {
+                p.point == q.point
+                    && p.triangle == q.triangle
+                    && p.depth == q.depth
+                    && p.beta == q.beta
+                    && p.normal == q.normal
+            })
+    }
+
+    /// The candidate lists find exactly the pairs the grid search finds, as
+    /// the upper cube slides, sinks and turns on the lower one (the lists
+    /// kept while they hold, made again when they do not), with and
+    /// without self-contact.
+    #[test]
+    fn candidate_lists_find_what_the_grid_finds() {
+        for self_contact in [false, true] {
+            let lower = cube(4, 0.025, [0.0, 0.0, 0.0]);
+            let upper = cube(5, 0.016, [0.02, 0.01, 0.1]);
+            let model = Model::union(&[lower, upper]).unwrap();
+            let contact = BodyContact::new(
+                &model,
+                ContactSettings::for_bodies(&model),
+                &[false, self_contact],
+            )
+            .unwrap();
+            let rest = model.rest_positions().to_vec();
+            let upper_nodes = model.bodies()[1].nodes.clone();
+            let (mut rebuilt, mut kept, mut touching) = (0, 0, 0);
+            for step in 0..120 {
+                let s = step as f64;
+                // Down 2 mm into the lower cube, across 3 cm, a turn about z.
+                let (dz, dx, angle) = (-0.002 * (s / 60.0).min(1.0), 3e-4 * s, 0.002 * s);
+                let (c, sn) = (angle.cos(), angle.sin());
+                let mut x = rest.clone();
+                for n in upper_nodes.clone() {
+                    let p = rest[n] - Vec3::new(0.06, 0.05, 0.0);
+                    x[n] = Vec3::new(
+                        c * p.x - sn * p.y + 0.06 + dx,
+                        sn * p.x + c * p.y + 0.05,
+                        p.z + dz,
+                    );
+                }
+                let held = contact
+                    .candidates
+                    .0
+                    .lock()
+                    .unwrap()
+                    .as_ref()
+                    .is_some_and(|c| c.hold(&x, &contact.points));
+                if held {
+                    kept += 1;
+                } else {
+                    rebuilt += 1;
+                }
+                let grid = contact.pairs_within(&x, 0.0);
+                let lists = contact.pairs_of_candidates(&x);
+                assert!(
+                    same(&grid, &lists),
+                    "step {step}: {} vs {} pairs",
+                    grid.len(),
+                    lists.len()
+                );
+                touching += usize::from(!grid.is_empty());
+            }
+            assert!(touching > 60, "{touching}");
+            assert!(kept > 10 && rebuilt > 2, "kept {kept}, made {rebuilt}");
+        }
+    }
 }
