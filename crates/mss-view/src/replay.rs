@@ -47,6 +47,17 @@ fn not_a_run(dir: &Path, reason: impl Into<String>) -> ViewError {
 impl RunFolder {
     /// Reads the folder's `lattice.pvd` (and notes the surface frames).
     pub fn open(dir: &Path) -> Result<RunFolder, ViewError> {
+        // A 2D run's frames are quads, which the replay does not draw: say
+        // so, and where they are seen, before reading any frame.
+        let summary = std::fs::read_to_string(dir.join("summary.json"))
+            .ok()
+            .and_then(|text| serde_json::from_str::<serde_json::Value>(&text).ok());
+        if summary.is_some_and(|s| s.get("dimension").and_then(|d| d.as_u64()) == Some(2)) {
+            return Err(not_a_run(
+                dir,
+                "a 2D run (its frames are quads): the replay shows 3D runs; open its lattice.pvd in ParaView, or run the scene live with `mss view SCENE`",
+            ));
+        }
         let pvd = dir.join("lattice.pvd");
         if !pvd.is_file() {
             return Err(not_a_run(

@@ -350,6 +350,14 @@ fn paths_that_are_neither_scene_nor_run_are_refused() {
     .unwrap();
     let err = Viewer::start(Source::Replay(dir.path().into()), ViewOptions::default()).unwrap_err();
     assert!(err.to_string().contains("plain file name"), "{err}");
+    // A 2D run's folder: said to be one, with where to see it.
+    std::fs::write(dir.path().join("summary.json"), r#"{"dimension": 2}"#).unwrap();
+    let err = Viewer::start(Source::Replay(dir.path().into()), ViewOptions::default()).unwrap_err();
+    assert!(matches!(err, ViewError::NotARun { .. }), "{err}");
+    assert!(
+        err.to_string().contains("2D run") && err.to_string().contains("ParaView"),
+        "{err}"
+    );
     let busy = Viewer::start(
         Source::Input(Box::new(small_input())),
         ViewOptions::default(),
