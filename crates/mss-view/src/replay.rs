@@ -6,7 +6,9 @@
 //! they are shown together): the
 //! skin is the boundary of their hexahedra (faces that belong to one cell),
 //! coloured by the `displacement` point field and by J = 1 +
-//! `volumetric_strain` averaged from the cells to the nodes. When every
+//! `volumetric_strain` averaged from the cells to the nodes. A 2D run's
+//! quads (its `summary.json` says `dimension` 2) are shown as a thin
+//! upright slab, as the live 2D viewer shows them. When every
 //! frame also has its embedded surface (`surface_NNNN.vtu`, or `.obj`,
 //! beside `lattice_NNNN.vtu`), it is offered as well, coloured by its
 //! displacement from the first frame. Frames are read when shown, so a
@@ -17,7 +19,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use mss_scene::mss_io::vtk::read::{
-    LatticeFrameData, read_lattice_vtu, read_pvd, read_surface_vtu,
+    LatticeFrameData, QuadFrameData, read_lattice_vtu, read_pvd, read_quads_vtu, read_surface_vtu,
 };
 
 use crate::protocol::{
@@ -35,6 +37,8 @@ pub struct RunFolder {
     /// Each frame's time and files (one per body).
     frames: Vec<(f64, Vec<String>)>,
     surface_files: Option<Vec<Vec<String>>>,
+    /// A 2D run (`summary.json` says `dimension` 2): frames of quads.
+    plane: bool,
 }
 
 fn not_a_run(dir: &Path, reason: impl Into<String>) -> ViewError {
@@ -47,17 +51,12 @@ fn not_a_run(dir: &Path, reason: impl Into<String>) -> ViewError {
 impl RunFolder {
     /// Reads the folder's `lattice.pvd` (and notes the surface frames).
     pub fn open(dir: &Path) -> Result<RunFolder, ViewError> {
-        // A 2D run's frames are quads, which the replay does not draw: say
-        // so, and where they are seen, before reading any frame.
-        let summary = std::fs::read_to_string(dir.join("summary.json"))
+        // A 2D run's frames are quads: read as a thin slab standing in the
+        // page's x-z plane (see `read_frame`).
+        let plane = std::fs::read_to_string(dir.join("summary.json"))
             .ok()
-            .and_then(|text| serde_json::from_str::<serde_json::Value>(&text).ok());
-        if summary.is_some_and(|s| s.get("dimension").and_then(|d| d.as_u64()) == Some(2)) {
-            return Err(not_a_run(
-                dir,
-                "a 2D run (its frames are quads): the replay shows 3D runs; open its lattice.pvd in ParaView, or run the scene live with `mss view SCENE`",
-            ));
-        }
+            .and_then(|text| serde_json::from_str::<serde_json::Value>(&text).ok())
+            .is_some_and(|s| s.get("dimension").and_then(|d| d.as_u64()) == Some(2));
         let pvd = dir.join("lattice.pvd");
         if !pvd.is_file() {
             return Err(not_a_run(
@@ -101,7 +100,8 @@ impl RunFolder {
         Ok(RunFolder {
             dir: dir.to_path_buf(),
             frames,
-            surface_files,
+            surface_files: if plane { None } else { surface_files },
+            plane,
         })
     }
 
@@ -198,14 +198,76 @@ fn boundary(cells: &[[u32; 8]]) -> (Vec<u32>, Vec<[u32; 3]>) {
 fn read_frame(run: &RunFolder, k: usize) -> Result<LatticeFrameData, String> {
     let mut joined: Option<LatticeFrameData> = None;
     for file in &run.frames[k].1 {
-        let data =
-            read_lattice_vtu(&run.dir.join(file), MAX_FRAME_BYTES).map_err(|e| e.to_string())?;
+        let path = run.dir.join(file);
+        let data = if run.plane {
+            read_quads_vtu(&path, MAX_FRAME_BYTES)
+                .map(slab)
+                .map_err(|e| e.to_string())?
+        } else {
+            read_lattice_vtu(&path, MAX_FRAME_BYTES).map_err(|e| e.to_string())?
+        };
         match &mut joined {
             None => joined = Some(data),
             Some(all) => append_frame(all, data).map_err(|e| format!("{file}: {e}"))?,
         }
     }
     joined.ok_or_else(|| format!("frame {k} lists no file"))
+}
+
+/// A 2D frame as a thin slab of hexahedra standing upright in the page's
+/// frame (the live 2D viewer's map: the plane's (x, y) is the page's
+/// (x, 0, y)), each quad's nodes twice, a tenth of its shorter side apart
+/// across the plane, so that the skin is the body's two faces and its
+/// outline's strip. Its displacement comes along (mapped alike); J is not
+/// written for 2D frames.
+fn slab(frame: QuadFrameData) -> LatticeFrameData {
+    let n = frame.points.len() as u32;
+    let depth = frame
+        .quads
+        .first()
+        .map(|q| {
+            let side = |a: usize, b: usize| {
+                let (p, r) = (frame.points[q[a] as usize], frame.points[q[b] as usize]);
+                (p[0] - r[0]).hypot(p[1] - r[1])
+            };
+            0.1 * side(0, 1).min(side(1, 2))
+        })
+        .unwrap_or(0.0);
+    let page = |p: [f64; 3], y: f64| [p[0], y, p[1]];
+    let points = frame
+        .points
+        .iter()
+        .map(|&p| page(p, -0.5 * depth))
+        .chain(frame.points.iter().map(|&p| page(p, 0.5 * depth)))
+        .collect();
+    let cells = frame
+        .quads
+        .iter()
+        .map(|q| {
+            [
+                q[0],
+                q[1],
+                q[2],
+                q[3],
+                q[0] + n,
+                q[1] + n,
+                q[2] + n,
+                q[3] + n,
+            ]
+        })
+        .collect();
+    let mut point_fields = HashMap::new();
+    if let Some((u, 3)) = frame.point_fields.get("displacement") {
+        let mapped: Vec<f64> = u.chunks_exact(3).flat_map(|d| [d[0], 0.0, d[1]]).collect();
+        let twice = mapped.iter().chain(&mapped).copied().collect();
+        point_fields.insert("displacement".to_owned(), (twice, 3));
+    }
+    LatticeFrameData {
+        points,
+        cells,
+        point_fields,
+        cell_fields: frame.cell_fields,
+    }
 }
 
 /// Appends `part` to `all`: its nodes after `all`'s, its cells renumbered,

@@ -215,6 +215,41 @@ pub fn read_lattice_vtu(path: &Path, max_bytes: u64) -> Result<LatticeFrameData,
     })
 }
 
+/// A 2D lattice frame read back from a `.vtu` of quads
+/// ([`super::write_quads_vtu`]).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct QuadFrameData {
+    /// Point positions (m; z = 0 for a 2D body).
+    pub points: Vec<[f64; 3]>,
+    /// Quads, VTK_QUAD node order (counter-clockwise).
+    pub quads: Vec<[u32; 4]>,
+    /// Point fields by name: the values, flattened, and their components.
+    pub point_fields: HashMap<String, (Vec<f64>, usize)>,
+    /// Cell fields by name, as `point_fields`.
+    pub cell_fields: HashMap<String, (Vec<f64>, usize)>,
+}
+
+/// Reads a 2D lattice frame written by [`super::write_quads_vtu`], with the
+/// guards of [`read_lattice_vtu`]: quads only, every index in range, fields
+/// of the right lengths.
+pub fn read_quads_vtu(path: &Path, max_bytes: u64) -> Result<QuadFrameData, ReadError> {
+    let piece = read_cells_vtu(path, max_bytes, super::VTK_QUAD, 4)?;
+    let points = piece.points;
+    let quads: Vec<[u32; 4]> = piece
+        .cells
+        .chunks_exact(4)
+        .map(|c| [c[0], c[1], c[2], c[3]])
+        .collect();
+    let point_fields = fields(path, piece.data.point, points.len(), "point")?;
+    let cell_fields = fields(path, piece.data.cell, quads.len(), "cell")?;
+    Ok(QuadFrameData {
+        points,
+        quads,
+        point_fields,
+        cell_fields,
+    })
+}
+
 /// A surface frame read back from a `.vtu` of triangles (the embedded
 /// surface's series, [`super::write_triangles_vtu`]).
 #[derive(Debug, Clone, PartialEq, Default)]

@@ -350,14 +350,6 @@ fn paths_that_are_neither_scene_nor_run_are_refused() {
     .unwrap();
     let err = Viewer::start(Source::Replay(dir.path().into()), ViewOptions::default()).unwrap_err();
     assert!(err.to_string().contains("plain file name"), "{err}");
-    // A 2D run's folder: said to be one, with where to see it.
-    std::fs::write(dir.path().join("summary.json"), r#"{"dimension": 2}"#).unwrap();
-    let err = Viewer::start(Source::Replay(dir.path().into()), ViewOptions::default()).unwrap_err();
-    assert!(matches!(err, ViewError::NotARun { .. }), "{err}");
-    assert!(
-        err.to_string().contains("2D run") && err.to_string().contains("ParaView"),
-        "{err}"
-    );
     let busy = Viewer::start(
         Source::Input(Box::new(small_input())),
         ViewOptions::default(),
@@ -487,14 +479,10 @@ density = 1000.0
     tokio::task::spawn_blocking(move || v.stop()).await.unwrap();
 }
 
-/// A 2D scene in the live viewer: the strip stands upright (the plane's y
-/// is the page's z), one surface of two triangles per rectangle; a drag
-/// lifts the picked rectangle toward the cursor; the poking disc pushes the
-/// top down; the scene's obstacles are drawn.
-#[tokio::test(flavor = "current_thread")]
-async fn a_2d_body_is_shown_upright_dragged_and_poked() {
-    let dir = tempfile::tempdir().unwrap();
-    let svg = dir.path().join("strip.svg");
+/// A 10 x 3 cm strip of 1 cm squares (a 2D scene) held at x = 0, its
+/// SVG written in `dir`, with `tail` (more tables) at the end.
+fn strip_input(dir: &std::path::Path, tail: &str) -> mss_view::mss_scene::SceneInput {
+    let svg = dir.join("strip.svg");
     std::fs::write(
         &svg,
         r#"<svg><rect x="0" y="0" width="0.1" height="0.03"/></svg>"#,
@@ -503,12 +491,24 @@ async fn a_2d_body_is_shown_upright_dragged_and_poked() {
     let text = format!(
         "[mesh]\npath = {:?}\n[voxelize]\ncell_size = [0.01, 0.01]\n[model]\ndimension = 2\n\
          thickness = 0.01\nparameterization = \"paper+hg\"\n[material]\nyoung = 1.0e5\n\
-         poisson = 0.3\ndensity = 1000.0\n[[fixed]]\nkind = \"face\"\nface = \"x-\"\n\
-         [[obstacles]]\nshape = {{ kind = \"sphere\", centre = [0.2, 0.0, 0.0], radius = 0.01 }}\n\
-         [solver]\nkind = \"explicit\"\ndamping = 10.0\nduration = 1.0\n",
+         poisson = 0.3\ndensity = 1000.0\n[[fixed]]\nkind = \"face\"\nface = \"x-\"\n{tail}",
         svg.display().to_string()
     );
-    let input = mss_view::mss_scene::SceneInput::from_toml(&text, "strip.toml").unwrap();
+    mss_view::mss_scene::SceneInput::from_toml(&text, "strip.toml").unwrap()
+}
+
+/// A 2D scene in the live viewer: the strip stands upright (the plane's y
+/// is the page's z), one surface of two triangles per rectangle; a drag
+/// lifts the picked rectangle toward the cursor; the poking disc pushes the
+/// top down; the scene's obstacles are drawn.
+#[tokio::test(flavor = "current_thread")]
+async fn a_2d_body_is_shown_upright_dragged_and_poked() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = strip_input(
+        dir.path(),
+        "[[obstacles]]\nshape = { kind = \"sphere\", centre = [0.2, 0.0, 0.0], radius = 0.01 }\n\
+         [solver]\nkind = \"explicit\"\ndamping = 10.0\nduration = 1.0\n",
+    );
     let v = tokio::task::spawn_blocking(move || {
         let v = Viewer::start(Source::Input(Box::new(input)), ViewOptions::default()).unwrap();
         assert!(v.wait_for_frame(WAIT).is_some(), "no first frame");
@@ -586,5 +586,53 @@ async fn a_2d_body_is_shown_upright_dragged_and_poked() {
         p[2]
     );
     assert!(page.status.as_ref().unwrap().error.is_none());
+    tokio::task::spawn_blocking(move || v.stop()).await.unwrap();
+}
+
+/// A 2D run's folder replays: its quads stand upright as a thin slab (the
+/// plane's y is the page's z), its frames come with their displacement.
+#[tokio::test(flavor = "current_thread")]
+async fn a_2d_run_replays_upright() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = strip_input(
+        dir.path(),
+        "[loads]\ngravity = [0.0, -9.81, 0.0]\n[solver]\nkind = \"explicit\"\ndamping = 10.0\n\
+         duration = 0.2\n[output]\nevery_time = 0.05\n",
+    );
+    let job = mss_view::mss_scene::plane_job::PlaneJob::prepare(input).unwrap();
+    let out = dir.path().join("out");
+    let summary = job.run(&out, &mss_view::mss_scene::Cancel::new()).unwrap();
+    assert!(summary.frames >= 4);
+    let v = tokio::task::spawn_blocking(move || {
+        let options = ViewOptions {
+            paused: true,
+            ..ViewOptions::default()
+        };
+        let v = Viewer::start(Source::Replay(out), options).unwrap();
+        assert!(v.wait_for_frame(WAIT).is_some(), "no first frame");
+        v
+    })
+    .await
+    .unwrap();
+    let mut page = Page::connect(v.addr(), v.token()).await;
+    assert!(page.next_frame(WAIT).await);
+    let scene = page.scene.clone().unwrap();
+    assert!(scene.error.is_none(), "{:?}", scene.error);
+    assert_eq!(scene.mode, "replay");
+    assert_eq!(scene.cells, 30);
+    assert!((scene.bounds[1][2] - scene.bounds[0][2] - 0.03).abs() < 1e-9);
+    assert!(scene.bounds[1][1] - scene.bounds[0][1] < 0.01);
+    // The last frame sags: its displacement is the summary's.
+    let last = scene.frame_times.len() - 1;
+    page.send(&format!(r#"{{"type":"seek","frame":{last}}}"#))
+        .await;
+    page.until(WAIT, "the last frame", |s| s.frame as usize == last)
+        .await;
+    let shown = page.status.as_ref().unwrap().max_displacement;
+    assert!(
+        (shown - summary.max_displacement).abs() < 1e-9 * summary.max_displacement.max(1e-12),
+        "{shown} vs {}",
+        summary.max_displacement
+    );
     tokio::task::spawn_blocking(move || v.stop()).await.unwrap();
 }
