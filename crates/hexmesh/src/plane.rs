@@ -201,24 +201,30 @@ impl RectLattice {
     /// The boundary edges (node pairs), each oriented with the body on its
     /// left (counter-clockwise around the outside, clockwise around holes).
     pub fn boundary_edges(&self) -> Vec<[u32; 2]> {
-        let mut count = std::collections::HashMap::new();
-        for c in &self.cells {
-            for e in 0..4 {
-                let (a, b) = (c[e], c[(e + 1) % 4]);
-                *count.entry((a.min(b), a.max(b))).or_insert(0u32) += 1;
-            }
-        }
-        let mut edges = Vec::new();
-        for c in &self.cells {
-            for e in 0..4 {
-                let (a, b) = (c[e], c[(e + 1) % 4]);
-                if count[&(a.min(b), a.max(b))] == 1 {
-                    edges.push([a, b]);
-                }
-            }
-        }
-        edges
+        boundary_edges_of(&self.cells)
     }
+}
+
+/// The boundary edges of quads `cells` (sides of one cell only), each
+/// oriented with its cell on its left, in cell order.
+pub fn boundary_edges_of(cells: &[[u32; 4]]) -> Vec<[u32; 2]> {
+    let mut count = std::collections::HashMap::new();
+    for c in cells {
+        for e in 0..4 {
+            let (a, b) = (c[e], c[(e + 1) % 4]);
+            *count.entry((a.min(b), a.max(b))).or_insert(0u32) += 1;
+        }
+    }
+    let mut edges = Vec::new();
+    for c in cells {
+        for e in 0..4 {
+            let (a, b) = (c[e], c[(e + 1) % 4]);
+            if count[&(a.min(b), a.max(b))] == 1 {
+                edges.push([a, b]);
+            }
+        }
+    }
+    edges
 }
 
 /// Closed polygons in the plane (m): the even-odd rule tells inside, so a

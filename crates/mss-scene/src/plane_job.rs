@@ -697,6 +697,21 @@ struct Slice {
     map: [[f64; 3]; 2],
 }
 
+/// The file `path` names (relative to the scene's folder), or the error
+/// under `key` saying `why` a built-in does not serve.
+fn file_of(
+    input: &SceneInput,
+    path: &str,
+    key: &str,
+    why: &str,
+    setting: &dyn Fn(&str, String) -> JobError,
+) -> Result<std::path::PathBuf, JobError> {
+    match Scene::source_of(path, &input.origin) {
+        MeshSource::File(p) => Ok(p),
+        MeshSource::Builtin(b) => Err(setting(key, format!("= \"builtin:{b}\"; {why}"))),
+    }
+}
+
 /// The outline of a 2D body's `[mesh]` (an SVG drawing or a planar mesh),
 /// placed in the x-y plane, and the file's name.
 fn mesh_outline(
@@ -704,17 +719,13 @@ fn mesh_outline(
     mesh: &crate::scene::MeshSection,
     setting: &dyn Fn(&str, String) -> JobError,
 ) -> Result<(String, Outline), JobError> {
-    let path = match Scene::source_of(&mesh.path, &input.origin) {
-        MeshSource::File(p) => p,
-        MeshSource::Builtin(b) => {
-            return Err(setting(
-                "[mesh] path",
-                format!(
-                    "= \"builtin:{b}\"; a 2D body needs an outline: an SVG drawing or a planar mesh file"
-                ),
-            ));
-        }
-    };
+    let path = file_of(
+        input,
+        &mesh.path,
+        "[mesh] path",
+        "a 2D body needs an outline: an SVG drawing or a planar mesh file",
+        setting,
+    )?;
     let raw = load_outline(&path).map_err(|e| setting("[mesh] path", e.to_string()))?;
     // The placement's units, scale, rotation and translation, kept in the
     // x-y plane.
@@ -746,17 +757,13 @@ fn image_outline(
     section: &crate::scene::ImageSection,
     setting: &dyn Fn(&str, String) -> JobError,
 ) -> Result<(String, Outline, Slice), JobError> {
-    let path = match Scene::source_of(&section.path, &input.origin) {
-        MeshSource::File(p) => p,
-        MeshSource::Builtin(b) => {
-            return Err(setting(
-                "[image] path",
-                format!(
-                    "= \"builtin:{b}\"; built-in meshes are not images: give a label image file"
-                ),
-            ));
-        }
-    };
+    let path = file_of(
+        input,
+        &section.path,
+        "[image] path",
+        "built-in meshes are not images: give a label image file",
+        setting,
+    )?;
     let limits = hexmesh::image::ImageLimits {
         max_bytes: crate::limits::Limits::default().memory_bytes,
     };

@@ -1028,12 +1028,12 @@ impl BodyContact {
             geometry_of[t as usize] = geometry.len() as u32;
             geometry.push(g);
         }
-        let per_chunk: Vec<Vec<Pair>> = (0..c.near.len())
-            .collect::<Vec<_>>()
-            .par_chunks(POINT_CHUNK)
-            .map(|chunk| {
+        let starts: Vec<usize> = (0..c.near.len()).step_by(POINT_CHUNK).collect();
+        let per_chunk: Vec<Vec<Pair>> = starts
+            .into_par_iter()
+            .map(|start| {
                 let mut out = Vec::new();
-                for &k in chunk {
+                for k in start..(start + POINT_CHUNK).min(c.near.len()) {
                     let i = c.near[k] as usize;
                     let p = x[self.points[i] as usize];
                     if !p.iter().all(|v| v.is_finite()) {

@@ -591,17 +591,9 @@ impl PlaneModel {
     /// `(a, b)` with `a < b`, sorted: sums over them do not depend on a
     /// hash order.
     pub fn boundary_edges(&self) -> Vec<(u32, u32)> {
-        let mut edges: std::collections::HashMap<(u32, u32), u32> = Default::default();
-        for c in &self.cells {
-            for k in 0..4 {
-                let (a, b) = (c[k], c[(k + 1) % 4]);
-                *edges.entry((a.min(b), a.max(b))).or_default() += 1;
-            }
-        }
-        let mut boundary: Vec<(u32, u32)> = edges
+        let mut boundary: Vec<(u32, u32)> = hexmesh::plane::boundary_edges_of(&self.cells)
             .into_iter()
-            .filter(|&(_, n)| n == 1)
-            .map(|(e, _)| e)
+            .map(|[a, b]| (a.min(b), a.max(b)))
             .collect();
         boundary.sort_unstable();
         boundary

@@ -1015,23 +1015,7 @@ fn a_drag_spring_pulls_in_series_with_the_strip() {
 #[test]
 fn multigrid_and_direct_solves_agree_in_2d() {
     use mss_core::solver::LinearSolverKind;
-    let lattice = RectLattice::block([60, 40], [0.02, 0.01], [0.0, 0.0]).unwrap();
-    let material = Material::new(1.0e6, 0.3, 1000.0).unwrap();
-    let m = PlaneModel::new(
-        &lattice,
-        material,
-        0.01,
-        PlaneParameterization::Paper,
-        Some(1.0),
-    )
-    .unwrap();
-    let mut p = PlaneProblem::new(m);
-    for (i, r) in p.model.rest_positions().iter().enumerate() {
-        if r.x.abs() < 1e-12 {
-            p.held[i] = [true, true];
-        }
-    }
-    p.gravity = [0.0, -9.81];
+    let mut p = cantilever([60, 40], [0.02, 0.01], 1.0e6, PlaneParameterization::Paper);
     let free = p.held.iter().filter(|h| !h[0]).count() * 2;
     assert!(free > 4000, "{free}");
     let mut answers = Vec::new();
