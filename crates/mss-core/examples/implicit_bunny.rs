@@ -1,12 +1,12 @@
 //! One implicit (backward Euler) step of the Stanford bunny sagging under
-//! gravity: `cargo run --release -p mss-core --example implicit_bunny -- CELLS [auto|direct|iterative]`.
+//! gravity: `cargo run --release -p mss-core --example implicit_bunny -- CELLS [auto|direct|iterative] [MODEL]`.
 //!
 //! The bunny (`data/meshes/bunny.obj`, about 10 units tall, y up) is scaled
 //! to 0.2 m and turned z up, voxelized with CELLS cells along its longest
-//! axis; E = 10 kPa, nu = 0.45, rho = 1000 kg/m^3, volumetric model with
-//! hourglass control, the lowest layer held, dt = 0.01 s. Prints the CPU time
+//! axis; E = 10 kPa, nu = 0.45, rho = 1000 kg/m^3, MODEL (default the
+//! volumetric model with hourglass control), the lowest layer held, dt = 0.01 s. Prints the CPU time
 //! of the step (this process, user + system), its Newton and Krylov
-//! iterations and the peak memory.
+//! iterations, the largest displacement and the peak memory.
 
 use std::time::Instant;
 
@@ -26,6 +26,7 @@ fn main() {
         Some("iterative") => LinearSolverKind::Iterative,
         _ => LinearSolverKind::Auto,
     };
+    let name = args.next().unwrap_or_else(|| "volumetric+hg".into());
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/meshes/bunny.obj");
     let mut mesh = hexmesh::load_mesh(&path).expect("the bunny").mesh;
     let b = mesh.bounding_box().expect("vertices");
@@ -39,7 +40,9 @@ fn main() {
         ..hexmesh::VoxelizeOptions::default()
     };
     let lattice = hexmesh::voxelize(&mesh, &opts).expect("voxelize").lattice;
-    let param = Parameterizations::default().get("volumetric+hg").unwrap();
+    let param = Parameterizations::default()
+        .get(&name)
+        .expect("a model name");
     let model = Model::new(
         &lattice,
         Material::new(1e4, 0.45, 1000.0).unwrap(),
@@ -70,9 +73,15 @@ fn main() {
     let info = integrator.step(&problem, &mut state).unwrap();
     let (cpu, wall) = (cpu_seconds() - c0, t0.elapsed().as_secs_f64());
     println!(
-        "bunny {cells} cells ({} cells, {nodes} nodes, {kind:?}): one implicit step of 0.01 s: cpu {cpu:.2} s, wall {wall:.2} s, {} Newton iterations, peak {:.0} MiB",
+        "bunny {cells} cells ({} cells, {nodes} nodes, {name}, {kind:?}): one implicit step of 0.01 s: cpu {cpu:.2} s, wall {wall:.2} s, {} Newton iterations, {} Krylov iterations, largest displacement {:.9e} m, peak {:.0} MiB",
         lattice.num_cells(),
         info.newton_iterations,
+        integrator.linear_stats().krylov_iterations,
+        state
+            .displacements(problem.model())
+            .iter()
+            .map(|u| u.norm())
+            .fold(0.0, f64::max),
         peak_mib()
     );
 }

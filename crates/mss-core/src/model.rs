@@ -1017,6 +1017,15 @@ impl Model {
         out
     }
 
+    /// Whether every material resists the lattice's three mechanisms
+    /// (docs/model.md section 5) with hourglass control. Without it, a smooth
+    /// field of these checkerboard patterns costs about as little energy as a
+    /// smooth displacement: the Newton solves' multigrid then gives them
+    /// coarse spaces of their own.
+    pub fn resists_mechanisms(&self) -> bool {
+        self.coefficients.iter().all(|c| c.hourglass > 0.0)
+    }
+
     /// Rest positions of the nodes (m).
     pub fn rest_positions(&self) -> &[Vec3] {
         // SAFETY: Vector3<f64> is a repr(C) wrapper of [[f64; 3]; 1], so a

@@ -18,8 +18,9 @@ pub struct BlockCsr {
 
 impl BlockCsr {
     /// The zero matrix with the pattern "nodes that share a cell" of `cells`
-    /// over `num_nodes` nodes (the diagonal is always present).
-    pub fn lattice_pattern(num_nodes: usize, cells: &[[u32; 8]]) -> Self {
+    /// over `num_nodes` nodes (the diagonal is always present); a cell is
+    /// any fixed number of nodes (8 for a hexahedron).
+    pub fn lattice_pattern<const N: usize>(num_nodes: usize, cells: &[[u32; N]]) -> Self {
         use rayon::prelude::*;
         // Cells of each node (counting sort), then each row on its own: a
         // few dozen candidates sorted in cache, rather than one sort of

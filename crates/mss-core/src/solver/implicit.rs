@@ -79,6 +79,15 @@ impl Implicit {
         })
     }
 
+    /// What the Newton iterations' linear solver did over the steps so far
+    /// (solves, Krylov iterations, hierarchies built).
+    pub fn linear_stats(&self) -> super::LinearStats {
+        self.linear
+            .borrow()
+            .as_ref()
+            .map_or_else(super::LinearStats::default, |l| l.stats())
+    }
+
     /// One backward Euler step of `dt` from `state` (not modified on failure).
     fn try_step(
         &self,

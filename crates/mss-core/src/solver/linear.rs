@@ -293,6 +293,9 @@ pub struct LinearSolver {
     lu: LuCache,
     cells: Vec<[u32; 8]>,
     coords: Vec<[i64; 3]>,
+    /// Whether the hierarchy's coarse levels carry the hexahedral lattice's
+    /// mechanisms (3D lattices; not the 2D element's degenerate cells).
+    enrich: bool,
     shape: Option<super::multigrid::HierarchyShape>,
     stats: LinearStats,
     /// Whether the next iterative solve keeps its hierarchy (when its
@@ -312,15 +315,25 @@ impl std::fmt::Debug for LinearSolver {
 }
 
 impl LinearSolver {
-    /// A solver for matrices over the nodes of `model`'s lattice.
+    /// A solver for matrices over the nodes of `model`'s lattice. Unless
+    /// every material has hourglass control, the multigrid's coarse levels
+    /// also carry the lattice's three mechanisms (see
+    /// [`Model::resists_mechanisms`](crate::Model::resists_mechanisms)).
     pub fn new(model: &crate::Model, kind: LinearSolverKind) -> Self {
-        Self::with_coords(model.cells(), model.grid_coords(), kind)
+        Self::with_coords(
+            model.cells(),
+            model.grid_coords(),
+            kind,
+            !model.resists_mechanisms(),
+        )
     }
 
     /// A solver for matrices over the nodes of a lattice given by its cells,
-    /// rest positions and cell edge.
+    /// rest positions and cell edge, for operators without the mass-spring
+    /// lattice's mechanisms (such as trilinear finite elements): the
+    /// multigrid's coarse spaces are the grid's alone.
     pub fn for_lattice(cells: &[[u32; 8]], rest: &[Vec3], h: f64, kind: LinearSolverKind) -> Self {
-        Self::with_coords(cells, super::multigrid::grid_coords(rest, h), kind)
+        Self::with_coords(cells, super::multigrid::grid_coords(rest, h), kind, false)
     }
 
     /// A solver for a 2D lattice of rectangles `size` (m) whose cells are
@@ -348,15 +361,21 @@ impl LinearSolver {
                 ]
             })
             .collect();
-        Self::with_coords(cells, coords, kind)
+        Self::with_coords(cells, coords, kind, false)
     }
 
-    fn with_coords(cells: &[[u32; 8]], coords: Vec<[i64; 3]>, kind: LinearSolverKind) -> Self {
+    fn with_coords(
+        cells: &[[u32; 8]],
+        coords: Vec<[i64; 3]>,
+        kind: LinearSolverKind,
+        enrich: bool,
+    ) -> Self {
         Self {
             kind,
             lu: LuCache::new(),
             cells: cells.to_vec(),
             coords,
+            enrich,
             shape: None,
             stats: LinearStats::default(),
             keep_next: false,
@@ -390,6 +409,7 @@ impl LinearSolver {
                 &self.cells,
                 &self.coords,
                 free,
+                self.enrich,
             ));
         }
         let shape = self.shape.as_ref()?;
@@ -476,6 +496,7 @@ impl LinearSolver {
                 &self.cells,
                 &self.coords,
                 free,
+                self.enrich,
             ));
         }
         let Some(shape) = self.shape.as_ref() else {

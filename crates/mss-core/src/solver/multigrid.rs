@@ -12,6 +12,25 @@
 //! - **Prolongation** `P`: trilinear weights (1, 1/2, 1/4 or 1/8 per coarse
 //!   node), applied per component and masked by the held dofs (a held fine dof
 //!   receives no correction).
+//! - **The lattice's mechanisms** (3D lattices): the paper's model, `springs`
+//!   and `volumetric` give no stiffness to three checkerboard patterns per
+//!   cell (docs/model.md section 5; along axis `i`, the node's signs along the
+//!   two other axes). A field of them under a smooth envelope costs as little
+//!   energy as a smooth displacement, yet trilinear interpolation cannot
+//!   represent it, and no point smoother reduces it: with the grid's coarse
+//!   spaces alone the Krylov method needed 83 to 173 iterations where the
+//!   hourglass-controlled models needed 24 to 26. So each coarse node also
+//!   has a *companion* node whose three dofs are the three patterns'
+//!   amplitudes: the first prolongation gives a fine node its parents'
+//!   companions with its trilinear weight times its sign for each axis, and
+//!   coarser levels interpolate the companions trilinearly (an envelope is
+//!   smooth). The two coarse spaces are not coupled on coarse levels
+//!   (their coupling is small on a regular lattice, and leaving it out kept
+//!   the iteration counts while halving the coarse operators); the cycle
+//!   corrects with both at once. A companion space may be rank deficient
+//!   where a part is thinner than a coarse cell; the coarse right-hand side
+//!   has no component along the prolongation's null space, and the coarsest
+//!   solve is regularized there (see [`COARSEST_REGULARIZATION`]).
 //! - **Coarse operators**: Galerkin, `A_c = P^T A P`, assembled block by block;
 //!   its pattern is that of the coarse lattice (nodes sharing a coarse cell),
 //!   which contains `P^T A P` because every coarse parent of every corner of a
@@ -76,13 +95,22 @@ pub(crate) fn grid_coords(rest: &[Vec3], h: f64) -> Vec<[i64; 3]> {
         .collect()
 }
 
-/// Trilinear prolongation from a coarse level: for each fine node, its coarse
-/// parents and weights (CSR).
+/// Prolongation from a coarse level: for each fine node, its coarse parents
+/// and their weights per component (CSR). Trilinear weights are the same for
+/// the three components; the hourglass companions' carry the mode's signs.
 #[derive(Debug, Clone)]
 struct Prolongation {
     offsets: Vec<u32>,
     parents: Vec<u32>,
-    weights: Vec<f64>,
+    weights: Vec<Vec3>,
+}
+
+/// The signs of the lattice's three mechanisms at grid node `g` (docs/model.md
+/// section 5): along axis `i`, the product of the node's signs along the two
+/// other axes.
+fn hourglass_signs(g: [i64; 3]) -> Vec3 {
+    let sign = |v: i64| if v.rem_euclid(2) == 0 { 1.0 } else { -1.0 };
+    Vec3::new(sign(g[1] + g[2]), sign(g[0] + g[2]), sign(g[0] + g[1]))
 }
 
 /// One level of the hierarchy above the finest (or the finest itself).
@@ -114,16 +142,28 @@ pub(crate) struct HierarchyShape {
     prolongations: Vec<Prolongation>,
     /// Empty operators with the pattern of each coarse level.
     coarse_patterns: Vec<BlockCsr>,
+    /// Per coarse level, the index of its first companion node
+    /// (`u32::MAX`: none).
+    first_companions: Vec<u32>,
     /// Free-dof mask of the finest level (the key of the cache).
     fine_free: Vec<bool>,
 }
 
 impl HierarchyShape {
     /// The hierarchy structure of a lattice given by its cells and node grid
-    /// coordinates, with free dofs `free[3 node + d]`.
-    pub(crate) fn new(cells: &[[u32; 8]], coords: &[[i64; 3]], free: &[bool]) -> Self {
+    /// coordinates, with free dofs `free[3 node + d]`. With `enrich`, every
+    /// coarse level also carries the lattice's mechanisms (see the module
+    /// docs): each coarse node has a companion whose three dofs are the
+    /// amplitudes of the three hourglass patterns around it.
+    pub(crate) fn new(
+        cells: &[[u32; 8]],
+        coords: &[[i64; 3]],
+        free: &[bool],
+        enrich: bool,
+    ) -> Self {
         let mut prolongations = Vec::new();
         let mut coarse_patterns = Vec::new();
+        let mut first_companions = Vec::new();
         let mut cells_k: Vec<[i64; 3]> = cells
             .iter()
             .map(|c| {
@@ -137,8 +177,12 @@ impl HierarchyShape {
                 m
             })
             .collect();
+        // Level k's nodes: the grid nodes `nodes_k`, then (on coarse levels
+        // of an enriched hierarchy) their companions in the same order.
         let mut nodes_k: Vec<[i64; 3]> = coords.to_vec();
-        while nodes_k.len() > COARSEST_NODES {
+        let mut companions_k = false;
+        let level_size = |nodes: usize, companions: bool| nodes * (1 + companions as usize);
+        while level_size(nodes_k.len(), companions_k) > COARSEST_NODES {
             // Coarse cells: parents of the fine cells.
             let mut coarse_cells: Vec<[i64; 3]> =
                 cells_k.iter().map(|c| c.map(|v| v.div_euclid(2))).collect();
@@ -153,20 +197,20 @@ impl HierarchyShape {
                 .collect();
             coarse_nodes.sort_unstable();
             coarse_nodes.dedup();
-            if coarse_nodes.len() * 10 > nodes_k.len() * 9 {
+            if level_size(coarse_nodes.len(), enrich) * 10
+                > level_size(nodes_k.len(), companions_k) * 9
+            {
                 // Hardly coarser (a flat or thin part): stop here.
                 break;
             }
+            let nc = coarse_nodes.len() as u32;
             let index: HashMap<[i64; 3], u32> = coarse_nodes
                 .iter()
                 .enumerate()
                 .map(|(i, &c)| (c, i as u32))
                 .collect();
-            let mut offsets = Vec::with_capacity(nodes_k.len() + 1);
-            let mut parents = Vec::new();
-            let mut weights = Vec::new();
-            offsets.push(0u32);
-            for f in &nodes_k {
+            // Trilinear parents of a fine grid node.
+            let trilinear = |f: &[i64; 3]| {
                 let axis = |v: i64| -> Vec<(i64, f64)> {
                     if v.rem_euclid(2) == 0 {
                         vec![(v / 2, 1.0)]
@@ -174,33 +218,71 @@ impl HierarchyShape {
                         vec![(v.div_euclid(2), 0.5), (v.div_euclid(2) + 1, 0.5)]
                     }
                 };
+                let mut out = Vec::with_capacity(8);
                 for (z, wz) in axis(f[2]) {
                     for (y, wy) in axis(f[1]) {
                         for (x, wx) in axis(f[0]) {
                             // Every parent exists (see the module docs); a
                             // missing one would only drop a weight.
                             if let Some(&p) = index.get(&[x, y, z]) {
-                                parents.push(p);
-                                weights.push(wx * wy * wz);
+                                out.push((p, wx * wy * wz));
                             }
                         }
                     }
                 }
+                out
+            };
+            let mut offsets = Vec::with_capacity(level_size(nodes_k.len(), companions_k) + 1);
+            let mut parents = Vec::new();
+            let mut weights = Vec::new();
+            offsets.push(0u32);
+            for f in &nodes_k {
+                let tri = trilinear(f);
+                for &(p, w) in &tri {
+                    parents.push(p);
+                    weights.push(Vec3::repeat(w));
+                }
+                if enrich && !companions_k {
+                    // The first coarsening: a fine node's share of each
+                    // parent's hourglass amplitudes, with the node's signs.
+                    let signs = hourglass_signs(*f);
+                    for &(p, w) in &tri {
+                        parents.push(p + nc);
+                        weights.push(signs * w);
+                    }
+                }
                 offsets.push(parents.len() as u32);
             }
-            let coarse_cell_nodes: Vec<[u32; 8]> = coarse_cells
+            if companions_k {
+                // A companion's amplitudes vary smoothly: trilinear, from
+                // the coarse companions.
+                for f in &nodes_k {
+                    for (p, w) in trilinear(f) {
+                        parents.push(p + nc);
+                        weights.push(Vec3::repeat(w));
+                    }
+                    offsets.push(parents.len() as u32);
+                }
+            }
+            let corner = |c: &[i64; 3], o: usize| {
+                let o = o as i64;
+                index[&[c[0] + (o & 1), c[1] + ((o >> 1) & 1), c[2] + (o >> 2)]]
+            };
+            // The companions' cells are the grid's, shifted: the two coarse
+            // spaces are not coupled.
+            let mut cells: Vec<[u32; 8]> = coarse_cells
                 .iter()
-                .map(|c| {
-                    std::array::from_fn(|o| {
-                        let o = o as i64;
-                        index[&[c[0] + (o & 1), c[1] + ((o >> 1) & 1), c[2] + (o >> 2)]]
-                    })
-                })
+                .map(|c| std::array::from_fn(|o| corner(c, o)))
                 .collect();
+            if enrich {
+                let shifted: Vec<[u32; 8]> = cells.iter().map(|c| c.map(|n| n + nc)).collect();
+                cells.extend(shifted);
+            }
             coarse_patterns.push(BlockCsr::lattice_pattern(
-                coarse_nodes.len(),
-                &coarse_cell_nodes,
+                level_size(nc as usize, enrich),
+                &cells,
             ));
+            first_companions.push(if enrich { nc } else { u32::MAX });
             prolongations.push(Prolongation {
                 offsets,
                 parents,
@@ -208,10 +290,12 @@ impl HierarchyShape {
             });
             cells_k = coarse_cells;
             nodes_k = coarse_nodes;
+            companions_k = enrich;
         }
         Self {
             prolongations,
             coarse_patterns,
+            first_companions,
             fine_free: free.to_vec(),
         }
     }
@@ -451,13 +535,27 @@ impl Multigrid {
     pub(crate) fn new(a: Operator, shape: &HierarchyShape) -> Result<Self, SetupError> {
         let mut levels = Vec::with_capacity(shape.num_levels());
         levels.push(level_of(a.a, a.mask));
-        for (p, pattern) in shape.prolongations.iter().zip(&shape.coarse_patterns) {
+
+        for ((p, pattern), &companions) in shape
+            .prolongations
+            .iter()
+            .zip(&shape.coarse_patterns)
+            .zip(&shape.first_companions)
+        {
             let fine = &levels[levels.len() - 1];
-            let (ac, mask) = galerkin(&fine.a, &fine.mask, p, pattern);
+            let (ac, mask) = galerkin(&fine.a, &fine.mask, p, pattern, companions);
             levels.push(level_of(ac, mask));
         }
         let last = &levels[levels.len() - 1];
-        let coarsest = match last.a.factor_lu(&vec![[false; 3]; last.a.num_rows()]) {
+        let regularized;
+        let coarsest_matrix = match shape.first_companions.last() {
+            Some(&first) if (first as usize) < last.a.num_rows() => {
+                regularized = regularize_companions(&last.a, first as usize);
+                &regularized
+            }
+            _ => &last.a,
+        };
+        let coarsest = match coarsest_matrix.factor_lu(&vec![[false; 3]; last.a.num_rows()]) {
             Ok(f) => Some(f),
             Err(e) => return Err(SetupError(format!("coarsest level: {e}"))),
         };
@@ -545,6 +643,30 @@ impl Multigrid {
     }
 }
 
+/// Relative shift added to the diagonal of the coarsest level's companions
+/// before it is factored: where a part is thinner than a coarse cell, the
+/// patterns interpolated from neighbouring companions can cancel, and the
+/// Galerkin operator is singular along those combinations. The coarse
+/// right-hand side has no component there (it is `P^T r`), so the shift
+/// leaves every other component as it was to this relative order.
+const COARSEST_REGULARIZATION: f64 = 1e-10;
+
+/// `a` with [`COARSEST_REGULARIZATION`] times its largest diagonal entry
+/// added to the diagonal of the nodes from `first` on (the companions).
+fn regularize_companions(a: &BlockCsr, first: usize) -> BlockCsr {
+    let largest = (0..a.num_rows())
+        .filter_map(|i| a.find(i, i))
+        .map(|k| a.blocks[k].diagonal().abs().max())
+        .fold(0.0, f64::max);
+    let mut out = a.clone();
+    for i in first..a.num_rows() {
+        if let Some(k) = out.find(i, i) {
+            out.blocks[k] += Mat3::identity() * (COARSEST_REGULARIZATION * largest);
+        }
+    }
+    out
+}
+
 fn level_of(a: BlockCsr, mask: Vec<[bool; 3]>) -> Level {
     let inv_diag = inverse_diagonal(&a);
     let rho = spectral_radius(&a, &inv_diag, &mask);
@@ -567,6 +689,7 @@ fn galerkin(
     mask: &[[bool; 3]],
     p: &Prolongation,
     pattern: &BlockCsr,
+    companions: u32,
 ) -> (BlockCsr, Vec<[bool; 3]>) {
     let nc = pattern.num_rows();
     // A coarse dof is free if some free fine dof interpolates from it.
@@ -581,7 +704,7 @@ fn galerkin(
     }
     // Coarse rows in parallel: each coarse row a collects the fine rows that
     // interpolate from it (transpose of P), in fine order (deterministic).
-    let mut children: Vec<Vec<(u32, f64)>> = vec![Vec::new(); nc];
+    let mut children: Vec<Vec<(u32, Vec3)>> = vec![Vec::new(); nc];
     for i in 0..mask.len() {
         for q in p.offsets[i] as usize..p.offsets[i + 1] as usize {
             children[p.parents[q] as usize].push((i as u32, p.weights[q]));
@@ -593,24 +716,46 @@ fn galerkin(
             let lo = pattern.row_offsets[ca] as usize;
             let hi = pattern.row_offsets[ca + 1] as usize;
             let cols = &pattern.col_indices[lo..hi];
+            let companion_row = ca as u32 >= companions;
             let mut row = vec![Mat3::zeros(); hi - lo];
             for &(i, wa) in &children[ca] {
                 let i = i as usize;
                 for k in a.row_offsets[i] as usize..a.row_offsets[i + 1] as usize {
                     let j = a.col_indices[k] as usize;
-                    // M A M: a held row or column contributes nothing.
+                    // M A M: a held row or column contributes nothing; the
+                    // row's weights scale the block's rows once.
                     let mut blk = a.blocks[k];
                     for e in 0..3 {
                         for d in 0..3 {
-                            if !(mask[i][e] && mask[j][d]) {
-                                blk[(e, d)] = 0.0;
-                            }
+                            blk[(e, d)] = if mask[i][e] && mask[j][d] {
+                                blk[(e, d)] * wa[e]
+                            } else {
+                                0.0
+                            };
                         }
                     }
-                    for q in p.offsets[j] as usize..p.offsets[j + 1] as usize {
+                    // Only the parents of the row's kind: the grid's and the
+                    // mechanisms' coarse spaces are not coupled (see the
+                    // module docs), and a node's parents list the grid's
+                    // first.
+                    let parents = p.offsets[j] as usize..p.offsets[j + 1] as usize;
+                    let split = parents.start
+                        + p.parents[parents.clone()].partition_point(|&c| c < companions);
+                    let parents = if companion_row {
+                        split..parents.end
+                    } else {
+                        parents.start..split
+                    };
+                    for q in parents {
                         let cb = p.parents[q];
                         if let Ok(pos) = cols.binary_search(&cb) {
-                            row[pos] += blk * (wa * p.weights[q]);
+                            let wb = p.weights[q];
+                            let target = &mut row[pos];
+                            for d in 0..3 {
+                                for e in 0..3 {
+                                    target[(e, d)] += blk[(e, d)] * wb[d];
+                                }
+                            }
                         }
                     }
                 }
@@ -639,7 +784,7 @@ fn restrict(p: &Prolongation, mask: &[[bool; 3]], r: &[Vec3], rc: &mut [Vec3]) {
             if m[2] { ri.z } else { 0.0 },
         );
         for q in p.offsets[i] as usize..p.offsets[i + 1] as usize {
-            rc[p.parents[q] as usize] += masked * p.weights[q];
+            rc[p.parents[q] as usize] += masked.component_mul(&p.weights[q]);
         }
     }
 }
@@ -650,7 +795,7 @@ fn prolong_add(p: &Prolongation, mask: &[[bool; 3]], ec: &[Vec3], x: &mut [Vec3]
             let i = ci * CHUNK + k;
             let mut e = Vec3::zeros();
             for q in p.offsets[i] as usize..p.offsets[i + 1] as usize {
-                e += ec[p.parents[q] as usize] * p.weights[q];
+                e += ec[p.parents[q] as usize].component_mul(&p.weights[q]);
             }
             for d in 0..3 {
                 if mask[i][d] {
@@ -1076,5 +1221,57 @@ mod tests {
                 assert!((f[d] - e[d]).abs() <= 1e-6 * 27.0 * 3.0, "{f} vs {e}");
             }
         }
+    }
+
+    /// The first prolongation of an enriched hierarchy carries the lattice's
+    /// three mechanisms: constant companion amplitudes give each fine node
+    /// its hourglass signs, a field the springs-only model does not resist,
+    /// and the grid's coarse space alone does not contain it.
+    #[test]
+    fn companions_prolong_to_the_lattice_mechanisms() {
+        let l = hexmesh::Lattice::block([12, 10, 10], 0.05, [0.0; 3]).unwrap();
+        let model = crate::Model::new(
+            &l,
+            crate::Material::new(1e4, 0.3, 1000.0).unwrap(),
+            &crate::model::SpringsOnly,
+        )
+        .unwrap();
+        assert!(!model.resists_mechanisms());
+        let coords = model.grid_coords();
+        let free = vec![true; 3 * l.num_nodes()];
+        let shape = HierarchyShape::new(l.cells(), &coords, &free, true);
+        let p = &shape.prolongations[0];
+        let nc = shape.first_companions[0] as usize;
+        assert_eq!(shape.coarse_patterns[0].num_rows(), 2 * nc);
+        let mut coarse = vec![Vec3::zeros(); 2 * nc];
+        coarse[nc..].iter_mut().for_each(|v| *v = Vec3::repeat(1.0));
+        let mask = vec![[true; 3]; l.num_nodes()];
+        let mut fine = vec![Vec3::zeros(); l.num_nodes()];
+        prolong_add(p, &mask, &coarse, &mut fine);
+        for (u, g) in fine.iter().zip(&coords) {
+            assert_eq!(*u, hourglass_signs(*g));
+        }
+        let k = model.rest_stiffness();
+        let mut force = vec![Vec3::zeros(); fine.len()];
+        mul(&k, &fine, &mut force);
+        let scale = k.blocks.iter().map(|b| b.abs().max()).fold(0.0, f64::max);
+        let largest = force.iter().map(|f| f.abs().max()).fold(0.0, f64::max);
+        assert!(largest <= 1e-12 * scale, "{largest:e} of {scale:e}");
+        // The same amplitudes with hourglass control are resisted.
+        let hg = crate::Model::new(
+            &l,
+            crate::Material::new(1e4, 0.3, 1000.0).unwrap(),
+            &crate::model::HourglassControl::new(Box::new(crate::model::SpringsOnly), 0.05)
+                .unwrap(),
+        )
+        .unwrap();
+        assert!(hg.resists_mechanisms());
+        mul(&hg.rest_stiffness(), &fine, &mut force);
+        let largest = force.iter().map(|f| f.abs().max()).fold(0.0, f64::max);
+        assert!(largest > 1e-3 * scale, "{largest:e} of {scale:e}");
+        // Without enrichment the coarse level has the grid's nodes only.
+        let plain = HierarchyShape::new(l.cells(), &coords, &free, false);
+        assert_eq!(plain.coarse_patterns[0].num_rows(), nc);
+        assert_eq!(plain.first_companions[0], u32::MAX);
     }
 }
