@@ -1431,6 +1431,49 @@ impl Model {
     /// matrix-free, in the force pass's layer order (the same bits for any
     /// thread count).
     fn rest_stiffness_mul(&self, mats: &[[[f64; 24]; 24]], v: &[Vec3], out: &mut [Vec3]) {
+        self.add_by_layers(out, |cell| {
+            let k = &mats[self.param_index(cell)];
+            let nodes = &self.cells[cell];
+            let mut local = [0.0f64; 24];
+            for (a, &n) in nodes.iter().enumerate() {
+                let p = &v[n as usize];
+                local[3 * a] = p.x;
+                local[3 * a + 1] = p.y;
+                local[3 * a + 2] = p.z;
+            }
+            std::array::from_fn(|a| {
+                Vec3::from_fn(|d, _| k[3 * a + d].iter().zip(&local).map(|(x, y)| x * y).sum())
+            })
+        });
+    }
+
+    /// `out = T v` with `T` the [`Model::tangent`] at `x`, matrix-free: the
+    /// force kernel on dual numbers along `v`, so no matrix is stored (the
+    /// same values as the assembled product to round-off), in the force
+    /// pass's layer order (the same bits for any thread count). Newton's
+    /// solves use the assembled tangent: docs/solvers.md ("Matrix-free or
+    /// assembled") measures both.
+    pub fn tangent_mul(&self, x: &[Vec3], v: &[Vec3], out: &mut [Vec3]) {
+        assert_eq!(x.len(), self.num_nodes(), "positions: one per node");
+        assert_eq!(v.len(), self.num_nodes(), "directions: one per node");
+        assert_eq!(out.len(), self.num_nodes(), "products: one per node");
+        self.add_by_layers(out, |cell| {
+            let nodes = &self.cells[cell];
+            let xd: [[kernel::Dual<1>; 3]; 8] = std::array::from_fn(|a| {
+                let (p, q) = (&x[nodes[a] as usize], &v[nodes[a] as usize]);
+                std::array::from_fn(|d| kernel::Dual { v: p[d], g: [q[d]] })
+            });
+            let mut f = [[<kernel::Dual<1> as kernel::Scalar>::cst(0.0); 3]; 8];
+            kernel::cell_forces(self.params_of(cell), &xd, &mut f);
+            f.map(|fa| Vec3::new(fa[0].g[0], fa[1].g[0], fa[2].g[0]))
+        });
+    }
+
+    /// `out = sum over cells of the cell's 8 corner vectors`, `per_cell(c)`
+    /// giving them, added in the force pass's layer order: the even layers
+    /// in parallel, then the odd ones, each layer's cells in order (the same
+    /// bits for any thread count).
+    fn add_by_layers(&self, out: &mut [Vec3], per_cell: impl Fn(usize) -> [Vec3; 8] + Sync) {
         out.par_chunks_mut(4 * CHUNK)
             .for_each(|c| c.fill(Vec3::zeros()));
         let shared = SharedForces(out.as_mut_ptr());
@@ -1440,26 +1483,14 @@ impl Model {
                 .step_by(2)
                 .for_each(|l| {
                     for cell in self.layers.range(l) {
-                        let k = &mats[self.param_index(cell)];
-                        let nodes = &self.cells[cell];
-                        let mut local = [0.0f64; 24];
-                        for (a, &n) in nodes.iter().enumerate() {
-                            let p = &v[n as usize];
-                            local[3 * a] = p.x;
-                            local[3 * a + 1] = p.y;
-                            local[3 * a + 2] = p.z;
-                        }
+                        let corner = per_cell(cell);
                         let s = shared;
-                        for (a, &n) in nodes.iter().enumerate() {
-                            let mut f = [0.0f64; 3];
-                            for (d, fd) in f.iter_mut().enumerate() {
-                                *fd = k[3 * a + d].iter().zip(&local).map(|(x, y)| x * y).sum();
-                            }
+                        for (&n, f) in self.cells[cell].iter().zip(corner) {
                             // SAFETY: as in the force pass, the nodes of a
                             // layer of this phase's parity belong to no other
                             // task of the phase; `out` has one entry per node.
                             unsafe {
-                                *s.0.add(n as usize) += Vec3::new(f[0], f[1], f[2]);
+                                *s.0.add(n as usize) += f;
                             }
                         }
                     }
