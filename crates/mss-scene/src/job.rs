@@ -1276,11 +1276,13 @@ fn build_problem(
 ) -> Result<Problem, JobError> {
     let scene = &input.scene;
     let views = scene.bodies();
+    // With `[contact] points` "surface" or "both", the embedded surfaces
+    // touch the obstacles, and the bodies touch each other through them.
+    let surface = (scene.contact.points != mss_core::contact::ContactPoints::Nodes)
+        .then(|| crate::output::joined_embedding(&parts_of(bodies)));
     let problem = if !scene.has_bodies() {
         let (view, body) = (&views[0], &bodies[0]);
         let model = body_model(input, view, body, registry)?;
-        let surface = (scene.contact.points != mss_core::contact::ContactPoints::Nodes)
-            .then(|| hexmesh::Embedding::new(&body.lattice, &body.mesh));
         input.problem_with_obstacles(model, registry, surface.as_ref(), extra)?
     } else {
         let mut parts = Vec::with_capacity(bodies.len());
@@ -1293,8 +1295,6 @@ fn build_problem(
             key: "[[bodies]]".into(),
             message: e.to_string(),
         })?;
-        let surface = (scene.contact.points != mss_core::contact::ContactPoints::Nodes)
-            .then(|| crate::output::joined_embedding(&parts_of(bodies)));
         input.scene_wide_problem(union, registry, surface.as_ref(), extra)?
     };
     let self_contact: Vec<bool> = views.iter().map(|v| v.self_contact).collect();
@@ -1305,14 +1305,31 @@ fn build_problem(
     let settings = scene
         .contact
         .body_settings(mss_core::contact::ContactSettings::for_bodies(model));
-    let contact =
-        mss_core::contact::BodyContact::new(model, settings, &self_contact).map_err(|e| {
-            JobError::Setting {
-                scene: input.name(),
-                key: "[contact]".into(),
-                message: e.to_string(),
-            }
-        })?;
+    let contact = match &surface {
+        Some(_) => {
+            // The surfaces refined to the cells' size: a contact's reaction
+            // goes to the corners of the triangle touched, and a face of a
+            // coarse mesh (a cube's) would carry a ball's weight at its
+            // corners, far from where the ball presses.
+            let refined: Vec<hexmesh::TriMesh> = bodies
+                .iter()
+                .map(|b| b.mesh.refined(b.lattice.h()))
+                .collect();
+            let parts: Vec<(&hexmesh::Lattice, &hexmesh::TriMesh)> = bodies
+                .iter()
+                .zip(&refined)
+                .map(|(b, mesh)| (&b.lattice, mesh))
+                .collect();
+            let surface = crate::output::joined_embedding(&parts);
+            mss_core::contact::BodyContact::on_surface(model, &surface, settings, &self_contact)
+        }
+        None => mss_core::contact::BodyContact::new(model, settings, &self_contact),
+    }
+    .map_err(|e| JobError::Setting {
+        scene: input.name(),
+        key: "[contact]".into(),
+        message: e.to_string(),
+    })?;
     Ok(problem.with_body_contact(contact))
 }
 

@@ -49,6 +49,23 @@
 //! tangent (not in its forces): a body held by contact alone would
 //! otherwise have a singular tangent wherever an iterate lifts it off.
 //!
+//! Also left out: a point just outside a body, beside the rim of a face
+//! whose plane it is below and within reach of (half a cell), is taken as
+//! touching at the rim (its depth is the plane's, its weights the rim's),
+//! and the tangent is approximate there. The depth is that of the body's
+//! tilt at its rim, so the force is small.
+//!
+//! **Embedded surfaces** ([`BodyContact::on_surface`]): the points and the
+//! triangles are the embedded input surfaces' vertices and triangles
+//! instead of the lattices' boundaries (refined by the scene to the cells'
+//! size, `hexmesh::TriMesh::refined`, so that a reaction goes to cells near
+//! where it acts). The search and the forces work on the vertices'
+//! positions; a force at a vertex goes to its cell's 8 nodes by the
+//! trilinear weights, and a derivative block between vertices `a` and `b`
+//! to their nodes with the products of their weights. The broad phase then
+//! also keeps the triangles whose boxes meet another body's with none of
+//! their corners there (a large face).
+//!
 //! **Self-contact** (per body) lets a body's points touch its own surface,
 //! except the triangles whose nodes lay within [`SELF_EXCLUSION`] cells of
 //! the point at rest: the point's own and neighbouring cells, which touch
@@ -90,6 +107,10 @@ pub const STATIC_MARGIN: f64 = 0.1;
 /// through it, they hold the edge back like a ridge, and a block sliding on
 /// another slowed as if friction were 10 % higher.
 pub const FACING_COSINE: f64 = 0.25;
+
+/// Grid cells a lattice face's box may cover in the broad phase (see
+/// [`BodyContact`]'s `span_limit`).
+const LATTICE_SPAN_LIMIT: i64 = 64;
 
 /// Points per parallel task of the narrow phase.
 const POINT_CHUNK: usize = 256;
@@ -418,6 +439,51 @@ pub struct BodyContact {
     omega_sq_per_stiffness: f64,
     cache: PairCache,
     candidates: CandidateCache,
+    /// Grid cells a triangle's box may cover in the broad phase: more is
+    /// taken for an exploded surface and left out (the solver's checks see
+    /// it). 64 for lattice faces; for an embedded surface, room for its
+    /// largest triangle stretched to twice its size.
+    span_limit: i64,
+    /// With the embedded surfaces as the bodies' surfaces: how each of its
+    /// vertices (the points, and the triangles' corners) follows the
+    /// nodes. The search and the forces then work on the vertices'
+    /// positions, and the forces and their derivatives go to the nodes by
+    /// the trilinear weights.
+    carrier: Option<Carrier>,
+}
+
+/// The embedded surface's vertices bound to the lattice: each one the
+/// trilinear combination of its cell's 8 nodes.
+#[derive(Debug, Clone)]
+struct Carrier {
+    nodes: Vec<[u32; 8]>,
+    weights: Vec<[f64; 8]>,
+}
+
+impl Carrier {
+    /// The vertices' positions (or velocities) for the nodes' `x`.
+    fn carry(&self, x: &[Vec3]) -> Vec<Vec3> {
+        self.nodes
+            .par_iter()
+            .zip(&self.weights)
+            .with_min_len(POINT_CHUNK)
+            .map(|(nodes, weights)| {
+                nodes
+                    .iter()
+                    .zip(weights)
+                    .map(|(&n, &w)| x[n as usize] * w)
+                    .sum()
+            })
+            .collect()
+    }
+
+    /// The nodes of vertex `v`, with their weights.
+    fn bound(&self, v: u32) -> impl Iterator<Item = (u32, f64)> + '_ {
+        self.nodes[v as usize]
+            .iter()
+            .copied()
+            .zip(self.weights[v as usize].iter().copied())
+    }
 }
 
 /// Why body contact could not be set up.
@@ -508,14 +574,8 @@ impl BodyContact {
         settings: ContactSettings,
         self_contact: &[bool],
     ) -> Result<Self, BodyContactError> {
-        settings.validate()?;
+        let base = Self::base(model, settings, self_contact)?;
         let bodies = model.bodies();
-        if self_contact.len() != bodies.len() {
-            return Err(BodyContactError::SelfContactCount {
-                given: self_contact.len(),
-                bodies: bodies.len(),
-            });
-        }
         let triangles = boundary_triangles(model);
         let boundary = model.boundary_nodes();
         let masses = model.masses();
@@ -549,29 +609,226 @@ impl BodyContact {
                 .zip(&stiffness_ratio)
                 .map(|(&n, r)| r / masses[n as usize])
                 .fold(0.0, f64::max);
-        // Twice the largest cell: a triangle's grown box spans at most two
-        // grid cells per axis.
-        let grid_size = 2.0 * bodies.iter().map(|b| b.h).fold(0.0, f64::max);
         Ok(Self {
-            settings,
             triangles,
             points,
             point_of_node,
             point_body,
             stiffness_ratio,
             point_mass,
-            self_contact: self_contact.to_vec(),
-            body_h: bodies.iter().map(|b| b.h).collect(),
             rest: if self_contact.iter().any(|&s| s) {
                 model.rest_positions().to_vec()
             } else {
                 Vec::new()
             },
-            grid_size,
             omega_sq_per_stiffness,
+            ..base
+        })
+    }
+
+    /// What both constructors share: the settings and the self-contact
+    /// flags checked, each body's cell, the broad phase's grid size (twice
+    /// the largest cell: a triangle's grown box spans at most two grid
+    /// cells per axis), and no points or triangles yet.
+    fn base(
+        model: &Model,
+        settings: ContactSettings,
+        self_contact: &[bool],
+    ) -> Result<Self, BodyContactError> {
+        settings.validate()?;
+        let bodies = model.bodies();
+        if self_contact.len() != bodies.len() {
+            return Err(BodyContactError::SelfContactCount {
+                given: self_contact.len(),
+                bodies: bodies.len(),
+            });
+        }
+        Ok(Self {
+            settings,
+            triangles: Vec::new(),
+            points: Vec::new(),
+            point_of_node: Vec::new(),
+            point_body: Vec::new(),
+            stiffness_ratio: Vec::new(),
+            point_mass: Vec::new(),
+            self_contact: self_contact.to_vec(),
+            body_h: bodies.iter().map(|b| b.h).collect(),
+            rest: Vec::new(),
+            grid_size: 2.0 * bodies.iter().map(|b| b.h).fold(0.0, f64::max),
+            omega_sq_per_stiffness: 0.0,
             cache: PairCache::default(),
             candidates: CandidateCache::default(),
+            span_limit: LATTICE_SPAN_LIMIT,
+            carrier: None,
         })
+    }
+
+    /// Contact between `model`'s bodies through their embedded surfaces
+    /// (`surface`, every body's, in the model's node numbering as
+    /// [`Model::union`] joins them): each vertex is a point that touches the
+    /// other bodies' surface triangles (and its own body's, for a body in
+    /// `self_contact`), and the forces go to the vertices' cells' nodes by
+    /// the trilinear weights. The bodies then touch where they are drawn,
+    /// not up to a cell away where their lattices end.
+    ///
+    /// A vertex's stiffness is its share of the nodes' (a body's boundary
+    /// nodes over its surface vertices, as for obstacles), so a dense
+    /// surface does not stiffen the contact. A surface wound inward (a
+    /// negative enclosed volume) is turned outward.
+    pub fn on_surface(
+        model: &Model,
+        surface: &hexmesh::Embedding,
+        settings: ContactSettings,
+        self_contact: &[bool],
+    ) -> Result<Self, BodyContactError> {
+        let base = Self::base(model, settings, self_contact)?;
+        let bodies = model.bodies();
+        let count = surface.vertex_cells().len();
+        let (nodes, weights): (Vec<[u32; 8]>, Vec<[f64; 8]>) =
+            (0..count).map(|i| surface.vertex_weights(i)).unzip();
+        let carrier = Carrier { nodes, weights };
+        let rest = carrier.carry(model.rest_positions());
+        let vertex_body: Vec<u32> = carrier
+            .nodes
+            .iter()
+            .map(|n| model.body_of_node(n[0] as usize) as u32)
+            .collect();
+        // Each body's triangles, turned outward where its surface encloses
+        // a negative volume.
+        let mut volume = vec![0.0; bodies.len()];
+        for t in surface.triangles() {
+            let [a, b, c] = t.map(|v| rest[v as usize]);
+            volume[vertex_body[t[0] as usize] as usize] += a.dot(&b.cross(&c)) / 6.0;
+        }
+        let triangles: Vec<Triangle> = surface
+            .triangles()
+            .iter()
+            .map(|t| {
+                let body = vertex_body[t[0] as usize];
+                let nodes = if volume[body as usize] < 0.0 {
+                    [t[0], t[2], t[1]]
+                } else {
+                    *t
+                };
+                Triangle { nodes, body }
+            })
+            .collect();
+        let masses = model.masses();
+        let boundary = model.boundary_nodes();
+        let mean = super::mean_boundary_mass(model, &boundary);
+        let mut boundary_per_body = vec![0usize; bodies.len()];
+        for &n in &boundary {
+            boundary_per_body[model.body_of_node(n as usize)] += 1;
+        }
+        let mut vertices_per_body = vec![0usize; bodies.len()];
+        for &b in &vertex_body {
+            vertices_per_body[b as usize] += 1;
+        }
+        let takes_part = |b: usize| bodies.len() > 1 || self_contact[b];
+        let points: Vec<u32> = (0..count as u32)
+            .filter(|&v| takes_part(vertex_body[v as usize] as usize))
+            .collect();
+        let mut point_of_node = vec![u32::MAX; count];
+        for (i, &v) in points.iter().enumerate() {
+            point_of_node[v as usize] = i as u32;
+        }
+        let point_body: Vec<u32> = points.iter().map(|&v| vertex_body[v as usize]).collect();
+        let point_mass: Vec<f64> = points
+            .iter()
+            .map(|&v| {
+                carrier
+                    .bound(v)
+                    .map(|(n, w)| masses[n as usize] * w.abs())
+                    .sum()
+            })
+            .collect();
+        let stiffness_ratio: Vec<f64> = points
+            .iter()
+            .zip(&point_mass)
+            .map(|(&v, &m)| {
+                let b = vertex_body[v as usize] as usize;
+                let share = boundary_per_body[b] as f64 / vertices_per_body[b].max(1) as f64;
+                (if mean > 0.0 { m / mean } else { 1.0 }) * share.min(1.0)
+            })
+            .collect();
+        // Gershgorin on the stiffness mapped to the nodes: a vertex of
+        // stiffness k couples its nodes a, b by w_a w_b k (row sums
+        // |w_a| k), and its triangle's side as much again; a margin of 1.5.
+        let mut rows = vec![0.0f64; model.num_nodes()];
+        for (&v, &r) in points.iter().zip(&stiffness_ratio) {
+            for (n, w) in carrier.bound(v) {
+                rows[n as usize] += w.abs() * r;
+            }
+        }
+        let omega_sq_per_stiffness = 3.0
+            * rows
+                .iter()
+                .zip(masses)
+                .filter(|(_, m)| **m > 0.0)
+                .map(|(r, m)| r / m)
+                .fold(0.0, f64::max);
+        let grid_size = base.grid_size;
+        let span_limit = triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.nodes.map(|n| rest[n as usize]);
+                let extent = a.sup(&b).sup(&c) - a.inf(&b).inf(&c);
+                // Twice the size, grown by the depth limit, in grid cells.
+                extent
+                    .iter()
+                    .map(|e| (2.0 * e / grid_size).ceil() as i64 + 2)
+                    .product::<i64>()
+            })
+            .fold(LATTICE_SPAN_LIMIT, i64::max);
+        Ok(Self {
+            triangles,
+            points,
+            point_of_node,
+            point_body,
+            stiffness_ratio,
+            point_mass,
+            rest,
+            omega_sq_per_stiffness,
+            span_limit,
+            carrier: Some(carrier),
+            ..base
+        })
+    }
+
+    /// Whether the bodies touch through their embedded surfaces
+    /// ([`BodyContact::on_surface`]) rather than their lattices' boundaries.
+    pub fn on_embedded_surface(&self) -> bool {
+        self.carrier.is_some()
+    }
+
+    /// The positions (or velocities) the search and the forces work on:
+    /// the nodes' own, or the embedded surface's vertices'.
+    fn carried<'a>(&self, x: &'a [Vec3]) -> std::borrow::Cow<'a, [Vec3]> {
+        match &self.carrier {
+            None => std::borrow::Cow::Borrowed(x),
+            Some(c) => std::borrow::Cow::Owned(c.carry(x)),
+        }
+    }
+
+    /// The nodes that carry point-or-corner `v`, with their weights (the
+    /// node itself without an embedded surface).
+    fn nodes_of(&self, v: u32) -> Vec<(u32, f64)> {
+        match &self.carrier {
+            None => vec![(v, 1.0)],
+            Some(c) => c.bound(v).collect(),
+        }
+    }
+
+    /// Adds `force` at point-or-corner `v` to the node forces `f`.
+    fn add_at(&self, v: u32, force: Vec3, f: &mut [Vec3]) {
+        match &self.carrier {
+            None => f[v as usize] += force,
+            Some(c) => {
+                for (n, w) in c.bound(v) {
+                    f[n as usize] += force * w;
+                }
+            }
+        }
     }
 
     /// The contact settings.
@@ -669,7 +926,7 @@ impl BodyContact {
                     .and_then(|d| d.checked_add(1))
                     .and_then(|d| n.checked_mul(d))
             });
-            if !span.is_some_and(|n| (1..=64).contains(&n)) {
+            if !span.is_some_and(|n| (1..=self.span_limit).contains(&n)) {
                 continue;
             }
             let grow = DEPTH_LIMIT * self.body_h[tri.body as usize];
@@ -715,6 +972,18 @@ impl BodyContact {
             if self.may_touch(b as usize, &p, &p, &boxes) {
                 near[node as usize] = true;
                 points.push(i as u32);
+            }
+        }
+        if self.carrier.is_some() {
+            // A surface's triangles may be much larger than a cell: one
+            // reaches into another body's box with none of its corners
+            // there (a block's top face under a ball resting on it).
+            for tri in &self.triangles {
+                let [a, b, c] = tri.nodes.map(|n| x[n as usize]);
+                let (lo, hi) = (a.inf(&b).inf(&c), a.sup(&b).sup(&c));
+                if self.may_touch(tri.body as usize, &lo, &hi, &boxes) {
+                    tri.nodes.iter().for_each(|&n| near[n as usize] = true);
+                }
             }
         }
         (points, near)
@@ -1103,8 +1372,9 @@ impl BodyContact {
     /// `anchors` are this contact's entries of the state's anchors (empty:
     /// every contact is new).
     pub fn add_forces(&self, x: &[Vec3], v: &[Vec3], anchors: &[Option<Vec3>], f: &mut [Vec3]) {
-        for pair in self.pairs(x, anchors).iter() {
-            let touch = self.touch(pair, x, v, anchors);
+        let (x, v) = (self.carried(x), self.carried(v));
+        for pair in self.pairs(&x, anchors).iter() {
+            let touch = self.touch(pair, &x, &v, anchors);
             self.spread(pair, touch.force, f);
         }
     }
@@ -1120,21 +1390,39 @@ impl BodyContact {
         f: &mut [Vec3],
         touched: &mut Vec<u32>,
     ) {
-        for pair in self.pairs(x, anchors).iter() {
-            let touch = self.touch(pair, x, v, anchors);
+        let (x, v) = (self.carried(x), self.carried(v));
+        for pair in self.pairs(&x, anchors).iter() {
+            let touch = self.touch(pair, &x, &v, anchors);
             self.spread(pair, touch.force, f);
-            touched.push(self.points[pair.point as usize]);
-            touched.extend(self.triangles[pair.triangle as usize].nodes);
+            for (n, _) in self.pair_weights(pair) {
+                touched.push(n);
+            }
         }
     }
 
     /// The force on the point and minus it on the triangle, by its weights.
     fn spread(&self, pair: &Pair, force: Vec3, f: &mut [Vec3]) {
         let tri = &self.triangles[pair.triangle as usize];
-        f[self.points[pair.point as usize] as usize] += force;
+        self.add_at(self.points[pair.point as usize], force, f);
         for (j, &n) in tri.nodes.iter().enumerate() {
-            f[n as usize] -= force * pair.beta[j];
+            self.add_at(n, -force * pair.beta[j], f);
         }
+    }
+
+    /// The nodes a pair's force moves and their weights: the point's with
+    /// `+`, its triangle's with minus their barycentric weights (a node of
+    /// several may come more than once).
+    fn pair_weights(&self, pair: &Pair) -> Vec<(u32, f64)> {
+        let tri = &self.triangles[pair.triangle as usize];
+        let mut out = self.nodes_of(self.points[pair.point as usize]);
+        for (k, &corner) in tri.nodes.iter().enumerate() {
+            out.extend(
+                self.nodes_of(corner)
+                    .into_iter()
+                    .map(|(n, w)| (n, -pair.beta[k] * w)),
+            );
+        }
+        out
     }
 
     /// Adds the contact's `d(force)/dx` to `jac` (see the module docs for
@@ -1151,22 +1439,23 @@ impl BodyContact {
         // surface as touching in its tangent: a body that only contact holds
         // otherwise has a singular tangent wherever an iterate lifts it off.
         let margin = if dv_dx == 0.0 { STATIC_MARGIN } else { 0.0 };
+        let (x, v) = (self.carried(x), self.carried(v));
+        let (x, v) = (&x[..], &v[..]);
         let pairs = self.with_persisting(
             std::sync::Arc::new(self.pairs_within(x, margin)),
             x,
             anchors,
         );
         // The point and its triangle's nodes are coupled: grow the pattern.
-        let mut extra = Vec::with_capacity(6 * pairs.len());
-        for pair in pairs.iter() {
-            let p = self.points[pair.point as usize];
-            for &n in &self.triangles[pair.triangle as usize].nodes {
-                extra.push((p, n));
-                extra.push((n, p));
+        let weights: Vec<Vec<(u32, f64)>> = pairs.iter().map(|p| self.pair_weights(p)).collect();
+        let mut extra = Vec::new();
+        for w in &weights {
+            for &(a, _) in w {
+                extra.extend(w.iter().map(|&(b, _)| (a, b)));
             }
         }
         jac.extend_pattern(&extra);
-        for pair in pairs.iter() {
+        for (pair, weights) in pairs.iter().zip(&weights) {
             let mut touch = self.touch(pair, x, v, anchors);
             if pair.depth <= 0.0 {
                 touch.f_n = 0.0;
@@ -1188,15 +1477,9 @@ impl BodyContact {
                 block -= tangent * touch.stiffness;
             }
             // The force F(p - sum beta_j x_j) on the point, minus beta_i F on
-            // the triangle's nodes.
-            let p = self.points[pair.point as usize];
-            let tri = &self.triangles[pair.triangle as usize];
-            let mut weights = [(p, 1.0); 4];
-            for (k, &node) in tri.nodes.iter().enumerate() {
-                weights[k + 1] = (node, -pair.beta[k]);
-            }
-            for &(a, wa) in &weights {
-                for &(b, wb) in &weights {
+            // the triangle's nodes (each through its nodes' weights).
+            for &(a, wa) in weights {
+                for &(b, wb) in weights {
                     if let Some(idx) = jac.find(a as usize, b as usize) {
                         jac.blocks[idx] += block * (wa * wb);
                     }
@@ -1226,6 +1509,8 @@ impl BodyContact {
         if anchors.len() != self.points.len() {
             return;
         }
+        let (x, v) = (self.carried(x), self.carried(v));
+        let (x, v) = (&x[..], &v[..]);
         let start = |n: u32| x[n as usize] - v[n as usize] * dt;
         for pair in self.pairs(x, anchors).iter() {
             let i = pair.point as usize;
@@ -1254,6 +1539,8 @@ impl BodyContact {
                 return;
             }
         }
+        let (x, v) = (self.carried(x), self.carried(v));
+        let (x, v) = (&x[..], &v[..]);
         let pairs = self.pairs(x, anchors);
         // The points that touch no more (pairs are in point order).
         let mut next_pair = pairs.iter().map(|p| p.point as usize).peekable();
@@ -1310,6 +1597,8 @@ impl BodyContact {
     /// limit of a surface at `x` is anchored at its projection there (so
     /// that friction holds it where it starts, as for obstacles).
     pub fn static_anchors(&self, x: &[Vec3]) -> Vec<Option<Vec3>> {
+        let x = self.carried(x);
+        let x = &x[..];
         let keys = self.broad_phase(x, &self.near_points(x).1);
         (0..self.points.len())
             .map(|i| {
@@ -1325,7 +1614,7 @@ impl BodyContact {
 
     /// Penalty energy `k d^2 / 2` over the touching points (J).
     pub fn energy(&self, x: &[Vec3]) -> f64 {
-        self.pairs(x, &[])
+        self.pairs(&self.carried(x), &[])
             .iter()
             .map(|p| {
                 0.5 * self.settings.stiffness
@@ -1340,8 +1629,9 @@ impl BodyContact {
     /// opposite between two bodies (self-contact adds zero to its body).
     pub fn body_forces(&self, x: &[Vec3], v: &[Vec3], anchors: &[Option<Vec3>]) -> Vec<Vec3> {
         let mut out = vec![Vec3::zeros(); self.body_h.len()];
-        for pair in self.pairs(x, anchors).iter() {
-            let touch = self.touch(pair, x, v, anchors);
+        let (x, v) = (self.carried(x), self.carried(v));
+        for pair in self.pairs(&x, anchors).iter() {
+            let touch = self.touch(pair, &x, &v, anchors);
             let tri = &self.triangles[pair.triangle as usize];
             out[self.point_body[pair.point as usize] as usize] += touch.force;
             out[tri.body as usize] -= touch.force;
@@ -1358,7 +1648,7 @@ impl BodyContact {
     /// [`BodyContact::max_depth`] with the state's anchors (this contact's
     /// part): the depth of points kept on their side too.
     pub fn max_depth_with(&self, x: &[Vec3], anchors: &[Option<Vec3>]) -> f64 {
-        self.pairs(x, anchors)
+        self.pairs(&self.carried(x), anchors)
             .iter()
             .map(|p| p.depth)
             .fold(0.0, f64::max)

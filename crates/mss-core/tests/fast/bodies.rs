@@ -225,26 +225,34 @@ fn the_contact_tangent_between_bodies_matches_finite_differences() {
         .enumerate()
         .map(|(i, r)| r + Vec3::new((i as f64).sin(), (i as f64 * 0.3).cos(), 0.0) * 1e-6)
         .collect();
+    let (worst, scale) = tangent_error(&bodies, model, &x, 7);
+    assert!(worst < 3e-3 * scale, "worst {worst} of {scale}");
+}
+
+/// The largest difference between `bodies`' contact tangent at `x` (at
+/// rest) and finite differences of its forces, over the touching nodes
+/// (every `stride`-th perturbed), and the tangent's largest block norm.
+fn tangent_error(bodies: &BodyContact, model: &Model, x: &[Vec3], stride: usize) -> (f64, f64) {
     let v = vec![Vec3::zeros(); x.len()];
-    let mut jac = model.tangent(&x);
+    let mut jac = model.tangent(x);
     jac.blocks
         .iter_mut()
         .for_each(|b| *b = mss_core::Mat3::zeros());
-    bodies.add_jacobian(&x, &v, &[], 1.0, &mut jac);
+    bodies.add_jacobian(x, &v, &[], 1.0, &mut jac);
     let force = |x: &[Vec3]| {
         let mut f = vec![Vec3::zeros(); x.len()];
         bodies.add_forces(x, &v, &[], &mut f);
         f
     };
-    let f0 = force(&x);
+    let f0 = force(x);
     let touching: Vec<usize> = (0..x.len()).filter(|&i| f0[i].norm() > 0.0).collect();
     assert!(touching.len() > 10);
     let eps = 1e-9;
     let mut worst = 0.0f64;
     let scale = jac.blocks.iter().map(|b| b.norm()).fold(0.0, f64::max);
-    for &j in touching.iter().step_by(7) {
+    for &j in touching.iter().step_by(stride) {
         for d in 0..3 {
-            let mut xp = x.clone();
+            let mut xp = x.to_vec();
             xp[j][d] += eps;
             let fp = force(&xp);
             for &i in &touching {
@@ -256,7 +264,7 @@ fn the_contact_tangent_between_bodies_matches_finite_differences() {
             }
         }
     }
-    assert!(worst < 3e-3 * scale, "worst {worst} of {scale}");
+    (worst, scale)
 }
 
 #[test]
@@ -606,4 +614,72 @@ fn a_block_slides_down_another_body_at_the_rigid_rate_in_both_solvers() {
             "{name}: the block is held by more than friction: {friction} vs {normal}"
         );
     }
+}
+
+/// Contact through the embedded surfaces ([`BodyContact::on_surface`]): a
+/// cube's refined surface slightly pressed into another's. The forces sum
+/// to zero (momentum), and the tangent, mapped to the nodes through the
+/// trilinear weights, matches finite differences of the forces. (The upper
+/// cube stands a cell's reach inside the lower one's top: a vertex just
+/// outside a body, beside the rim of a face whose plane it is below, is
+/// taken as touching at that rim, where the tangent is approximate; see
+/// the module docs of `contact::bodies`.)
+#[test]
+fn surface_contact_between_bodies_keeps_momentum_and_its_tangent_matches_finite_differences() {
+    let (lower_lattice, upper_lattice) = (
+        Lattice::block([4, 4, 4], 0.025, [0.0, 0.0, 0.0]).unwrap(),
+        Lattice::block([5, 5, 5], 0.016, [0.01, 0.01, 0.1 - 2e-5]).unwrap(),
+    );
+    let model = |l: &Lattice, e: f64| {
+        let param = HourglassControl::new(Box::new(VolumetricBarrier), 1.0).unwrap();
+        Model::new(l, Material::new(e, 0.3, 1000.0).unwrap(), &param).unwrap()
+    };
+    let union = Model::union(&[model(&lower_lattice, 2e5), model(&upper_lattice, 1e5)]).unwrap();
+    // The surfaces as the lattices' boxes, refined to a cell (what a scene
+    // with `[contact] points = "both"` builds), and turned inward for the
+    // upper one: the contact turns it back.
+    let lower_mesh = hexmesh::generate::box_mesh([0.0; 3], [0.1; 3]).refined(0.025);
+    let mut upper_mesh =
+        hexmesh::generate::box_mesh([0.01, 0.01, 0.1 - 2e-5], [0.09, 0.09, 0.18 - 2e-5])
+            .refined(0.016);
+    upper_mesh.triangles.iter_mut().for_each(|t| t.swap(1, 2));
+    let mut surface = hexmesh::Embedding::new(&lower_lattice, &lower_mesh);
+    surface.append(
+        &hexmesh::Embedding::new(&upper_lattice, &upper_mesh),
+        lower_lattice.num_nodes() as u32,
+    );
+    let settings = ContactSettings {
+        friction_static: 0.0,
+        friction_kinetic: 0.0,
+        damping_ratio: 0.0,
+        ..ContactSettings::for_bodies(&union)
+    };
+    let bodies = BodyContact::on_surface(&union, &surface, settings, &[false, false]).unwrap();
+    assert!(bodies.on_embedded_surface());
+    assert_eq!(
+        bodies.num_points(),
+        lower_mesh.vertices.len() + upper_mesh.vertices.len()
+    );
+    let x: Vec<Vec3> = union
+        .rest_positions()
+        .iter()
+        .enumerate()
+        .map(|(i, r)| r + Vec3::new((i as f64).sin(), (i as f64 * 0.3).cos(), 0.0) * 1e-6)
+        .collect();
+    let v = vec![Vec3::zeros(); x.len()];
+    let force = |x: &[Vec3]| {
+        let mut f = vec![Vec3::zeros(); x.len()];
+        bodies.add_forces(x, &v, &[], &mut f);
+        f
+    };
+    let f0 = force(&x);
+    let total: Vec3 = f0.iter().sum();
+    let largest = f0.iter().map(|f| f.norm()).fold(0.0, f64::max);
+    assert!(largest > 0.0, "the surfaces touch");
+    assert!(total.norm() < 1e-12 * largest * x.len() as f64, "{total}");
+    // The upper body is pushed up.
+    let per_body = bodies.body_forces(&x, &v, &[]);
+    assert!(per_body[1].z > 0.0 && (per_body[0] + per_body[1]).norm() < 1e-12);
+    let (worst, scale) = tangent_error(&bodies, &union, &x, 5);
+    assert!(worst < 3e-3 * scale, "worst {worst} of {scale}");
 }

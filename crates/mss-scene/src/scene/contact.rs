@@ -15,7 +15,11 @@ use crate::kind_table::KindTable;
 #[serde(deny_unknown_fields)]
 pub struct ContactSection {
     /// `"nodes"` (the lattice's boundary nodes, default), `"surface"` (the
-    /// embedded input surface's vertices, what is rendered) or `"both"`.
+    /// embedded input surface's vertices, what is rendered) or `"both"`
+    /// touch the obstacles. With `"surface"` or `"both"` the bodies also
+    /// touch each other (and themselves) through their embedded surfaces,
+    /// each one's vertices against the others' triangles, where they are
+    /// drawn; with `"nodes"` through their lattices' boundaries.
     #[serde(default)]
     pub points: ContactPoints,
     /// Whether the body of a scene without `[[bodies]]` touches itself

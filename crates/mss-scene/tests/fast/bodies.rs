@@ -333,3 +333,95 @@ fn a_run_of_several_bodies_interrupted_and_resumed_writes_the_uninterrupted_file
         assert!(b.iter().any(|f| f.0 == name), "{name} written");
     }
 }
+
+/// A ball dropped 2 mm onto a block (the bundled squeeze without its
+/// plate), `[contact] points` as given, run 1 s with damping: the ball's
+/// weight through the contact, and how far the ball's drawn surface ends
+/// above the block's (negative: inside it).
+fn ball_on_block(points: &str) -> (f64, f64, f64, f64) {
+    let plate = SQUEEZE
+        .find("[[obstacles]]\nshape = { kind = \"box\"")
+        .unwrap();
+    let end = plate + SQUEEZE[plate..].find("\n\n").unwrap();
+    let text = format!(
+        "{}{}",
+        &SQUEEZE[..plate],
+        &SQUEEZE[end..]
+            .replace(
+                "[contact]\n",
+                &format!("[contact]\npoints = \"{points}\"\n")
+            )
+            .replace("damping = 10.0", "damping = 30.0")
+            .replace("cells = 12", "cells = 10")
+            // The block's top half-way through a layer of its 12 mm cells.
+            .replace("scale = [0.12, 0.12, 0.06]", "scale = [0.12, 0.12, 0.066]")
+            .replace(
+                "translate = [0.0, 0.0, 0.03]",
+                "translate = [0.0, 0.0, 0.033]"
+            )
+            .replace(
+                "translate = [0.0, 0.0, 0.102]",
+                "translate = [0.0, 0.0, 0.108]"
+            )
+    );
+    let job = job(&text);
+    let s = run_to(&job, 1.0);
+    let model = job.problem.model();
+    let bodies = job.problem.contact().unwrap().bodies().unwrap();
+    assert_eq!(bodies.on_embedded_surface(), points != "nodes");
+    let anchors = &s.contact[s.contact.len() - bodies.num_points()..];
+    let between = bodies.body_forces(&s.x, &s.v, anchors);
+    let ball_weight: f64 = model.masses()[model.bodies()[1].nodes.clone()]
+        .iter()
+        .sum::<f64>()
+        * 9.81;
+    let embedding = job.embedding();
+    let surface = embedding.deform(mss_core::as_arrays(&s.x));
+    let ball = |i: usize| model.body_of_node(embedding.vertex_cells()[i][0] as usize) == 1;
+    let lowest_ball = (0..surface.len())
+        .filter(|&i| ball(i))
+        .map(|i| surface[i][2])
+        .fold(f64::INFINITY, f64::min);
+    // The block's top face (the built-in cube's top corners).
+    let block_top = (0..surface.len())
+        .filter(|&i| !ball(i))
+        .map(|i| surface[i][2])
+        .fold(f64::NEG_INFINITY, f64::max);
+    (
+        between[1].z / ball_weight,
+        (between[0] + between[1]).norm() / ball_weight,
+        lowest_ball - block_top,
+        bodies.max_depth(&s.x) / model.h(),
+    )
+}
+
+/// With `[contact] points = "both"` the bodies touch where they are drawn:
+/// a ball resting on a block whose top lies half-way through a layer of its
+/// cells ends with its drawn surface on the block's (overlapping by the
+/// penalty's depth, 1.3 mm here), where through the lattices it floats
+/// 2.5 mm above it (the lattice's top is not the drawn top). The weight
+/// goes through the contact either way.
+#[test]
+fn bodies_touch_through_their_drawn_surfaces_with_points_both() {
+    let h_block = 0.012;
+    let (carried, imbalance, gap, depth) = ball_on_block("both");
+    assert!(
+        (carried - 1.0).abs() < 0.01,
+        "carried {carried} of the weight"
+    );
+    assert!(imbalance < 1e-9, "action != reaction by {imbalance}");
+    assert!(
+        gap <= 0.0 && gap > -0.15 * h_block,
+        "the drawn surfaces {gap} m apart"
+    );
+    assert!(depth < 0.15, "{depth} cells deep");
+    let (carried, _, lattice_gap, _) = ball_on_block("nodes");
+    assert!(
+        (carried - 1.0).abs() < 0.01,
+        "carried {carried} of the weight"
+    );
+    assert!(
+        lattice_gap > 0.1 * h_block,
+        "through the lattices the drawn surfaces are {lattice_gap} m apart"
+    );
+}
