@@ -1507,8 +1507,21 @@ impl Model {
 
     /// [`Model::cell_diagnostics`] into `out`, reusing its allocation.
     pub fn cell_diagnostics_into(&self, x: &[Vec3], out: &mut Vec<CellDiagnostics>) {
+        self.cell_diagnostics_of(x, 0..self.cells.len(), out);
+    }
+
+    /// [`Model::cell_diagnostics`] of the cells `cells` only, into `out`
+    /// (reusing its allocation): a frame writer takes them a block at a
+    /// time instead of holding every cell's at once.
+    pub fn cell_diagnostics_of(
+        &self,
+        x: &[Vec3],
+        cells: std::ops::Range<usize>,
+        out: &mut Vec<CellDiagnostics>,
+    ) {
         assert_eq!(x.len(), self.num_nodes(), "positions: one per node");
-        (0..self.cells.len())
+        assert!(cells.end <= self.cells.len(), "cells of the model");
+        cells
             .into_par_iter()
             .map(|c| {
                 let p = self.params_of(c);

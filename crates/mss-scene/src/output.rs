@@ -219,6 +219,9 @@ fn start_cache(
     Pc2Writer::create(&dir.join(format!("{stem}.pc2")), rest.len(), 0.0, 1.0)
 }
 
+/// Cells whose diagnostics a frame computes at once (1.5 MB of them).
+const DIAGNOSTICS_BLOCK: usize = 1 << 16;
+
 /// The arrays of one frame, kept between frames.
 #[derive(Default)]
 struct FrameScratch {
@@ -306,8 +309,8 @@ struct PartWriter {
     /// Its nodes and cells among the model's.
     nodes: std::ops::Range<usize>,
     cells: std::ops::Range<usize>,
-    /// Its cells over its own nodes.
-    local_cells: Vec<[u32; 8]>,
+    /// Its cells over its own nodes (the lattice's, shared: not a copy).
+    local_cells: std::sync::Arc<[[u32; 8]]>,
     /// Its cells' image labels (a body made from an image).
     cell_labels: Option<Vec<i32>>,
     /// Lattice frame exporters with the extension of the files they write
@@ -341,7 +344,7 @@ impl PartWriter {
             name,
             nodes,
             cells,
-            local_cells: body.lattice.cells().to_vec(),
+            local_cells: body.lattice.shared_cells(),
             cell_labels: body.cell_labels.map(<[i32]>::to_vec),
             lattice: Vec::new(),
             skin: None,
@@ -643,13 +646,18 @@ impl FrameWriter {
                 Vec::new()
             };
         }
-        model.cell_diagnostics_into(&state.x, &mut sc.diag);
+        // A block of cells at a time: the three arrays, not a fourth of
+        // every cell's diagnostics beside them.
         sc.vol.clear();
-        sc.vol.extend(sc.diag.iter().map(|d| d.volumetric_strain));
         sc.shear.clear();
-        sc.shear.extend(sc.diag.iter().map(|d| d.shear_strain));
         sc.corr.clear();
-        sc.corr.extend(sc.diag.iter().map(|d| d.correction_force));
+        for start in (0..model.num_cells()).step_by(DIAGNOSTICS_BLOCK) {
+            let end = (start + DIAGNOSTICS_BLOCK).min(model.num_cells());
+            model.cell_diagnostics_of(&state.x, start..end, &mut sc.diag);
+            sc.vol.extend(sc.diag.iter().map(|d| d.volumetric_strain));
+            sc.shear.extend(sc.diag.iter().map(|d| d.shear_strain));
+            sc.corr.extend(sc.diag.iter().map(|d| d.correction_force));
+        }
         let contact_force = problem.contact().map(|_| problem.contact_forces(state));
         let f_int = mss_core::as_arrays(&sc.f_int);
         let f_ext = mss_core::as_arrays(&sc.f_ext);
