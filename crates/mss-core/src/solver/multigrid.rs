@@ -710,58 +710,70 @@ fn galerkin(
             children[p.parents[q] as usize].push((i as u32, p.weights[q]));
         }
     }
+    // Per task, each coarse column's position in the row being summed (a
+    // dense map over the coarse nodes, cleared after each row): a lookup
+    // instead of a binary search per block and parent.
     let rows: Vec<Vec<Mat3>> = (0..nc)
         .into_par_iter()
-        .map(|ca| {
-            let lo = pattern.row_offsets[ca] as usize;
-            let hi = pattern.row_offsets[ca + 1] as usize;
-            let cols = &pattern.col_indices[lo..hi];
-            let companion_row = ca as u32 >= companions;
-            let mut row = vec![Mat3::zeros(); hi - lo];
-            for &(i, wa) in &children[ca] {
-                let i = i as usize;
-                for k in a.row_offsets[i] as usize..a.row_offsets[i + 1] as usize {
-                    let j = a.col_indices[k] as usize;
-                    // M A M: a held row or column contributes nothing; the
-                    // row's weights scale the block's rows once.
-                    let mut blk = a.blocks[k];
-                    for e in 0..3 {
-                        for d in 0..3 {
-                            blk[(e, d)] = if mask[i][e] && mask[j][d] {
-                                blk[(e, d)] * wa[e]
-                            } else {
-                                0.0
-                            };
-                        }
-                    }
-                    // Only the parents of the row's kind: the grid's and the
-                    // mechanisms' coarse spaces are not coupled (see the
-                    // module docs), and a node's parents list the grid's
-                    // first.
-                    let parents = p.offsets[j] as usize..p.offsets[j + 1] as usize;
-                    let split = parents.start
-                        + p.parents[parents.clone()].partition_point(|&c| c < companions);
-                    let parents = if companion_row {
-                        split..parents.end
-                    } else {
-                        parents.start..split
-                    };
-                    for q in parents {
-                        let cb = p.parents[q];
-                        if let Ok(pos) = cols.binary_search(&cb) {
-                            let wb = p.weights[q];
-                            let target = &mut row[pos];
+        .map_init(
+            || vec![u32::MAX; nc],
+            |position, ca| {
+                let lo = pattern.row_offsets[ca] as usize;
+                let hi = pattern.row_offsets[ca + 1] as usize;
+                let cols = &pattern.col_indices[lo..hi];
+                for (k, &c) in cols.iter().enumerate() {
+                    position[c as usize] = k as u32;
+                }
+                let companion_row = ca as u32 >= companions;
+                let mut row = vec![Mat3::zeros(); hi - lo];
+                for &(i, wa) in &children[ca] {
+                    let i = i as usize;
+                    for k in a.row_offsets[i] as usize..a.row_offsets[i + 1] as usize {
+                        let j = a.col_indices[k] as usize;
+                        // M A M: a held row or column contributes nothing; the
+                        // row's weights scale the block's rows once.
+                        let mut blk = a.blocks[k];
+                        for e in 0..3 {
                             for d in 0..3 {
-                                for e in 0..3 {
-                                    target[(e, d)] += blk[(e, d)] * wb[d];
+                                blk[(e, d)] = if mask[i][e] && mask[j][d] {
+                                    blk[(e, d)] * wa[e]
+                                } else {
+                                    0.0
+                                };
+                            }
+                        }
+                        // Only the parents of the row's kind: the grid's and the
+                        // mechanisms' coarse spaces are not coupled (see the
+                        // module docs), and a node's parents list the grid's
+                        // first.
+                        let parents = p.offsets[j] as usize..p.offsets[j + 1] as usize;
+                        let split = parents.start
+                            + p.parents[parents.clone()].partition_point(|&c| c < companions);
+                        let parents = if companion_row {
+                            split..parents.end
+                        } else {
+                            parents.start..split
+                        };
+                        for q in parents {
+                            let pos = position[p.parents[q] as usize];
+                            if pos != u32::MAX {
+                                let wb = p.weights[q];
+                                let target = &mut row[pos as usize];
+                                for d in 0..3 {
+                                    for e in 0..3 {
+                                        target[(e, d)] += blk[(e, d)] * wb[d];
+                                    }
                                 }
                             }
                         }
                     }
                 }
-            }
-            row
-        })
+                for &c in cols {
+                    position[c as usize] = u32::MAX;
+                }
+                row
+            },
+        )
         .collect();
     let mut ac = pattern.clone();
     for (ca, row) in rows.into_iter().enumerate() {
