@@ -291,23 +291,33 @@ impl Grid {
     }
 }
 
-/// The pairs of the last positions asked about: a step asks two or three
-/// times at the same positions (its forces, its anchors, the next step's
-/// start).
-#[derive(Default)]
-struct PairCache(std::sync::Mutex<Option<(u64, std::sync::Arc<Vec<Pair>>)>>);
+/// Something a search keeps for the next one, behind a mutex (the
+/// contact is shared by the solver's threads). A clone starts empty: what
+/// it held belongs to the positions the original last saw.
+struct Cache<T>(std::sync::Mutex<Option<T>>);
 
-impl Clone for PairCache {
+impl<T> Default for Cache<T> {
+    fn default() -> Self {
+        Self(std::sync::Mutex::new(None))
+    }
+}
+
+impl<T> Clone for Cache<T> {
     fn clone(&self) -> Self {
         Self::default()
     }
 }
 
-impl std::fmt::Debug for PairCache {
+impl<T> std::fmt::Debug for Cache<T> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str("PairCache")
+        f.write_str("Cache")
     }
 }
+
+/// The pairs of the last positions asked about (by their key): a step asks
+/// two or three times at the same positions (its forces, its anchors, the
+/// next step's start).
+type PairCache = Cache<(u64, std::sync::Arc<Vec<Pair>>)>;
 
 /// Per point that may touch, the triangles it may touch while no point has
 /// moved more than half the skin since `reference` (a Verlet list).
@@ -339,20 +349,7 @@ impl Candidates {
 }
 
 /// The candidate lists of the last search, kept while they hold.
-#[derive(Default)]
-struct CandidateCache(std::sync::Mutex<Option<Candidates>>);
-
-impl Clone for CandidateCache {
-    fn clone(&self) -> Self {
-        Self::default()
-    }
-}
-
-impl std::fmt::Debug for CandidateCache {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str("CandidateCache")
-    }
-}
+type CandidateCache = Cache<Candidates>;
 
 /// The search of the triangle nearest to a point: the best facing the
 /// point (its outward normal against theirs) and the best of the others.
