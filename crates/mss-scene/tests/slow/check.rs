@@ -107,7 +107,14 @@ fn the_template_carries_its_weight_and_buckles_when_softer() {
     let t = report.time_estimate.as_ref().unwrap();
     let pilot = t.pilot.as_ref().expect("a folding body's run is piloted");
     assert_eq!(pilot.simulated_fraction, 1.0);
-    assert!(pilot.time_ratio > 1.0, "{pilot:?}");
+    // The ratio of its steps' cost to the steps at rest is a wall-time
+    // ratio: on this short run it is about 1 (0.96 was seen on a busy
+    // 2-core host), so only its being measured is asserted here; the
+    // estimates bench compares estimates with runs.
+    assert!(
+        pilot.time_ratio.is_finite() && pilot.time_ratio > 0.0,
+        "{pilot:?}"
+    );
     assert!(
         t.seconds >= pilot.stepping_seconds + t.writing_seconds,
         "{t:?}"
