@@ -48,9 +48,10 @@ pub use constraints::{ConstraintSpec, Constraints, NodeSelector};
 pub use loads::{Damping, Load, LoadSpec};
 pub use material::{Material, MaterialError};
 pub use model::{
-    BodySpan, CellCoefficients, CellDiagnostics, ForceWorkspace, HourglassControl, HourglassError,
-    Model, ModelError, PaperModel, Parameterization, ParameterizationError, Parameterizations,
-    Precision, SpringsOnly, UnknownParameterization, Volumetric, VolumetricBarrier,
+    BodySpan, CellCoefficients, CellDiagnostics, CellMeasure, ForceWorkspace, HourglassControl,
+    HourglassError, Model, ModelError, PaperModel, Parameterization, ParameterizationError,
+    Parameterizations, Precision, SpringsOnly, UnknownParameterization, Volumetric,
+    VolumetricBarrier,
 };
 pub use solver::{
     Integrator, Integrators, Problem, SolverError, State, StaticOptions, solve_static,

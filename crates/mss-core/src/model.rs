@@ -463,6 +463,17 @@ pub struct CellDiagnostics {
     pub correction_force: f64,
 }
 
+/// One of a cell's [`CellDiagnostics`], for [`Model::cell_measure_of`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CellMeasure {
+    /// [`CellDiagnostics::volumetric_strain`].
+    VolumetricStrain,
+    /// [`CellDiagnostics::shear_strain`].
+    ShearStrain,
+    /// [`CellDiagnostics::correction_force`].
+    CorrectionForce,
+}
+
 /// Scratch memory of [`Model::internal_forces_with`]. The force pass
 /// writes each cell's corner forces straight into the nodes' sums (see
 /// [`Model::internal_forces_with`]), so it holds nothing today; it stays in
@@ -1507,77 +1518,98 @@ impl Model {
 
     /// [`Model::cell_diagnostics`] into `out`, reusing its allocation.
     pub fn cell_diagnostics_into(&self, x: &[Vec3], out: &mut Vec<CellDiagnostics>) {
-        self.cell_diagnostics_of(x, 0..self.cells.len(), out);
+        assert_eq!(x.len(), self.num_nodes(), "positions: one per node");
+        (0..self.cells.len())
+            .into_par_iter()
+            .map(|c| {
+                let (volumetric_strain, shear_strain) = self.cell_strains(x, c);
+                CellDiagnostics {
+                    volumetric_strain,
+                    shear_strain,
+                    correction_force: self.cell_correction_force(x, c),
+                }
+            })
+            .collect_into_vec(out);
     }
 
-    /// [`Model::cell_diagnostics`] of the cells `cells` only, into `out`
-    /// (reusing its allocation): a frame writer takes them a block at a
-    /// time instead of holding every cell's at once.
-    pub fn cell_diagnostics_of(
+    /// One of [`CellMeasure`] for the cells `cells` only, into `out`
+    /// (reusing its allocation): a frame writer computes each of its cell
+    /// fields in turn, a block of cells at a time, instead of holding every
+    /// cell's diagnostics at once; and only the correction force costs
+    /// force kernels.
+    pub fn cell_measure_of(
         &self,
         x: &[Vec3],
         cells: std::ops::Range<usize>,
-        out: &mut Vec<CellDiagnostics>,
+        measure: CellMeasure,
+        out: &mut Vec<f64>,
     ) {
         assert_eq!(x.len(), self.num_nodes(), "positions: one per node");
         assert!(cells.end <= self.cells.len(), "cells of the model");
         cells
             .into_par_iter()
-            .map(|c| {
-                let p = self.params_of(c);
-                let xc = self.corners(x, c);
-                let (cols, jac) = kernel::deformation_gradient(&xc, p.grad_scale);
-                let f = Mat3::from_columns(&cols.map(|c| Vec3::new(c[0], c[1], c[2])));
-                let green = 0.5 * (f.transpose() * f - Mat3::identity());
-                let dev = green - Mat3::identity() * (green.trace() / 3.0);
-                let shear = (2.0 / 3.0 * dev.norm_squared()).sqrt();
-                let correction_force = if p.correction.is_some() {
-                    let mut full = [[0.0; 3]; 8];
-                    let no_hourglass = CellParams {
-                        k_hourglass: 0.0,
-                        corner_barrier: 0.0,
-                        ..*p
-                    };
-                    kernel::cell_forces(&no_hourglass, &xc, &mut full);
-                    let mut springs = [[0.0; 3]; 8];
-                    let q = CellParams {
-                        correction: None,
-                        vol_lambda_h3: 0.0,
-                        k_hourglass: 0.0,
-                        corner_barrier: 0.0,
-                        ..*p
-                    };
-                    kernel::cell_forces(&q, &xc, &mut springs);
-                    let mut vol = [[0.0; 3]; 8];
-                    if p.vol_lambda_h3 != 0.0 {
-                        let r = CellParams {
-                            correction: None,
-                            k_edge: 0.0,
-                            k_diag: 0.0,
-                            k_hourglass: 0.0,
-                            corner_barrier: 0.0,
-                            ..*p
-                        };
-                        kernel::cell_forces(&r, &xc, &mut vol);
-                    }
-                    (0..8)
-                        .map(|k| {
-                            (0..3)
-                                .map(|d| (full[k][d] - springs[k][d] - vol[k][d]).powi(2))
-                                .sum::<f64>()
-                        })
-                        .sum::<f64>()
-                        .sqrt()
-                } else {
-                    0.0
-                };
-                CellDiagnostics {
-                    volumetric_strain: jac - 1.0,
-                    shear_strain: shear,
-                    correction_force,
-                }
+            .map(|c| match measure {
+                CellMeasure::VolumetricStrain => self.cell_strains(x, c).0,
+                CellMeasure::ShearStrain => self.cell_strains(x, c).1,
+                CellMeasure::CorrectionForce => self.cell_correction_force(x, c),
             })
             .collect_into_vec(out);
+    }
+
+    /// `(J - 1, shear strain)` of cell `c` at `x` ([`CellDiagnostics`]).
+    fn cell_strains(&self, x: &[Vec3], c: usize) -> (f64, f64) {
+        let xc = self.corners(x, c);
+        let (cols, jac) = kernel::deformation_gradient(&xc, self.params_of(c).grad_scale);
+        let f = Mat3::from_columns(&cols.map(|c| Vec3::new(c[0], c[1], c[2])));
+        let green = 0.5 * (f.transpose() * f - Mat3::identity());
+        let dev = green - Mat3::identity() * (green.trace() / 3.0);
+        (jac - 1.0, (2.0 / 3.0 * dev.norm_squared()).sqrt())
+    }
+
+    /// The magnitude of cell `c`'s correction forces at `x`
+    /// ([`CellDiagnostics::correction_force`]).
+    fn cell_correction_force(&self, x: &[Vec3], c: usize) -> f64 {
+        let p = self.params_of(c);
+        if p.correction.is_none() {
+            return 0.0;
+        }
+        let xc = self.corners(x, c);
+        let mut full = [[0.0; 3]; 8];
+        let no_hourglass = CellParams {
+            k_hourglass: 0.0,
+            corner_barrier: 0.0,
+            ..*p
+        };
+        kernel::cell_forces(&no_hourglass, &xc, &mut full);
+        let mut springs = [[0.0; 3]; 8];
+        let q = CellParams {
+            correction: None,
+            vol_lambda_h3: 0.0,
+            k_hourglass: 0.0,
+            corner_barrier: 0.0,
+            ..*p
+        };
+        kernel::cell_forces(&q, &xc, &mut springs);
+        let mut vol = [[0.0; 3]; 8];
+        if p.vol_lambda_h3 != 0.0 {
+            let r = CellParams {
+                correction: None,
+                k_edge: 0.0,
+                k_diag: 0.0,
+                k_hourglass: 0.0,
+                corner_barrier: 0.0,
+                ..*p
+            };
+            kernel::cell_forces(&r, &xc, &mut vol);
+        }
+        (0..8)
+            .map(|k| {
+                (0..3)
+                    .map(|d| (full[k][d] - springs[k][d] - vol[k][d]).powi(2))
+                    .sum::<f64>()
+            })
+            .sum::<f64>()
+            .sqrt()
     }
 
     /// Per cell, how far its corners are from the best affine map of the

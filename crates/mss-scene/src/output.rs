@@ -219,38 +219,157 @@ fn start_cache(
     Pc2Writer::create(&dir.join(format!("{stem}.pc2")), rest.len(), 0.0, 1.0)
 }
 
-/// Cells whose diagnostics a frame computes at once (1.5 MB of them).
-const DIAGNOSTICS_BLOCK: usize = 1 << 16;
-
-/// The arrays of one frame, kept between frames.
+/// The buffers a frame's derived fields are computed into, one field at a
+/// time, kept between frames.
 #[derive(Default)]
 struct FrameScratch {
-    displacement: Vec<[f64; 3]>,
-    f_int: Vec<Vec3>,
-    f_ext: Vec<Vec3>,
-    /// Constant over a run: filled at the first frame.
-    fixed: Vec<bool>,
-    material: Vec<u32>,
-    diag: Vec<mss_core::CellDiagnostics>,
-    vol: Vec<f64>,
-    shear: Vec<f64>,
-    corr: Vec<f64>,
+    /// A derived point field of every node (displacement, a force).
+    nodes: Vec<Vec3>,
+    /// A derived cell field of one body's cells.
+    cells: Vec<f64>,
     ws: mss_core::ForceWorkspace,
 }
 
+/// What a frame writes that is constant over a run: filled at the first
+/// frame.
+#[derive(Default)]
+struct FrameConstants {
+    fixed: Vec<bool>,
+    material: Vec<u32>,
+}
+
+/// A point or cell field derived from the state when it is written, so that
+/// a frame never holds more than one of them (the exporters write one array
+/// after the other; [`mss_io::vtk::ComputedValues`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Derived {
+    Displacement,
+    InternalForce,
+    ExternalForce,
+    ContactForce,
+    VolumetricStrain,
+    ShearStrain,
+    CorrectionForce,
+}
+
+impl Derived {
+    const POINT_FIELDS: [Derived; 3] = [
+        Derived::Displacement,
+        Derived::InternalForce,
+        Derived::ExternalForce,
+    ];
+    const CELL_FIELDS: [Derived; 3] = [
+        Derived::VolumetricStrain,
+        Derived::ShearStrain,
+        Derived::CorrectionForce,
+    ];
+
+    fn name(self) -> &'static str {
+        match self {
+            Derived::Displacement => "displacement",
+            Derived::InternalForce => "internal_force",
+            Derived::ExternalForce => "external_force",
+            Derived::ContactForce => "contact_force",
+            Derived::VolumetricStrain => "volumetric_strain",
+            Derived::ShearStrain => "shear_strain",
+            Derived::CorrectionForce => "correction_force",
+        }
+    }
+
+    fn per_cell(self) -> bool {
+        Self::CELL_FIELDS.contains(&self)
+    }
+}
+
+/// The state a frame's derived fields come from.
+struct FrameSource<'a> {
+    problem: &'a Problem,
+    state: &'a State,
+    scratch: std::sync::Mutex<&'a mut FrameScratch>,
+}
+
+/// One body's share of a derived field.
+struct DerivedField<'a, 's> {
+    which: Derived,
+    /// The body's nodes or cells among the model's.
+    range: std::ops::Range<usize>,
+    source: &'a FrameSource<'s>,
+}
+
+impl DerivedField<'_, '_> {
+    fn field(&self) -> Field<'_> {
+        Field::computed(self.which.name(), self)
+    }
+}
+
+impl mss_io::vtk::ComputedValues for DerivedField<'_, '_> {
+    fn len(&self) -> usize {
+        self.range.len()
+    }
+
+    fn num_components(&self) -> usize {
+        if self.which.per_cell() { 1 } else { 3 }
+    }
+
+    fn with_values(
+        &self,
+        write: &mut dyn FnMut(&[f64]) -> std::io::Result<()>,
+    ) -> std::io::Result<()> {
+        let FrameSource { problem, state, .. } = self.source;
+        let model = problem.model();
+        let mut guard = self
+            .source
+            .scratch
+            .lock()
+            .map_err(|_| std::io::Error::other("a frame field's computation panicked"))?;
+        let sc = &mut **guard;
+        let range = self.range.clone();
+        match self.which {
+            Derived::Displacement => {
+                let rest = &model.rest_positions()[range.clone()];
+                sc.nodes.clear();
+                sc.nodes
+                    .extend(state.x[range].iter().zip(rest).map(|(x, r)| x - r));
+                write(mss_core::as_arrays(&sc.nodes).as_flattened())
+            }
+            Derived::InternalForce | Derived::ExternalForce => {
+                // Forces gather over cells and loads: computed for every
+                // node, written for the body's.
+                let n = model.num_nodes();
+                sc.nodes.clear();
+                sc.nodes.resize(n, Vec3::zeros());
+                if self.which == Derived::InternalForce {
+                    model.internal_forces_with(&state.x, &mut sc.ws, &mut sc.nodes);
+                } else {
+                    problem.external_forces(state.time, &state.x, 1.0, &mut sc.nodes);
+                }
+                write(mss_core::as_arrays(&sc.nodes[range]).as_flattened())
+            }
+            Derived::ContactForce => {
+                let f = problem.contact_forces(state);
+                write(mss_core::as_arrays(&f[range]).as_flattened())
+            }
+            Derived::VolumetricStrain | Derived::ShearStrain | Derived::CorrectionForce => {
+                let measure = match self.which {
+                    Derived::VolumetricStrain => mss_core::CellMeasure::VolumetricStrain,
+                    Derived::ShearStrain => mss_core::CellMeasure::ShearStrain,
+                    _ => mss_core::CellMeasure::CorrectionForce,
+                };
+                model.cell_measure_of(&state.x, range, measure, &mut sc.cells);
+                write(&sc.cells)
+            }
+        }
+    }
+}
+
 /// The point and cell arrays of the frame being written.
-struct FrameArrays<'a> {
+struct FrameArrays<'a, 's> {
     points: &'a [[f64; 3]],
-    displacement: &'a [[f64; 3]],
     velocity: &'a [[f64; 3]],
-    f_int: &'a [[f64; 3]],
-    f_ext: &'a [[f64; 3]],
     fixed: &'a [bool],
-    vol: &'a [f64],
-    shear: &'a [f64],
-    corr: &'a [f64],
     material: &'a [u32],
-    contact_force: Option<&'a [[f64; 3]]>,
+    source: &'a FrameSource<'s>,
+    has_contact: bool,
 }
 
 /// Where each body's nodes start among the nodes of the bodies side by side
@@ -425,6 +544,7 @@ pub struct FrameWriter {
     times: Vec<f64>,
     /// The frame arrays, reused from frame to frame.
     scratch: FrameScratch,
+    constants: FrameConstants,
     files: usize,
     bytes: u64,
 }
@@ -472,6 +592,7 @@ impl FrameWriter {
             springs,
             times: Vec::new(),
             scratch: FrameScratch::default(),
+            constants: FrameConstants::default(),
             files: 0,
             bytes: 0,
         })
@@ -612,33 +733,13 @@ impl FrameWriter {
         let model = problem.model();
         let n = model.num_nodes();
         let index = self.times.len();
-        // The frame's arrays live in `scratch` and are refilled in place: a
-        // frame allocates nothing of the lattice's size once the first is
-        // written.
-        let mut scratch = std::mem::take(&mut self.scratch);
-        let sc = &mut scratch;
-        let points = mss_core::as_arrays(&state.x);
-        let velocity = mss_core::as_arrays(&state.v);
-        let rest = model.rest_positions();
-        sc.displacement.clear();
-        sc.displacement.extend(
-            state
-                .x
-                .iter()
-                .zip(rest)
-                .map(|(x, r)| [x.x - r.x, x.y - r.y, x.z - r.z]),
-        );
-        sc.f_int.resize(n, Vec3::zeros());
-        model.internal_forces_with(&state.x, &mut sc.ws, &mut sc.f_int);
-        sc.f_ext.clear();
-        sc.f_ext.resize(n, Vec3::zeros());
-        problem.external_forces(state.time, &state.x, 1.0, &mut sc.f_ext);
-        if sc.fixed.len() != n {
+        let constants = &mut self.constants;
+        if constants.fixed.len() != n {
             let constraints = problem.constraints();
-            sc.fixed = (0..n)
+            constants.fixed = (0..n)
                 .map(|i| constraints.mask(i).iter().any(|&h| h))
                 .collect();
-            sc.material = if model.materials().len() > 1 {
+            constants.material = if model.materials().len() > 1 {
                 (0..model.num_cells())
                     .map(|c| model.cell_material(c))
                     .collect()
@@ -646,42 +747,31 @@ impl FrameWriter {
                 Vec::new()
             };
         }
-        // A block of cells at a time: the three arrays, not a fourth of
-        // every cell's diagnostics beside them.
-        sc.vol.clear();
-        sc.shear.clear();
-        sc.corr.clear();
-        for start in (0..model.num_cells()).step_by(DIAGNOSTICS_BLOCK) {
-            let end = (start + DIAGNOSTICS_BLOCK).min(model.num_cells());
-            model.cell_diagnostics_of(&state.x, start..end, &mut sc.diag);
-            sc.vol.extend(sc.diag.iter().map(|d| d.volumetric_strain));
-            sc.shear.extend(sc.diag.iter().map(|d| d.shear_strain));
-            sc.corr.extend(sc.diag.iter().map(|d| d.correction_force));
-        }
-        let contact_force = problem.contact().map(|_| problem.contact_forces(state));
-        let f_int = mss_core::as_arrays(&sc.f_int);
-        let f_ext = mss_core::as_arrays(&sc.f_ext);
-        let (displacement, fixed, material) = (&sc.displacement, &sc.fixed, &sc.material);
-        let (vol, shear, corr) = (&sc.vol, &sc.shear, &sc.corr);
+        // The derived fields are computed as each is written, into buffers
+        // kept between frames: one node array and one cell array at a
+        // time, not one per field.
+        let mut scratch = std::mem::take(&mut self.scratch);
+        let constants = std::mem::take(&mut self.constants);
+        let source = FrameSource {
+            problem,
+            state,
+            scratch: std::sync::Mutex::new(&mut scratch),
+        };
         let result = self.write_frame(
             problem,
             state,
             index,
             FrameArrays {
-                points,
-                displacement,
-                velocity,
-                f_int,
-                f_ext,
-                fixed,
-                vol,
-                shear,
-                corr,
-                material,
-                contact_force: contact_force.as_deref().map(mss_core::as_arrays),
+                points: mss_core::as_arrays(&state.x),
+                velocity: mss_core::as_arrays(&state.v),
+                fixed: &constants.fixed,
+                material: &constants.material,
+                source: &source,
+                has_contact: problem.contact().is_some(),
             },
         );
         self.scratch = scratch;
+        self.constants = constants;
         result
     }
 
@@ -690,7 +780,7 @@ impl FrameWriter {
         problem: &Problem,
         state: &State,
         index: usize,
-        a: FrameArrays<'_>,
+        a: FrameArrays<'_, '_>,
     ) -> Result<(), JobError> {
         let mut written = Vec::new();
         for part in &mut self.parts {
@@ -723,29 +813,41 @@ impl FrameWriter {
         part: &mut PartWriter,
         time: f64,
         index: usize,
-        a: &FrameArrays<'_>,
+        a: &FrameArrays<'_, '_>,
         written: &mut Vec<PathBuf>,
     ) -> Result<(), JobError> {
         let (n, c) = (part.nodes.clone(), part.cells.clone());
         let points = &a.points[n.clone()];
         if !part.lattice.is_empty() {
+            let derived = |which: Derived| DerivedField {
+                which,
+                range: if which.per_cell() {
+                    c.clone()
+                } else {
+                    n.clone()
+                },
+                source: a.source,
+            };
+            let [displacement, f_int, f_ext] = Derived::POINT_FIELDS.map(derived);
+            let [vol, shear, corr] = Derived::CELL_FIELDS.map(derived);
+            let contact_force = derived(Derived::ContactForce);
             let mut frame = LatticeFrame::new(points, &part.local_cells)
-                .with_point_field(Field::vectors("displacement", &a.displacement[n.clone()]))
+                .with_point_field(displacement.field())
                 .with_point_field(Field::vectors("velocity", &a.velocity[n.clone()]))
-                .with_point_field(Field::vectors("internal_force", &a.f_int[n.clone()]))
-                .with_point_field(Field::vectors("external_force", &a.f_ext[n.clone()]))
+                .with_point_field(f_int.field())
+                .with_point_field(f_ext.field())
                 .with_point_field(Field::flags("fixed", &a.fixed[n.clone()]))
-                .with_cell_field(Field::scalars("volumetric_strain", &a.vol[c.clone()]))
-                .with_cell_field(Field::scalars("shear_strain", &a.shear[c.clone()]))
-                .with_cell_field(Field::scalars("correction_force", &a.corr[c.clone()]));
+                .with_cell_field(vol.field())
+                .with_cell_field(shear.field())
+                .with_cell_field(corr.field());
             if !a.material.is_empty() {
                 frame = frame.with_cell_field(Field::ids("material", &a.material[c.clone()]));
             }
             if let Some(labels) = &part.cell_labels {
                 frame = frame.with_cell_field(Field::labels("label", labels));
             }
-            if let Some(f) = a.contact_force {
-                frame = frame.with_point_field(Field::vectors("contact_force", &f[n.clone()]));
+            if a.has_contact {
+                frame = frame.with_point_field(contact_force.field());
             }
             let stem = part.stem(LATTICE_PREFIX);
             for (exporter, ext) in &mut part.lattice {

@@ -223,6 +223,33 @@ fn corrections_vanish_at_quarter() {
     );
 }
 
+#[test]
+fn each_cell_measure_is_that_of_the_cells_diagnostics() {
+    use mss_core::CellMeasure;
+    let l = Lattice::block([3, 2, 2], 0.1, [0.0; 3]).unwrap();
+    let m = Model::new(&l, Material::new(50.0, 0.3, 1.0).unwrap(), &PaperModel).unwrap();
+    let x = deformed(&m, 11);
+    let d = m.cell_diagnostics(&x);
+    assert!(d.iter().all(|c| c.correction_force > 0.0 && c.shear_strain > 0.0));
+    let mut out = vec![f64::NAN; 2];
+    for measure in [
+        CellMeasure::VolumetricStrain,
+        CellMeasure::ShearStrain,
+        CellMeasure::CorrectionForce,
+    ] {
+        let of = |c: &mss_core::CellDiagnostics| match measure {
+            CellMeasure::VolumetricStrain => c.volumetric_strain,
+            CellMeasure::ShearStrain => c.shear_strain,
+            CellMeasure::CorrectionForce => c.correction_force,
+        };
+        for range in [0..d.len(), 3..7, 5..5] {
+            m.cell_measure_of(&x, range.clone(), measure, &mut out);
+            let expected: Vec<f64> = d[range].iter().map(of).collect();
+            assert_eq!(out, expected, "{measure:?}");
+        }
+    }
+}
+
 /// Mean z-deflection of the x = 0.4 end of the docs/model.md cantilever.
 fn cantilever_tip(k: u32) -> f64 {
     let l = Lattice::block([4 * k, k, k], 0.1 / k as f64, [0.0; 3]).unwrap();

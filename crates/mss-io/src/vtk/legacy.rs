@@ -51,13 +51,43 @@ pub fn write_legacy_vtk(
         vertices.push(8);
         vertices.extend_from_slice(c);
     }
-    let attribute = |f: &super::Field| match f.values {
-        FieldValues::Scalars(v) => Attribute::scalars(f.name, 1).with_data(v.to_vec()),
-        FieldValues::Vectors(v) => Attribute::vectors(f.name).with_data(v.as_flattened().to_vec()),
-        FieldValues::Flags(v) => Attribute::scalars(f.name, 1)
-            .with_data(IOBuffer::U8(v.iter().map(|&b| u8::from(b)).collect())),
-        FieldValues::Ids(v) => Attribute::scalars(f.name, 1).with_data(v.to_vec()),
-        FieldValues::Labels(v) => Attribute::scalars(f.name, 1).with_data(v.to_vec()),
+    // vtkio's model owns its arrays, so a computed field is copied like the
+    // others.
+    let attribute = |f: &super::Field| -> Result<Attribute, IoError> {
+        Ok(match f.values {
+            FieldValues::Scalars(v) => Attribute::scalars(f.name, 1).with_data(v.to_vec()),
+            FieldValues::Vectors(v) => {
+                Attribute::vectors(f.name).with_data(v.as_flattened().to_vec())
+            }
+            FieldValues::Flags(v) => Attribute::scalars(f.name, 1)
+                .with_data(IOBuffer::U8(v.iter().map(|&b| u8::from(b)).collect())),
+            FieldValues::Ids(v) => Attribute::scalars(f.name, 1).with_data(v.to_vec()),
+            FieldValues::Labels(v) => Attribute::scalars(f.name, 1).with_data(v.to_vec()),
+            FieldValues::Computed(c) => {
+                let mut values = Vec::new();
+                c.with_values(&mut |v| {
+                    values.extend_from_slice(v);
+                    Ok(())
+                })
+                .map_err(|e| IoError::io(path, e))?;
+                if values.len() != c.len() * c.num_components() {
+                    return Err(IoError::invalid(
+                        path,
+                        format!(
+                            "computed field {:?} gave {} numbers, expected {}",
+                            f.name,
+                            values.len(),
+                            c.len() * c.num_components()
+                        ),
+                    ));
+                }
+                if c.num_components() == 3 {
+                    Attribute::vectors(f.name).with_data(values)
+                } else {
+                    Attribute::scalars(f.name, 1).with_data(values)
+                }
+            }
+        })
     };
     let vtk = Vtk {
         version: Version::new_legacy(4, 2),
@@ -74,8 +104,16 @@ pub fn write_legacy_vtk(
                 types: vec![CellType::Hexahedron; num_cells],
             },
             data: Attributes {
-                point: frame.point_data.iter().map(attribute).collect(),
-                cell: frame.cell_data.iter().map(attribute).collect(),
+                point: frame
+                    .point_data
+                    .iter()
+                    .map(attribute)
+                    .collect::<Result<_, _>>()?,
+                cell: frame
+                    .cell_data
+                    .iter()
+                    .map(attribute)
+                    .collect::<Result<_, _>>()?,
             },
         }),
     };

@@ -38,7 +38,7 @@ pub const VTK_TRIANGLE: u8 = 5;
 pub const VTK_HEXAHEDRON: u8 = 12;
 
 /// Values of a field, one entry per point (point data) or per cell (cell data).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Clone, Copy)]
 pub enum FieldValues<'a> {
     /// One `f64` per entry (written as `Float64`; legacy: `SCALARS name double`).
     Scalars(&'a [f64]),
@@ -52,6 +52,72 @@ pub enum FieldValues<'a> {
     /// One signed integer per entry (`Int32`; legacy: `int`), e.g. the
     /// image label of each cell.
     Labels(&'a [i32]),
+    /// `Float64` scalars or 3-vectors computed when the writer reaches
+    /// them ([`ComputedValues`]).
+    Computed(&'a dyn ComputedValues),
+}
+
+/// Values that a writer asks for when it writes them, instead of a slice
+/// held for the whole frame.
+///
+/// A frame of a large lattice carries several derived arrays (displacement,
+/// forces, strains); held at once they cost more than the simulation's own
+/// state. A writer writes one array after the other, so a source that
+/// computes each into one buffer it reuses keeps a single array alive.
+///
+/// Contract: [`ComputedValues::with_values`] passes exactly `len() *
+/// num_components()` numbers (entry after entry, the components of an entry
+/// together), the same ones on every call for the same frame; writers may
+/// call it more than once (once per file written), never from inside
+/// another field's call.
+pub trait ComputedValues: Sync {
+    /// Number of entries (points or cells).
+    fn len(&self) -> usize;
+    /// True when there are no entries.
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// Components per entry: 1 (scalars) or 3 (vectors).
+    fn num_components(&self) -> usize;
+    /// Computes the values and passes them to `write`, returning what it
+    /// returns.
+    fn with_values(
+        &self,
+        write: &mut dyn FnMut(&[f64]) -> std::io::Result<()>,
+    ) -> std::io::Result<()>;
+}
+
+impl std::fmt::Debug for FieldValues<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            FieldValues::Scalars(v) => f.debug_tuple("Scalars").field(v).finish(),
+            FieldValues::Vectors(v) => f.debug_tuple("Vectors").field(v).finish(),
+            FieldValues::Flags(v) => f.debug_tuple("Flags").field(v).finish(),
+            FieldValues::Ids(v) => f.debug_tuple("Ids").field(v).finish(),
+            FieldValues::Labels(v) => f.debug_tuple("Labels").field(v).finish(),
+            FieldValues::Computed(c) => f
+                .debug_struct("Computed")
+                .field("len", &c.len())
+                .field("num_components", &c.num_components())
+                .finish(),
+        }
+    }
+}
+
+impl PartialEq for FieldValues<'_> {
+    /// Slices compare by value; computed values are equal only to the same
+    /// source.
+    fn eq(&self, other: &Self) -> bool {
+        match (self, other) {
+            (FieldValues::Scalars(a), FieldValues::Scalars(b)) => a == b,
+            (FieldValues::Vectors(a), FieldValues::Vectors(b)) => a == b,
+            (FieldValues::Flags(a), FieldValues::Flags(b)) => a == b,
+            (FieldValues::Ids(a), FieldValues::Ids(b)) => a == b,
+            (FieldValues::Labels(a), FieldValues::Labels(b)) => a == b,
+            (FieldValues::Computed(a), FieldValues::Computed(b)) => std::ptr::addr_eq(*a, *b),
+            _ => false,
+        }
+    }
 }
 
 impl FieldValues<'_> {
@@ -63,6 +129,7 @@ impl FieldValues<'_> {
             FieldValues::Flags(v) => v.len(),
             FieldValues::Ids(v) => v.len(),
             FieldValues::Labels(v) => v.len(),
+            FieldValues::Computed(c) => c.len(),
         }
     }
 
@@ -75,6 +142,7 @@ impl FieldValues<'_> {
     pub fn num_components(&self) -> usize {
         match self {
             FieldValues::Vectors(_) => 3,
+            FieldValues::Computed(c) => c.num_components(),
             _ => 1,
         }
     }
@@ -132,6 +200,14 @@ impl<'a> Field<'a> {
         Field {
             name,
             values: FieldValues::Labels(values),
+        }
+    }
+
+    /// A field computed when written (see [`ComputedValues`]).
+    pub fn computed(name: &'a str, values: &'a dyn ComputedValues) -> Self {
+        Field {
+            name,
+            values: FieldValues::Computed(values),
         }
     }
 }
@@ -271,6 +347,16 @@ fn check_fields(path: &Path, kind: &str, fields: &[Field], expected: usize) -> R
             return Err(IoError::invalid(
                 path,
                 format!("{kind} field name {:?} is used twice", f.name),
+            ));
+        }
+        let components = f.values.num_components();
+        if components != 1 && components != 3 {
+            return Err(IoError::invalid(
+                path,
+                format!(
+                    "{kind} field {:?} has {components} components per entry; 1 or 3 can be written",
+                    f.name
+                ),
             ));
         }
         if f.values.len() != expected {

@@ -221,14 +221,31 @@ impl Source<'_> {
     }
 }
 
-fn field_source<'a>(f: &Field<'a>) -> Source<'a> {
-    match f.values {
+/// Writes `f` as a `DataArray`; a computed field's values exist only for
+/// the call.
+fn field_array(w: &mut dyn Write, f: &Field, enc: VtuEncoding) -> io::Result<()> {
+    let comps = f.values.num_components();
+    let src = match f.values {
         FieldValues::Scalars(v) => Source::F64(v),
         FieldValues::Vectors(v) => Source::F64(v.as_flattened()),
         FieldValues::Flags(v) => Source::Bool(v),
         FieldValues::Ids(v) => Source::U32(v),
         FieldValues::Labels(v) => Source::I32(v),
-    }
+        FieldValues::Computed(c) => {
+            let expected = c.len() * comps;
+            return c.with_values(&mut |v| {
+                if v.len() != expected {
+                    return Err(io::Error::other(format!(
+                        "computed field {:?} gave {} numbers, expected {expected}",
+                        f.name,
+                        v.len()
+                    )));
+                }
+                data_array(w, f.name, comps, Source::F64(v), enc)
+            });
+        }
+    };
+    data_array(w, f.name, comps, src, enc)
 }
 
 pub(crate) fn write_grid(w: &mut dyn Write, g: &Grid, enc: VtuEncoding) -> io::Result<()> {
@@ -275,7 +292,7 @@ fn write_attributes(
     }
     writeln!(w, "      <{tag}>")?;
     for f in fields {
-        data_array(w, f.name, f.values.num_components(), field_source(f), enc)?;
+        field_array(w, f, enc)?;
     }
     writeln!(w, "      </{tag}>")
 }

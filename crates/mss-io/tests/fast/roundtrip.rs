@@ -6,7 +6,8 @@ use mss_io::IoError;
 use mss_io::exporters::Exporters;
 use mss_io::skin::{SkinFrames, vertex_normals, write_obj, write_stl};
 use mss_io::vtk::{
-    Field, LatticeFrame, LegacyFormat, VtuEncoding, write_legacy_vtk, write_lines_vtu, write_vtu,
+    ComputedValues, Field, LatticeFrame, LegacyFormat, VtuEncoding, write_legacy_vtk,
+    write_lines_vtu, write_vtu,
 };
 use std::collections::HashMap;
 use std::path::Path;
@@ -202,6 +203,115 @@ fn legacy_vtk_round_trips_in_ascii_and_binary() {
         };
         assert!(String::from_utf8_lossy(&bytes[..80]).contains(kind));
         check(&s, &read_back(&path));
+    }
+}
+
+/// Values handed over from a buffer the source refills on every call,
+/// as a frame writer computes a derived array when it is written.
+struct Recomputed<'a> {
+    values: &'a [f64],
+    components: usize,
+    buffer: std::sync::Mutex<Vec<f64>>,
+    calls: std::sync::atomic::AtomicUsize,
+    /// Numbers left out of what is handed over (to check the refusal).
+    short_by: usize,
+}
+
+impl<'a> Recomputed<'a> {
+    fn new(values: &'a [f64], components: usize) -> Self {
+        Recomputed {
+            values,
+            components,
+            buffer: std::sync::Mutex::new(Vec::new()),
+            calls: std::sync::atomic::AtomicUsize::new(0),
+            short_by: 0,
+        }
+    }
+}
+
+impl ComputedValues for Recomputed<'_> {
+    fn len(&self) -> usize {
+        self.values.len() / self.components
+    }
+    fn num_components(&self) -> usize {
+        self.components
+    }
+    fn with_values(
+        &self,
+        write: &mut dyn FnMut(&[f64]) -> std::io::Result<()>,
+    ) -> std::io::Result<()> {
+        self.calls
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let mut buffer = self.buffer.lock().unwrap();
+        buffer.clear();
+        buffer.extend_from_slice(&self.values[..self.values.len() - self.short_by]);
+        write(&buffer)
+    }
+}
+
+#[test]
+fn computed_fields_write_the_bytes_of_the_same_values_held_in_slices() {
+    let s = sample();
+    let displacement = Recomputed::new(s.displacement.as_flattened(), 3);
+    let strain = Recomputed::new(&s.strain, 1);
+    let with_computed = || {
+        LatticeFrame::new(&s.points, &s.cells)
+            .with_point_field(Field::computed("displacement", &displacement))
+            .with_point_field(Field::vectors("velocity", &s.velocity))
+            .with_point_field(Field::flags("fixed", &s.fixed))
+            .with_cell_field(Field::computed("strain", &strain))
+            .with_cell_field(Field::ids("cell_id", &s.ids))
+            .with_cell_field(Field::labels("label", &s.labels))
+    };
+    let dir = tempfile::tempdir().unwrap();
+    for enc in [
+        VtuEncoding::Ascii,
+        VtuEncoding::Base64,
+        VtuEncoding::Base64Zlib,
+    ] {
+        let held = dir.path().join(format!("held_{enc:?}.vtu"));
+        let lazy = dir.path().join(format!("computed_{enc:?}.vtu"));
+        write_vtu(&held, &frame(&s), enc).unwrap();
+        write_vtu(&lazy, &with_computed(), enc).unwrap();
+        assert_eq!(std::fs::read(&held).unwrap(), std::fs::read(&lazy).unwrap());
+    }
+    for format in [LegacyFormat::Ascii, LegacyFormat::Binary] {
+        let path = dir.path().join(format!("computed_{format:?}.vtk"));
+        write_legacy_vtk(&path, &with_computed(), format, "computed").unwrap();
+        check(&s, &read_back(&path));
+    }
+    // Each file asked for each computed array once.
+    assert_eq!(
+        displacement
+            .calls
+            .load(std::sync::atomic::Ordering::Relaxed),
+        5
+    );
+    assert_eq!(strain.calls.load(std::sync::atomic::Ordering::Relaxed), 5);
+
+    // A source that hands over fewer numbers than it promised leaves no file.
+    let mut short = Recomputed::new(&s.strain, 1);
+    short.short_by = 1;
+    let bad =
+        LatticeFrame::new(&s.points, &s.cells).with_cell_field(Field::computed("strain", &short));
+    for (name, result) in [
+        (
+            "short.vtu",
+            write_vtu(&dir.path().join("short.vtu"), &bad, VtuEncoding::Base64Zlib),
+        ),
+        (
+            "short.vtk",
+            write_legacy_vtk(
+                &dir.path().join("short.vtk"),
+                &bad,
+                LegacyFormat::Binary,
+                "x",
+            ),
+        ),
+    ] {
+        let err = result.unwrap_err().to_string();
+        assert!(err.contains("strain") && err.contains("expected"), "{err}");
+        assert!(!dir.path().join(name).exists());
     }
 }
 
