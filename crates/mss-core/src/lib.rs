@@ -9,6 +9,7 @@
 //!
 //! Knows nothing of file formats: it takes a [`hexmesh::Lattice`].
 
+mod cache;
 pub mod constraints;
 
 /// Vectors as plain coordinate triples, without copying (for writers and

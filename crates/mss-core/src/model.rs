@@ -692,6 +692,9 @@ pub struct Model {
     bodies: Vec<BodySpan>,
     /// The lattice edges at corner 0 of no cell.
     leftover_edges: Vec<LeftoverEdge>,
+    /// A force workspace lent to the passes that do not bring their own
+    /// ([`Model::internal_forces_shared`]).
+    spare_workspace: crate::cache::Cache<ForceWorkspace>,
 }
 
 /// Where one body of a [`Model`] lies in its node and cell arrays.
@@ -901,6 +904,7 @@ impl Model {
                 parameterization: param.name(),
             }],
             leftover_edges,
+            spare_workspace: Default::default(),
         })
     }
 
@@ -992,6 +996,7 @@ impl Model {
             omega_max_sq_estimate: std::sync::OnceLock::new(),
             bodies: spans,
             leftover_edges: leftovers,
+            spare_workspace: Default::default(),
         })
     }
 
@@ -1160,11 +1165,22 @@ impl Model {
         }
     }
 
-    /// Internal forces at positions `x` (N), written to `out` (allocating
-    /// convenience wrapper of [`Model::internal_forces_with`]).
+    /// Internal forces at positions `x` (N), written to `out`, with the
+    /// model's spare workspace ([`Model::internal_forces_shared`]).
     pub fn internal_forces(&self, x: &[Vec3], out: &mut [Vec3]) {
-        let mut ws = self.workspace();
-        self.internal_forces_with(x, &mut ws, out);
+        self.internal_forces_shared(Precision::F64, x, out);
+    }
+
+    /// [`Model::internal_forces_in`] with a workspace the model lends: it
+    /// keeps one, so that the callers that do not hold their own between
+    /// passes (an explicit integrator, a frame writer, a Newton residual)
+    /// share one node array of scratch instead of each keeping or
+    /// allocating theirs. Two passes at once on one model each get one
+    /// (the second allocates); the model keeps one of them.
+    pub fn internal_forces_shared(&self, precision: Precision, x: &[Vec3], out: &mut [Vec3]) {
+        let mut ws = self.spare_workspace.take().unwrap_or_default();
+        self.internal_forces_in(precision, x, &mut ws, out);
+        self.spare_workspace.put(ws);
     }
 
     /// Internal forces at positions `x` (N), written to `out`, using `ws` as

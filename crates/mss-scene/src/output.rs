@@ -227,7 +227,6 @@ struct FrameScratch {
     nodes: Vec<Vec3>,
     /// A derived cell field of one body's cells.
     cells: Vec<f64>,
-    ws: mss_core::ForceWorkspace,
 }
 
 /// What a frame writes that is constant over a run: filled at the first
@@ -339,7 +338,7 @@ impl mss_io::vtk::ComputedValues for DerivedField<'_, '_> {
                 sc.nodes.clear();
                 sc.nodes.resize(n, Vec3::zeros());
                 if self.which == Derived::InternalForce {
-                    model.internal_forces_with(&state.x, &mut sc.ws, &mut sc.nodes);
+                    model.internal_forces(&state.x, &mut sc.nodes);
                 } else {
                     problem.external_forces(state.time, &state.x, 1.0, &mut sc.nodes);
                 }

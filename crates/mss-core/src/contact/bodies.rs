@@ -291,33 +291,10 @@ impl Grid {
     }
 }
 
-/// Something a search keeps for the next one, behind a mutex (the
-/// contact is shared by the solver's threads). A clone starts empty: what
-/// it held belongs to the positions the original last saw.
-struct Cache<T>(std::sync::Mutex<Option<T>>);
-
-impl<T> Default for Cache<T> {
-    fn default() -> Self {
-        Self(std::sync::Mutex::new(None))
-    }
-}
-
-impl<T> Clone for Cache<T> {
-    fn clone(&self) -> Self {
-        Self::default()
-    }
-}
-
-impl<T> std::fmt::Debug for Cache<T> {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str("Cache")
-    }
-}
-
 /// The pairs of the last positions asked about (by their key): a step asks
 /// two or three times at the same positions (its forces, its anchors, the
 /// next step's start).
-type PairCache = Cache<(u64, std::sync::Arc<Vec<Pair>>)>;
+type PairCache = crate::cache::Cache<(u64, std::sync::Arc<Vec<Pair>>)>;
 
 /// Per point that may touch, the triangles it may touch while no point has
 /// moved more than half the skin since `reference` (a Verlet list).
@@ -349,7 +326,7 @@ impl Candidates {
 }
 
 /// The candidate lists of the last search, kept while they hold.
-type CandidateCache = Cache<Candidates>;
+type CandidateCache = crate::cache::Cache<Candidates>;
 
 /// The search of the triangle nearest to a point: the best facing the
 /// point (its outward normal against theirs) and the best of the others.
@@ -996,7 +973,7 @@ impl BodyContact {
     /// asks two or three times at the same positions).
     fn searched(&self, x: &[Vec3]) -> std::sync::Arc<Vec<Pair>> {
         let key = self.positions_key(x);
-        let mut cache = self.cache.0.lock().unwrap_or_else(|e| e.into_inner());
+        let mut cache = self.cache.lock();
         if let Some((k, pairs)) = cache.as_ref()
             && *k == key
         {
@@ -1265,7 +1242,7 @@ impl BodyContact {
         if self.points.is_empty() {
             return Vec::new();
         }
-        let mut held = self.candidates.0.lock().unwrap_or_else(|e| e.into_inner());
+        let mut held = self.candidates.lock();
         if !held.as_ref().is_some_and(|c| c.hold(x, &self.points)) {
             *held = Some(self.build_candidates(x));
         }
@@ -1726,9 +1703,7 @@ mod tests {
                 }
                 let held = contact
                     .candidates
-                    .0
                     .lock()
-                    .unwrap()
                     .as_ref()
                     .is_some_and(|c| c.hold(&x, &contact.points));
                 if held {

@@ -50,7 +50,9 @@
 //! failure is the last one that passed.
 //!
 //! Steps do not allocate: forces, damping products and the last-good snapshot
-//! live in buffers owned by [`Explicit`]. Node updates run in parallel over
+//! live in buffers owned by [`Explicit`], and the force pass's scratch is
+//! the model's spare ([`Model::internal_forces_shared`], shared with the
+//! frame writer). Node updates run in parallel over
 //! fixed-size chunks with no reduction other than a logical AND, and the
 //! contact updates visit the touching nodes in a fixed order on one thread, so
 //! results are bitwise identical for any number of threads (the model's
@@ -62,7 +64,6 @@ use super::{
     Divergence, EXPLICIT_HINT, Integrator, Problem, SolverError, State, StepInfo, check_inverted,
 };
 use crate::contact::Contact;
-use crate::model::ForceWorkspace;
 use crate::model::kernel::CORNER_BARRIER_START;
 use crate::{BlockCsr, Model, Precision, Vec3};
 
@@ -239,7 +240,6 @@ pub struct Explicit {
     relax_after: u64,
     /// The state at the start of the step being taken (to retry it).
     start: State,
-    ws: ForceWorkspace,
     /// Conservative force (internal + external) at the positions whose
     /// [`positions_key`] is `cache_key`, at `cache_time`.
     f_cons: Vec<Vec3>,
@@ -357,7 +357,6 @@ impl Explicit {
                 time: 0.0,
                 contact: Vec::new(),
             },
-            ws: problem.model().workspace(),
             f_cons: vec![Vec3::zeros(); n],
             f_contact: if problem.contact().is_some() {
                 vec![Vec3::zeros(); n]
@@ -537,7 +536,7 @@ impl Explicit {
     fn conservative_forces(&mut self, problem: &Problem, state: &State) {
         let model = problem.model();
         let (x, t) = (&state.x, state.time);
-        model.internal_forces_in(self.opts.precision, x, &mut self.ws, &mut self.f_cons);
+        model.internal_forces_shared(self.opts.precision, x, &mut self.f_cons);
         for l in problem.loads() {
             l.add_forces(model, t, x, 1.0, &mut self.f_cons);
         }

@@ -230,7 +230,10 @@ fn each_cell_measure_is_that_of_the_cells_diagnostics() {
     let m = Model::new(&l, Material::new(50.0, 0.3, 1.0).unwrap(), &PaperModel).unwrap();
     let x = deformed(&m, 11);
     let d = m.cell_diagnostics(&x);
-    assert!(d.iter().all(|c| c.correction_force > 0.0 && c.shear_strain > 0.0));
+    assert!(
+        d.iter()
+            .all(|c| c.correction_force > 0.0 && c.shear_strain > 0.0)
+    );
     let mut out = vec![f64::NAN; 2];
     for measure in [
         CellMeasure::VolumetricStrain,
