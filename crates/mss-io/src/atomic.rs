@@ -6,7 +6,7 @@
 //! holds either the previous complete version or the new one.
 
 use std::fs::{self, File, OpenOptions};
-use std::io::{self, BufWriter, Write};
+use std::io::{self, BufWriter, Seek, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -88,6 +88,20 @@ pub fn write_atomic(
     path: &Path,
     write: impl FnOnce(&mut dyn Write) -> io::Result<()>,
 ) -> Result<(), IoError> {
+    write_atomic_seekable(path, |w| write(w))
+}
+
+/// A writer that can go back, as the `.vtu` writer does to fill in an
+/// array's header once its compressed blocks are written.
+pub(crate) trait WriteSeek: Write + Seek {}
+
+impl<T: Write + Seek + ?Sized> WriteSeek for T {}
+
+/// [`write_atomic`] with a writer that can seek within the file written.
+pub(crate) fn write_atomic_seekable(
+    path: &Path,
+    write: impl FnOnce(&mut dyn WriteSeek) -> io::Result<()>,
+) -> Result<(), IoError> {
     let file_name = path.file_name().ok_or_else(|| {
         IoError::invalid(
             path,
@@ -136,7 +150,7 @@ pub(crate) fn create_temporary(
 
 fn fill_and_close(
     file: File,
-    write: impl FnOnce(&mut dyn Write) -> io::Result<()>,
+    write: impl FnOnce(&mut dyn WriteSeek) -> io::Result<()>,
 ) -> io::Result<()> {
     let mut w = BufWriter::with_capacity(BUFFER_BYTES, file);
     write(&mut w)?;

@@ -18,7 +18,7 @@
 
 use super::{Field, FieldValues, Grid, LatticeFrame, VTK_HEXAHEDRON, VTK_LINE, validate_grid};
 use crate::IoError;
-use crate::atomic::write_atomic;
+use crate::atomic::{WriteSeek, write_atomic_seekable};
 use crate::numfmt::write_f64;
 use base64::Engine as _;
 use base64::engine::general_purpose::STANDARD;
@@ -64,7 +64,7 @@ pub fn write_vtu(path: &Path, frame: &LatticeFrame, encoding: VtuEncoding) -> Re
         point_data: &frame.point_data,
         cell_data: &frame.cell_data,
     };
-    write_atomic(path, |w| write_grid(w, &grid, encoding))
+    write_atomic_seekable(path, |w| write_grid(w, &grid, encoding))
 }
 
 /// Writes line cells (VTK_LINE), e.g. the springs of a lattice with their
@@ -130,7 +130,7 @@ fn write_cells_vtu<const N: usize>(
         point_data,
         cell_data,
     };
-    write_atomic(path, |w| write_grid(w, &grid, encoding))
+    write_atomic_seekable(path, |w| write_grid(w, &grid, encoding))
 }
 
 /// An array as the writer sees it: a typed source of elements, some generated
@@ -223,7 +223,7 @@ impl Source<'_> {
 
 /// Writes `f` as a `DataArray`; a computed field's values exist only for
 /// the call.
-fn field_array(w: &mut dyn Write, f: &Field, enc: VtuEncoding) -> io::Result<()> {
+fn field_array(w: &mut dyn WriteSeek, f: &Field, enc: VtuEncoding) -> io::Result<()> {
     let comps = f.values.num_components();
     let src = match f.values {
         FieldValues::Scalars(v) => Source::F64(v),
@@ -248,7 +248,7 @@ fn field_array(w: &mut dyn Write, f: &Field, enc: VtuEncoding) -> io::Result<()>
     data_array(w, f.name, comps, src, enc)
 }
 
-pub(crate) fn write_grid(w: &mut dyn Write, g: &Grid, enc: VtuEncoding) -> io::Result<()> {
+pub(crate) fn write_grid(w: &mut dyn WriteSeek, g: &Grid, enc: VtuEncoding) -> io::Result<()> {
     let compressor = if enc == VtuEncoding::Base64Zlib {
         " compressor=\"vtkZLibDataCompressor\""
     } else {
@@ -282,7 +282,7 @@ pub(crate) fn write_grid(w: &mut dyn Write, g: &Grid, enc: VtuEncoding) -> io::R
 }
 
 fn write_attributes(
-    w: &mut dyn Write,
+    w: &mut dyn WriteSeek,
     tag: &str,
     fields: &[Field],
     enc: VtuEncoding,
@@ -298,7 +298,7 @@ fn write_attributes(
 }
 
 fn data_array(
-    w: &mut dyn Write,
+    w: &mut dyn WriteSeek,
     name: &str,
     num_comp: usize,
     src: Source,
@@ -409,40 +409,60 @@ fn write_base64(w: &mut dyn Write, src: Source) -> io::Result<()> {
     b64.finish()
 }
 
-fn write_zlib(w: &mut dyn Write, src: Source) -> io::Result<()> {
+/// Blocks compressed at once (2 MiB of raw bytes): in parallel within a
+/// group, written before the next group is compressed.
+const BLOCKS_PER_GROUP: usize = 64;
+
+/// Writes `src` as a ZLib-compressed array. The header (block count and
+/// sizes) comes first in the file but is known only once every block is
+/// compressed; its base64 text has a known length, so a placeholder is
+/// written and filled in afterwards, and the compressed blocks are written
+/// a group at a time instead of being held until the end (for a large
+/// lattice they are most of a frame's memory).
+fn write_zlib(w: &mut dyn WriteSeek, src: Source) -> io::Result<()> {
     let elem = src.elem_size();
     let per_block = BLOCK_BYTES / elem;
     let n = src.len();
     let num_blocks = n.div_ceil(per_block);
-    // Blocks are independent: compress them in parallel, keep their order.
-    let blocks: Vec<io::Result<Vec<u8>>> = (0..num_blocks)
-        .into_par_iter()
-        .map(|b| {
-            let range = b * per_block..((b + 1) * per_block).min(n);
-            let mut raw = Vec::with_capacity(BLOCK_BYTES);
-            src.push_bytes(range, &mut raw);
-            let mut z = ZlibEncoder::new(
-                Vec::with_capacity(BLOCK_BYTES / 2),
-                Compression::new(ZLIB_LEVEL),
-            );
-            z.write_all(&raw)?;
-            z.finish()
-        })
-        .collect();
-    let blocks: Vec<Vec<u8>> = blocks.into_iter().collect::<io::Result<_>>()?;
-
+    let header_bytes = 8 * (3 + num_blocks);
+    let header_at = w.stream_position()?;
+    w.write_all(&vec![b'A'; 4 * header_bytes.div_ceil(3)])?;
+    let mut sizes: Vec<u64> = Vec::with_capacity(num_blocks);
+    let mut b64 = Base64Stream::new(w);
+    for group in (0..num_blocks).step_by(BLOCKS_PER_GROUP) {
+        // Blocks are independent: compress them in parallel, keep their order.
+        let blocks: Vec<io::Result<Vec<u8>>> = (group..(group + BLOCKS_PER_GROUP).min(num_blocks))
+            .into_par_iter()
+            .map(|b| {
+                let range = b * per_block..((b + 1) * per_block).min(n);
+                let mut raw = Vec::with_capacity(BLOCK_BYTES);
+                src.push_bytes(range, &mut raw);
+                let mut z = ZlibEncoder::new(
+                    Vec::with_capacity(BLOCK_BYTES / 2),
+                    Compression::new(ZLIB_LEVEL),
+                );
+                z.write_all(&raw)?;
+                z.finish()
+            })
+            .collect();
+        for block in blocks {
+            let block = block?;
+            sizes.push(block.len() as u64);
+            b64.push(&block)?;
+        }
+    }
+    b64.finish()?;
+    let end = w.stream_position()?;
     let last = n * elem - num_blocks.saturating_sub(1) * per_block * elem;
-    let mut header: Vec<u8> = Vec::with_capacity(8 * (3 + num_blocks));
+    let mut header: Vec<u8> = Vec::with_capacity(header_bytes);
     for x in [num_blocks, per_block * elem, last] {
         header.extend((x as u64).to_le_bytes());
     }
-    for b in &blocks {
-        header.extend((b.len() as u64).to_le_bytes());
+    for size in sizes {
+        header.extend(size.to_le_bytes());
     }
+    w.seek(io::SeekFrom::Start(header_at))?;
     w.write_all(STANDARD.encode(&header).as_bytes())?;
-    let mut b64 = Base64Stream::new(w);
-    for b in &blocks {
-        b64.push(b)?;
-    }
-    b64.finish()
+    w.seek(io::SeekFrom::Start(end))?;
+    Ok(())
 }
