@@ -751,7 +751,11 @@ impl Job {
                         remove_previous_run(out_dir, &self.registry.exporters)?;
                         writer = self.writer(out_dir)?;
                         if !plan.last_only {
-                            writer.write(problem, &state)?;
+                            writer.write_with_scratch(
+                                problem,
+                                &state,
+                                integrator.lend_scratch(),
+                            )?;
                         }
                         1
                     }
@@ -814,7 +818,11 @@ impl Job {
                         // again when its time comes).
                         checkpoint(steps_done, &state, totals, integrator.as_ref(), &writer)?;
                         if steps_done > 0 && !plan.frame_after(steps_done) {
-                            writer.write(problem, &state)?;
+                            writer.write_with_scratch(
+                                problem,
+                                &state,
+                                integrator.lend_scratch(),
+                            )?;
                         }
                         interrupted = true;
                         log::warn!(
@@ -836,7 +844,11 @@ impl Job {
                             // frame, unless it is the last frame already written
                             // (time never goes back in the series).
                             if writer.last_time().is_none_or(|t| state.time > t) {
-                                let _ = writer.write(problem, &state);
+                                let _ = writer.write_with_scratch(
+                                    problem,
+                                    &state,
+                                    integrator.lend_scratch(),
+                                );
                             }
                             let _ = writer.finish();
                             return Err(JobError::Solver {
@@ -852,7 +864,7 @@ impl Job {
                         totals.peak = (moved, state.time);
                     }
                     if plan.frame_after(k) {
-                        writer.write(problem, &state)?;
+                        writer.write_with_scratch(problem, &state, integrator.lend_scratch())?;
                         let _ = totals.note_folds(&name, problem.model(), &state);
                     }
                     if checkpoint_steps.is_some_and(|n| k % n == 0) && k < plan.steps {

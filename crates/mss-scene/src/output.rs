@@ -280,11 +280,18 @@ impl Derived {
     }
 }
 
+/// The buffers a frame's derived fields are computed into.
+struct FrameBuffers<'a> {
+    /// One entry per node of the model.
+    nodes: &'a mut [Vec3],
+    cells: &'a mut Vec<f64>,
+}
+
 /// The state a frame's derived fields come from.
 struct FrameSource<'a> {
     problem: &'a Problem,
     state: &'a State,
-    scratch: std::sync::Mutex<&'a mut FrameScratch>,
+    scratch: std::sync::Mutex<FrameBuffers<'a>>,
 }
 
 /// One body's share of a derived field.
@@ -321,26 +328,25 @@ impl mss_io::vtk::ComputedValues for DerivedField<'_, '_> {
             .scratch
             .lock()
             .map_err(|_| std::io::Error::other("a frame field's computation panicked"))?;
-        let sc = &mut **guard;
+        let sc = &mut *guard;
         let range = self.range.clone();
         match self.which {
             Derived::Displacement => {
                 let rest = &model.rest_positions()[range.clone()];
-                sc.nodes.clear();
-                sc.nodes
-                    .extend(state.x[range].iter().zip(rest).map(|(x, r)| x - r));
-                write(mss_core::as_arrays(&sc.nodes).as_flattened())
+                let out = &mut sc.nodes[..range.len()];
+                for ((o, x), r) in out.iter_mut().zip(&state.x[range]).zip(rest) {
+                    *o = x - r;
+                }
+                write(mss_core::as_arrays(out).as_flattened())
             }
             Derived::InternalForce | Derived::ExternalForce => {
                 // Forces gather over cells and loads: computed for every
                 // node, written for the body's.
-                let n = model.num_nodes();
-                sc.nodes.clear();
-                sc.nodes.resize(n, Vec3::zeros());
+                sc.nodes.fill(Vec3::zeros());
                 if self.which == Derived::InternalForce {
-                    model.internal_forces(&state.x, &mut sc.nodes);
+                    model.internal_forces(&state.x, sc.nodes);
                 } else {
-                    problem.external_forces(state.time, &state.x, 1.0, &mut sc.nodes);
+                    problem.external_forces(state.time, &state.x, 1.0, sc.nodes);
                 }
                 write(mss_core::as_arrays(&sc.nodes[range]).as_flattened())
             }
@@ -354,7 +360,7 @@ impl mss_io::vtk::ComputedValues for DerivedField<'_, '_> {
                     Derived::ShearStrain => mss_core::CellMeasure::ShearStrain,
                     _ => mss_core::CellMeasure::CorrectionForce,
                 };
-                model.cell_measure_of(&state.x, range, measure, &mut sc.cells);
+                model.cell_measure_of(&state.x, range, measure, sc.cells);
                 write(&sc.cells)
             }
         }
@@ -729,6 +735,19 @@ impl FrameWriter {
 
     /// Writes one frame of `state` (time `state.time`).
     pub fn write(&mut self, problem: &Problem, state: &State) -> Result<(), JobError> {
+        self.write_with_scratch(problem, state, None)
+    }
+
+    /// [`FrameWriter::write`], computing the frame's derived point fields
+    /// into `lent` (one entry per node; see
+    /// [`mss_core::solver::Integrator::lend_scratch`]) instead of an array
+    /// the writer keeps; one of another length is not used.
+    pub fn write_with_scratch(
+        &mut self,
+        problem: &Problem,
+        state: &State,
+        lent: Option<&mut [Vec3]>,
+    ) -> Result<(), JobError> {
         let model = problem.model();
         let n = model.num_nodes();
         let index = self.times.len();
@@ -751,10 +770,20 @@ impl FrameWriter {
         // time, not one per field.
         let mut scratch = std::mem::take(&mut self.scratch);
         let constants = std::mem::take(&mut self.constants);
+        let nodes = match lent {
+            Some(lent) if lent.len() == n => lent,
+            _ => {
+                scratch.nodes.resize(n, Vec3::zeros());
+                &mut scratch.nodes[..]
+            }
+        };
         let source = FrameSource {
             problem,
             state,
-            scratch: std::sync::Mutex::new(&mut scratch),
+            scratch: std::sync::Mutex::new(FrameBuffers {
+                nodes,
+                cells: &mut scratch.cells,
+            }),
         };
         let result = self.write_frame(
             problem,

@@ -969,6 +969,12 @@ impl Integrator for Explicit {
         self.dt
     }
 
+    /// The positions a step keeps to be retried from: each step's first
+    /// drift copies them again before anything reads them.
+    fn lend_scratch(&mut self) -> Option<&mut [Vec3]> {
+        Some(&mut self.start.x)
+    }
+
     fn check_next_step(&mut self) {
         self.check_at_end = true;
     }

@@ -683,6 +683,14 @@ pub trait Integrator: Send {
     /// that the state it returns can be written as a frame. The default does
     /// nothing: an integrator that checks every step needs nothing more.
     fn check_next_step(&mut self) {}
+    /// A node array (one entry per node) that the integrator does not need
+    /// until its next step, lent as scratch: a frame writer computes the
+    /// frame's derived fields into it instead of holding an array of its
+    /// own. Its contents are the caller's to overwrite; the integrator
+    /// fills it again before it reads it. The default lends nothing.
+    fn lend_scratch(&mut self) -> Option<&mut [Vec3]> {
+        None
+    }
     /// What the integrator carries from one step to the next beyond the
     /// [`State`] (step control, counters, cached forces), for checkpoints.
     /// The default is nothing: right for an integrator whose steps depend
