@@ -361,7 +361,7 @@ impl mss_io::vtk::ComputedValues for DerivedField<'_, '_> {
                     _ => mss_core::CellMeasure::CorrectionForce,
                 };
                 model.cell_measure_of(&state.x, range, measure, sc.cells);
-                write(&sc.cells)
+                write(sc.cells)
             }
         }
     }
