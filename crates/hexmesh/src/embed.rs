@@ -30,7 +30,7 @@ impl Embedding {
             let g: [f64; 3] = std::array::from_fn(|k| (p[k] - o[k]) / h);
             let home: [i64; 3] = std::array::from_fn(|k| g[k].floor() as i64);
             let cell = nearest_cell(lattice, g, home, dims);
-            let cc = lattice.cell_coords()[cell as usize];
+            let cc = lattice.cell_coord(cell as usize);
             cells.push(lattice.cells()[cell as usize]);
             coords.push(std::array::from_fn(|k| g[k] - cc[k] as f64));
         }

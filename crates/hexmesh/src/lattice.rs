@@ -1,6 +1,6 @@
 //! The cubic lattice: cells of edge `h` on a regular grid with shared nodes.
 
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 use thiserror::Error;
 
 /// Offsets of the 8 corners of a cell, in VTK_HEXAHEDRON order: the bottom face
@@ -51,17 +51,31 @@ pub enum LatticeError {
 /// then z); nodes are exactly the corners of the cells, without duplicates,
 /// sorted the same way; `cells[c][k]` is the node at grid coordinates
 /// `cell_coords[c] + CORNER_OFFSETS[k]` (VTK_HEXAHEDRON order).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone)]
 pub struct Lattice {
     origin: [f64; 3],
     h: f64,
     dims: [u32; 3],
     /// Shared with the models built on the lattice (no copy).
     nodes: Arc<[[f64; 3]]>,
-    node_coords: Vec<[u32; 3]>,
+    /// Derived from `nodes` when asked for after [`Lattice::release_coordinates`].
+    node_coords: OnceLock<Vec<[u32; 3]>>,
     /// Shared with the models built on the lattice (no copy).
     cells: Arc<[[u32; 8]]>,
-    cell_coords: Vec<[u32; 3]>,
+    /// Derived from the cells' corner 0 when asked for after
+    /// [`Lattice::release_coordinates`].
+    cell_coords: OnceLock<Vec<[u32; 3]>>,
+}
+
+impl PartialEq for Lattice {
+    /// The grid, the nodes and the cells: the coordinates follow from them.
+    fn eq(&self, other: &Self) -> bool {
+        self.origin == other.origin
+            && self.h == other.h
+            && self.dims == other.dims
+            && self.nodes == other.nodes
+            && self.cells == other.cells
+    }
 }
 
 /// Checks what both constructors need: a positive finite `h`, a finite origin,
@@ -163,9 +177,9 @@ impl Lattice {
             h,
             dims,
             nodes: nodes.into(),
-            node_coords,
+            node_coords: OnceLock::from(node_coords),
             cells: cells.into(),
-            cell_coords,
+            cell_coords: OnceLock::from(cell_coords),
         })
     }
 
@@ -238,9 +252,40 @@ impl Lattice {
         Arc::clone(&self.cells)
     }
 
-    /// Grid coordinates of the nodes.
+    /// Grid coordinates of the nodes (derived and kept when first asked
+    /// for after [`Lattice::release_coordinates`]; [`Lattice::node_coord`]
+    /// derives one without keeping any).
     pub fn node_coords(&self) -> &[[u32; 3]] {
-        &self.node_coords
+        self.node_coords
+            .get_or_init(|| self.nodes.iter().map(|p| self.grid_coords_of(p)).collect())
+    }
+
+    /// Grid coordinates of node `i`, from its position.
+    pub fn node_coord(&self, i: usize) -> [u32; 3] {
+        self.grid_coords_of(&self.nodes[i])
+    }
+
+    /// Grid coordinates of cell `c` (of its minimum corner), from the
+    /// position of its corner 0.
+    pub fn cell_coord(&self, c: usize) -> [u32; 3] {
+        self.node_coord(self.cells[c][0] as usize)
+    }
+
+    /// The grid coordinates of a node at `p`: nodes are placed at
+    /// `origin + h * coords`, so the quotient is within round-off of an
+    /// integer (for any origin less than 10^15 cells away).
+    fn grid_coords_of(&self, p: &[f64; 3]) -> [u32; 3] {
+        std::array::from_fn(|k| ((p[k] - self.origin[k]) / self.h).round() as u32)
+    }
+
+    /// Frees the nodes' and cells' grid coordinates (24 bytes per cell),
+    /// which are derived again from the positions and cells when next asked
+    /// for: for a holder that keeps the lattice through a long run (its
+    /// frames share its cells) but no longer looks its cells up by
+    /// coordinates.
+    pub fn release_coordinates(&mut self) {
+        self.node_coords = OnceLock::new();
+        self.cell_coords = OnceLock::new();
     }
 
     /// Cells as 8 node indices in VTK_HEXAHEDRON order.
@@ -248,9 +293,11 @@ impl Lattice {
         &self.cells
     }
 
-    /// Grid coordinates of the cells (of their minimum corner).
+    /// Grid coordinates of the cells (of their minimum corner; kept as
+    /// [`Lattice::node_coords`] are, [`Lattice::cell_coord`] for one).
     pub fn cell_coords(&self) -> &[[u32; 3]] {
-        &self.cell_coords
+        self.cell_coords
+            .get_or_init(|| (0..self.cells.len()).map(|c| self.cell_coord(c)).collect())
     }
 
     /// Number of nodes.
@@ -274,8 +321,11 @@ impl Lattice {
             return None;
         }
         let key = cell_key(coord, self.dims);
-        self.cell_coords
-            .binary_search_by_key(&key, |&c| cell_key(c, self.dims))
+        // Cells are sorted by their key (no coordinates need be held).
+        self.cells
+            .binary_search_by_key(&key, |c| {
+                cell_key(self.grid_coords_of(&self.nodes[c[0] as usize]), self.dims)
+            })
             .ok()
             .map(|i| i as u32)
     }
@@ -286,8 +336,8 @@ impl Lattice {
             return None;
         }
         let key = node_key(coord, self.dims);
-        self.node_coords
-            .binary_search_by_key(&key, |&c| node_key(c, self.dims))
+        self.nodes
+            .binary_search_by_key(&key, |p| node_key(self.grid_coords_of(p), self.dims))
             .ok()
             .map(|i| i as u32)
     }
@@ -360,10 +410,11 @@ impl Lattice {
         // stride) ascends too: one cursor per direction walks the cells once
         // beside the loop (a merge), instead of a search per face.
         let strides = [1u64, dims[0] as u64, dims[0] as u64 * dims[1] as u64];
-        let key_of = |i: usize| cell_key(self.cell_coords[i], dims);
+        let key_of = |i: usize| cell_key(self.cell_coord(i), dims);
         let mut cursor = [0usize; 6];
         let mut out = Vec::new();
-        for (c, (&cell, &cc)) in self.cells.iter().zip(&self.cell_coords).enumerate() {
+        for (c, &cell) in self.cells.iter().enumerate() {
+            let cc = self.cell_coord(c);
             let key = cell_key(cc, dims);
             for (f, corners) in CELL_FACES.iter().enumerate() {
                 let axis = f / 2;
@@ -569,9 +620,9 @@ impl Lattice {
             h,
             dims,
             nodes: nodes.into(),
-            node_coords,
+            node_coords: OnceLock::from(node_coords),
             cells: cells.into(),
-            cell_coords,
+            cell_coords: OnceLock::from(cell_coords),
         })
     }
 }
@@ -688,6 +739,8 @@ mod tests {
         let a = Lattice::from_occupancy([0.5, 0.0, -1.0], 0.25, dims, &occ).unwrap();
         let b = Lattice::from_cells([0.5, 0.0, -1.0], 0.25, dims, cells).unwrap();
         assert_eq!(a, b);
+        assert_eq!(a.node_coords(), b.node_coords());
+        assert_eq!(a.cell_coords(), b.cell_coords());
         assert_eq!(
             Lattice::from_occupancy([0.0; 3], 1.0, dims, &[false; 12]),
             Err(LatticeError::Empty)
@@ -703,5 +756,40 @@ mod tests {
         let n = l.node_at([4, 4, 4]).unwrap();
         assert_eq!(l.nodes()[n as usize], [4.0, 4.0, 4.0]);
         assert_eq!(l.node_at([2, 2, 2]), None);
+    }
+
+    /// Coordinates freed and derived again from the positions are those the
+    /// constructor made, far from the origin and with an awkward cell size,
+    /// and the lookups and faces that use them do not change.
+    #[test]
+    fn released_coordinates_are_derived_again_exactly() {
+        let dims = [7, 5, 6];
+        let occ: Vec<bool> = (0..7 * 5 * 6).map(|i| (i * 7919) % 5 != 0).collect();
+        for (origin, h) in [
+            ([0.0; 3], 1.0),
+            ([1234.567, -0.001, 1e3], 0.0137),
+            ([-4.2e5, 3.3e5, 7.0], 1e-3),
+        ] {
+            let kept = Lattice::from_occupancy(origin, h, dims, &occ).unwrap();
+            let mut released = kept.clone();
+            released.release_coordinates();
+            for i in 0..kept.num_nodes() {
+                assert_eq!(released.node_coord(i), kept.node_coords()[i]);
+            }
+            for c in 0..kept.num_cells() {
+                assert_eq!(released.cell_coord(c), kept.cell_coords()[c]);
+            }
+            assert_eq!(released.boundary_faces(), kept.boundary_faces());
+            for (c, &cc) in kept.cell_coords().iter().enumerate() {
+                assert_eq!(released.cell_at(cc), Some(c as u32));
+            }
+            for (n, &nc) in kept.node_coords().iter().enumerate() {
+                assert_eq!(released.node_at(nc), Some(n as u32));
+            }
+            // Nothing above needed them held.
+            assert!(released.node_coords.get().is_none() && released.cell_coords.get().is_none());
+            assert_eq!(released.node_coords(), kept.node_coords());
+            assert_eq!(released.cell_coords(), kept.cell_coords());
+        }
     }
 }

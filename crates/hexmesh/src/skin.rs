@@ -85,7 +85,7 @@ fn neighbour(c: [u32; 3], face: u8) -> [u32; 3] {
 /// Whether cells `c0` and `c1` (which share an edge ending at `node`) are
 /// joined through face-adjacent occupied cells among the 8 around `node`.
 fn joined_around(lattice: &Lattice, node: u32, c0: u32, c1: u32) -> bool {
-    let p = lattice.node_coords()[node as usize];
+    let p = lattice.node_coord(node as usize);
     // The 2 x 2 x 2 block of cells around the node: bit i of the index is
     // the offset along axis i.
     let at = |i: usize| -> Option<u32> {
@@ -159,7 +159,7 @@ pub fn boundary_skin(lattice: &Lattice) -> Skin {
                 let cell = |u: &(u32, u8)| faces[u.0 as usize].cell;
                 let void = |u: &(u32, u8)| {
                     let face = &faces[u.0 as usize];
-                    neighbour(lattice.cell_coords()[face.cell as usize], face.face)
+                    neighbour(lattice.cell_coord(face.cell as usize), face.face)
                 };
                 let (a, b) = key;
                 let c0 = cell(&users[0]);

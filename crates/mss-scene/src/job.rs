@@ -387,6 +387,12 @@ impl Job {
         // Refuse a bad integrator choice (unknown name, a dt above the
         // stability limit) here, before anything is written.
         input.integrator(&registry, &problem, &plan)?;
+        // A run keeps the lattices for their positions and cells (shared
+        // with the model and the frames); their grid coordinates, 24 bytes
+        // per cell, are derived again if anything asks for them.
+        for body in &mut bodies {
+            body.lattice.release_coordinates();
+        }
         Ok(Job {
             bodies,
             limits,
