@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use hexmesh::{Embedding, Lattice, Skin, TriMesh};
 use mss_core::solver::{Problem, State};
-use mss_core::{SpringSet, Vec3};
+use mss_core::{CellMeasure, SpringSet, Vec3};
 use mss_io::IoError;
 use mss_io::exporters::{Exporters, SeriesFacts};
 use mss_io::pc2::Pc2Writer;
@@ -308,7 +308,34 @@ impl DerivedField<'_, '_> {
     }
 }
 
+impl DerivedField<'_, '_> {
+    /// The measure a cell field is of.
+    fn cell_measure(&self) -> Option<CellMeasure> {
+        match self.which {
+            Derived::VolumetricStrain => Some(CellMeasure::VolumetricStrain),
+            Derived::ShearStrain => Some(CellMeasure::ShearStrain),
+            Derived::CorrectionForce => Some(CellMeasure::CorrectionForce),
+            _ => None,
+        }
+    }
+}
+
 impl mss_io::vtk::ComputedValues for DerivedField<'_, '_> {
+    /// Cell measures are computed cell by cell: a `.vtu` writer asks for
+    /// them a block at a time, and no array of them is held.
+    fn values_of(&self, entries: std::ops::Range<usize>, out: &mut Vec<f64>) -> bool {
+        let Some(measure) = self.cell_measure() else {
+            return false;
+        };
+        let start = self.range.start;
+        let FrameSource { state, problem, .. } = self.source;
+        let cells = start + entries.start..start + entries.end;
+        problem
+            .model()
+            .cell_measure_of(&state.x, cells, measure, out);
+        true
+    }
+
     fn len(&self) -> usize {
         self.range.len()
     }
@@ -355,11 +382,7 @@ impl mss_io::vtk::ComputedValues for DerivedField<'_, '_> {
                 write(mss_core::as_arrays(&f[range]).as_flattened())
             }
             Derived::VolumetricStrain | Derived::ShearStrain | Derived::CorrectionForce => {
-                let measure = match self.which {
-                    Derived::VolumetricStrain => mss_core::CellMeasure::VolumetricStrain,
-                    Derived::ShearStrain => mss_core::CellMeasure::ShearStrain,
-                    _ => mss_core::CellMeasure::CorrectionForce,
-                };
+                let measure = self.cell_measure().unwrap_or(CellMeasure::CorrectionForce);
                 model.cell_measure_of(&state.x, range, measure, sc.cells);
                 write(sc.cells)
             }

@@ -85,6 +85,17 @@ pub trait ComputedValues: Sync {
         &self,
         write: &mut dyn FnMut(&[f64]) -> std::io::Result<()>,
     ) -> std::io::Result<()>;
+    /// Puts the values of entries `entries` alone into `out` (replacing its
+    /// contents) and returns true, for a source that computes any range of
+    /// entries on its own (cell by cell): a writer then asks block by block,
+    /// possibly from several threads at once, and never holds the whole
+    /// array. The default returns false (the source computes whole arrays,
+    /// through [`ComputedValues::with_values`]); a writer may ask with an
+    /// empty range to learn which.
+    fn values_of(&self, entries: std::ops::Range<usize>, out: &mut Vec<f64>) -> bool {
+        let _ = (entries, out);
+        false
+    }
 }
 
 impl std::fmt::Debug for FieldValues<'_> {

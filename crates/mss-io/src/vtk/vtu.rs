@@ -16,7 +16,9 @@
 //! The last block size is always its true size (never 0), which VTK, meshio
 //! and vtkio all read correctly.
 
-use super::{Field, FieldValues, Grid, LatticeFrame, VTK_HEXAHEDRON, VTK_LINE, validate_grid};
+use super::{
+    ComputedValues, Field, FieldValues, Grid, LatticeFrame, VTK_HEXAHEDRON, VTK_LINE, validate_grid,
+};
 use crate::IoError;
 use crate::atomic::{WriteSeek, write_atomic_seekable};
 use crate::numfmt::write_f64;
@@ -138,6 +140,10 @@ fn write_cells_vtu<const N: usize>(
 #[derive(Clone, Copy)]
 enum Source<'a> {
     F64(&'a [f64]),
+    /// `Float64` values computed a block at a time
+    /// ([`ComputedValues::values_of`]); the second field is the components
+    /// per entry.
+    Ranged(&'a dyn ComputedValues, usize),
     /// Written as Int64 (connectivity).
     U32AsI64(&'a [u32]),
     /// Written as UInt32.
@@ -162,6 +168,7 @@ impl Source<'_> {
     fn len(&self) -> usize {
         match *self {
             Source::F64(v) => v.len(),
+            Source::Ranged(c, comps) => c.len() * comps,
             Source::U32AsI64(v) | Source::U32(v) => v.len(),
             Source::I32(v) => v.len(),
             Source::Bool(v) => v.len(),
@@ -171,7 +178,7 @@ impl Source<'_> {
 
     fn elem_size(&self) -> usize {
         match self {
-            Source::F64(_) | Source::U32AsI64(_) | Source::Offsets { .. } => 8,
+            Source::F64(_) | Source::Ranged(..) | Source::U32AsI64(_) | Source::Offsets { .. } => 8,
             Source::U32(_) | Source::I32(_) => 4,
             Source::Bool(_) | Source::ConstU8 { .. } => 1,
         }
@@ -179,7 +186,7 @@ impl Source<'_> {
 
     fn vtk_type(&self) -> &'static str {
         match self {
-            Source::F64(_) => "Float64",
+            Source::F64(_) | Source::Ranged(..) => "Float64",
             Source::U32AsI64(_) | Source::Offsets { .. } => "Int64",
             Source::U32(_) => "UInt32",
             Source::I32(_) => "Int32",
@@ -188,8 +195,25 @@ impl Source<'_> {
     }
 
     /// Appends the little-endian bytes of elements `range` to `out`.
-    fn push_bytes(&self, range: std::ops::Range<usize>, out: &mut Vec<u8>) {
+    fn push_bytes(&self, range: std::ops::Range<usize>, out: &mut Vec<u8>) -> io::Result<()> {
         match *self {
+            Source::Ranged(c, comps) => {
+                // Elements are numbers; a block may start or end inside an
+                // entry.
+                let entries = range.start / comps..range.end.div_ceil(comps);
+                let skip = range.start - entries.start * comps;
+                let expected = entries.len() * comps;
+                let mut values = Vec::with_capacity(expected);
+                if !c.values_of(entries, &mut values) || values.len() != expected {
+                    return Err(io::Error::other(format!(
+                        "a computed field gave {} numbers for a block, expected {expected}",
+                        values.len()
+                    )));
+                }
+                values[skip..skip + range.len()]
+                    .iter()
+                    .for_each(|x| out.extend_from_slice(&x.to_le_bytes()));
+            }
             Source::F64(v) => v[range]
                 .iter()
                 .for_each(|x| out.extend_from_slice(&x.to_le_bytes())),
@@ -207,11 +231,14 @@ impl Source<'_> {
                 .for_each(|k| out.extend_from_slice(&((k as i64 + 1) * step as i64).to_le_bytes())),
             Source::ConstU8 { value, .. } => out.extend(range.map(|_| value)),
         }
+        Ok(())
     }
 
     fn write_ascii_elem(&self, w: &mut dyn Write, k: usize) -> io::Result<()> {
         match *self {
             Source::F64(v) => write_f64(w, v[k]),
+            // `field_array` hands the ASCII writer computed values whole.
+            Source::Ranged(..) => Err(io::Error::other("ranged values are not written as ASCII")),
             Source::U32AsI64(v) | Source::U32(v) => write!(w, "{}", v[k]),
             Source::I32(v) => write!(w, "{}", v[k]),
             Source::Bool(v) => write!(w, "{}", u8::from(v[k])),
@@ -231,6 +258,12 @@ fn field_array(w: &mut dyn WriteSeek, f: &Field, enc: VtuEncoding) -> io::Result
         FieldValues::Flags(v) => Source::Bool(v),
         FieldValues::Ids(v) => Source::U32(v),
         FieldValues::Labels(v) => Source::I32(v),
+        FieldValues::Computed(c)
+            if enc != VtuEncoding::Ascii && c.values_of(0..0, &mut Vec::new()) =>
+        {
+            return data_array(w, f.name, comps, Source::Ranged(c, comps), enc)
+                .map_err(|e| io::Error::other(format!("computed field {:?}: {e}", f.name)));
+        }
         FieldValues::Computed(c) => {
             let expected = c.len() * comps;
             return c.with_values(&mut |v| {
@@ -402,7 +435,7 @@ fn write_base64(w: &mut dyn Write, src: Source) -> io::Result<()> {
     let mut start = 0;
     while start < n {
         let end = (start + CHUNK_ELEMS).min(n);
-        src.push_bytes(start..end, b64.raw());
+        src.push_bytes(start..end, b64.raw())?;
         b64.flush_full()?;
         start = end;
     }
@@ -436,7 +469,7 @@ fn write_zlib(w: &mut dyn WriteSeek, src: Source) -> io::Result<()> {
             .map(|b| {
                 let range = b * per_block..((b + 1) * per_block).min(n);
                 let mut raw = Vec::with_capacity(BLOCK_BYTES);
-                src.push_bytes(range, &mut raw);
+                src.push_bytes(range, &mut raw)?;
                 let mut z = ZlibEncoder::new(
                     Vec::with_capacity(BLOCK_BYTES / 2),
                     Compression::new(ZLIB_LEVEL),

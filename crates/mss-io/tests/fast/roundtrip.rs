@@ -215,6 +215,8 @@ struct Recomputed<'a> {
     calls: std::sync::atomic::AtomicUsize,
     /// Numbers left out of what is handed over (to check the refusal).
     short_by: usize,
+    /// Whether it computes any range of entries on its own.
+    ranged: bool,
 }
 
 impl<'a> Recomputed<'a> {
@@ -225,7 +227,13 @@ impl<'a> Recomputed<'a> {
             buffer: std::sync::Mutex::new(Vec::new()),
             calls: std::sync::atomic::AtomicUsize::new(0),
             short_by: 0,
+            ranged: false,
         }
+    }
+
+    fn ranged(mut self, ranged: bool) -> Self {
+        self.ranged = ranged;
+        self
     }
 }
 
@@ -247,71 +255,107 @@ impl ComputedValues for Recomputed<'_> {
         buffer.extend_from_slice(&self.values[..self.values.len() - self.short_by]);
         write(&buffer)
     }
+    fn values_of(&self, entries: std::ops::Range<usize>, out: &mut Vec<f64>) -> bool {
+        if !self.ranged {
+            return false;
+        }
+        let c = self.components;
+        let end = (entries.end * c).min(self.values.len() - self.short_by);
+        out.clear();
+        out.extend_from_slice(&self.values[(entries.start * c).min(end)..end]);
+        true
+    }
 }
 
 #[test]
 fn computed_fields_write_the_bytes_of_the_same_values_held_in_slices() {
     let s = sample();
-    let displacement = Recomputed::new(s.displacement.as_flattened(), 3);
-    let strain = Recomputed::new(&s.strain, 1);
-    let with_computed = || {
-        LatticeFrame::new(&s.points, &s.cells)
-            .with_point_field(Field::computed("displacement", &displacement))
-            .with_point_field(Field::vectors("velocity", &s.velocity))
-            .with_point_field(Field::flags("fixed", &s.fixed))
-            .with_cell_field(Field::computed("strain", &strain))
-            .with_cell_field(Field::ids("cell_id", &s.ids))
-            .with_cell_field(Field::labels("label", &s.labels))
-    };
     let dir = tempfile::tempdir().unwrap();
-    for enc in [
-        VtuEncoding::Ascii,
-        VtuEncoding::Base64,
-        VtuEncoding::Base64Zlib,
-    ] {
-        let held = dir.path().join(format!("held_{enc:?}.vtu"));
-        let lazy = dir.path().join(format!("computed_{enc:?}.vtu"));
-        write_vtu(&held, &frame(&s), enc).unwrap();
-        write_vtu(&lazy, &with_computed(), enc).unwrap();
+    for ranged in [false, true] {
+        let displacement = Recomputed::new(s.displacement.as_flattened(), 3).ranged(ranged);
+        let strain = Recomputed::new(&s.strain, 1).ranged(ranged);
+        let with_computed = || {
+            LatticeFrame::new(&s.points, &s.cells)
+                .with_point_field(Field::computed("displacement", &displacement))
+                .with_point_field(Field::vectors("velocity", &s.velocity))
+                .with_point_field(Field::flags("fixed", &s.fixed))
+                .with_cell_field(Field::computed("strain", &strain))
+                .with_cell_field(Field::ids("cell_id", &s.ids))
+                .with_cell_field(Field::labels("label", &s.labels))
+        };
+        for enc in [
+            VtuEncoding::Ascii,
+            VtuEncoding::Base64,
+            VtuEncoding::Base64Zlib,
+        ] {
+            let held = dir.path().join(format!("held_{enc:?}.vtu"));
+            let lazy = dir.path().join(format!("computed_{enc:?}_{ranged}.vtu"));
+            write_vtu(&held, &frame(&s), enc).unwrap();
+            write_vtu(&lazy, &with_computed(), enc).unwrap();
+            assert_eq!(std::fs::read(&held).unwrap(), std::fs::read(&lazy).unwrap());
+        }
+        for format in [LegacyFormat::Ascii, LegacyFormat::Binary] {
+            let path = dir.path().join(format!("computed_{format:?}.vtk"));
+            write_legacy_vtk(&path, &with_computed(), format, "computed").unwrap();
+            check(&s, &read_back(&path));
+        }
+        // Each file asked for each whole computed array once; a ranged
+        // source is asked for blocks instead, except by the text and legacy
+        // writers.
+        let whole_arrays = if ranged { 3 } else { 5 };
+        for f in [&displacement, &strain] {
+            let calls = f.calls.load(std::sync::atomic::Ordering::Relaxed);
+            assert_eq!(calls, whole_arrays);
+        }
+    }
+
+    // Blocks of 4,096 numbers that start and end inside a 3-vector entry.
+    let lattice = hexmesh::Lattice::block([39, 39, 39], 0.01, [0.0; 3]).unwrap();
+    let u: Vec<f64> = lattice
+        .nodes()
+        .as_flattened()
+        .iter()
+        .map(|p| (p * 37.0).sin())
+        .collect();
+    let ranged_u = Recomputed::new(&u, 3).ranged(true);
+    for enc in [VtuEncoding::Base64, VtuEncoding::Base64Zlib] {
+        let held = dir.path().join("big_held.vtu");
+        let lazy = dir.path().join("big_ranged.vtu");
+        let held_frame = LatticeFrame::new(lattice.nodes(), lattice.cells())
+            .with_point_field(Field::vectors("u", u.as_chunks::<3>().0));
+        write_vtu(&held, &held_frame, enc).unwrap();
+        let lazy_frame = LatticeFrame::new(lattice.nodes(), lattice.cells())
+            .with_point_field(Field::computed("u", &ranged_u));
+        write_vtu(&lazy, &lazy_frame, enc).unwrap();
         assert_eq!(std::fs::read(&held).unwrap(), std::fs::read(&lazy).unwrap());
     }
-    for format in [LegacyFormat::Ascii, LegacyFormat::Binary] {
-        let path = dir.path().join(format!("computed_{format:?}.vtk"));
-        write_legacy_vtk(&path, &with_computed(), format, "computed").unwrap();
-        check(&s, &read_back(&path));
-    }
-    // Each file asked for each computed array once.
-    assert_eq!(
-        displacement
-            .calls
-            .load(std::sync::atomic::Ordering::Relaxed),
-        5
-    );
-    assert_eq!(strain.calls.load(std::sync::atomic::Ordering::Relaxed), 5);
+    assert_eq!(ranged_u.calls.load(std::sync::atomic::Ordering::Relaxed), 0);
 
     // A source that hands over fewer numbers than it promised leaves no file.
-    let mut short = Recomputed::new(&s.strain, 1);
-    short.short_by = 1;
-    let bad =
-        LatticeFrame::new(&s.points, &s.cells).with_cell_field(Field::computed("strain", &short));
-    for (name, result) in [
-        (
-            "short.vtu",
-            write_vtu(&dir.path().join("short.vtu"), &bad, VtuEncoding::Base64Zlib),
-        ),
-        (
-            "short.vtk",
-            write_legacy_vtk(
-                &dir.path().join("short.vtk"),
-                &bad,
-                LegacyFormat::Binary,
-                "x",
+    for ranged in [false, true] {
+        let mut short = Recomputed::new(&s.strain, 1).ranged(ranged);
+        short.short_by = 1;
+        let bad = LatticeFrame::new(&s.points, &s.cells)
+            .with_cell_field(Field::computed("strain", &short));
+        for (name, result) in [
+            (
+                "short.vtu",
+                write_vtu(&dir.path().join("short.vtu"), &bad, VtuEncoding::Base64Zlib),
             ),
-        ),
-    ] {
-        let err = result.unwrap_err().to_string();
-        assert!(err.contains("strain") && err.contains("expected"), "{err}");
-        assert!(!dir.path().join(name).exists());
+            (
+                "short.vtk",
+                write_legacy_vtk(
+                    &dir.path().join("short.vtk"),
+                    &bad,
+                    LegacyFormat::Binary,
+                    "x",
+                ),
+            ),
+        ] {
+            let err = result.unwrap_err().to_string();
+            assert!(err.contains("strain") && err.contains("expected"), "{err}");
+            assert!(!dir.path().join(name).exists());
+        }
     }
 }
 
