@@ -149,14 +149,14 @@ pub fn parse_size(text: &str) -> Result<u64, String> {
 /// Bytes of a process before any lattice (program, runtime, thread stacks).
 const BASE_BYTES: u64 = 13 << 20;
 /// Bytes per cell of an explicit run at its peak, output included, beyond
-/// [`BASE_BYTES`] (measured with the model sharing the lattice's arrays:
-/// the slope over voxelized cubes of 64^3 and 96^3 cells is 439, the
-/// bundled scenes 12-13 MiB in all; the lattice, the model, the state, the
-/// integrator and one frame being written). The mode check that `mss run`
+/// [`BASE_BYTES`] (measured: the slope over voxelized cubes of 48^3 to
+/// 128^3 cells is 296, the bundled scenes 12-13 MiB in all; the lattice's
+/// positions and cells, the model, the state, the integrator, whose retry
+/// positions the frame being written borrows; docs/solvers.md). The mode check that `mss run`
 /// makes on lattices of at most 20,000 nodes is not counted (it is bounded
 /// by that size); `benches/estimates.rs` of mss-cli compares the estimate
 /// with runs.
-const EXPLICIT_BYTES_PER_CELL: u64 = 440;
+const EXPLICIT_BYTES_PER_CELL: u64 = 300;
 /// Bytes per node that Newton solves add (tangent, multigrid hierarchy,
 /// Krylov vectors; measured: 28,000 implicit and 30,000 static with the
 /// stability test on 8,800 nodes).
