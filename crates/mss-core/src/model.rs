@@ -604,19 +604,24 @@ struct Layers {
 }
 
 impl Layers {
-    fn of(cell_coords: &[[u32; 3]]) -> Self {
+    /// The layers of cells whose z grid coordinates are `layer_of`, in
+    /// cell order (ascending).
+    fn of(layer_of: impl ExactSizeIterator<Item = u32>) -> Self {
         let mut offsets = vec![0u32];
-        for (c, w) in cell_coords.windows(2).enumerate() {
-            debug_assert!(w[0][2] <= w[1][2], "cells sorted by layer");
-            if w[1][2] != w[0][2] {
+        let count = layer_of.len();
+        let mut previous: Option<u32> = None;
+        for (c, z) in layer_of.enumerate() {
+            if let Some(p) = previous {
+                debug_assert!(p <= z, "cells sorted by layer");
                 // A missing layer in between would be an empty range; the
                 // parity of the layer index is what matters, so keep gaps.
-                for _ in w[0][2]..w[1][2] {
-                    offsets.push(c as u32 + 1);
+                for _ in p..z {
+                    offsets.push(c as u32);
                 }
             }
+            previous = Some(z);
         }
-        offsets.push(cell_coords.len() as u32);
+        offsets.push(count as u32);
         Self { offsets }
     }
 
@@ -877,7 +882,7 @@ impl Model {
             .flat_map(|(s, m)| s.map(|s| s / m))
             .fold(0.0f64, f64::max);
         drop(row_sums);
-        let layers = Layers::of(lattice.cell_coords());
+        let layers = Layers::of((0..lattice.num_cells()).map(|c| lattice.cell_coord(c)[2]));
         let num_cells = cells.len();
         let num_springs = lattice.num_unique_edges() + 4 * num_cells;
         let leftover_edges = leftover_edges(&cells, n, |_| h);

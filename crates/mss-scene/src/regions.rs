@@ -107,10 +107,8 @@ impl CellLabels {
         Self {
             origin: lattice.origin(),
             sides: [lattice.h(); 3],
-            labels: lattice
-                .cell_coords()
-                .iter()
-                .copied()
+            labels: (0..lattice.num_cells())
+                .map(|c| lattice.cell_coord(c))
                 .zip(labels.iter().copied())
                 .collect(),
         }
@@ -273,10 +271,11 @@ pub fn assign_regions_with_labels(
     mesh_of: &dyn Fn(&str) -> Result<TriMesh, String>,
 ) -> Result<RegionAssignment, RegionError> {
     let (o, h) = (lattice.origin(), lattice.h());
-    let centres: Vec<[f64; 3]> = lattice
-        .cell_coords()
-        .iter()
-        .map(|c| std::array::from_fn(|k| o[k] + (c[k] as f64 + 0.5) * h))
+    let centres: Vec<[f64; 3]> = (0..lattice.num_cells())
+        .map(|cell| {
+            let c = lattice.cell_coord(cell);
+            std::array::from_fn(|k| o[k] + (c[k] as f64 + 0.5) * h)
+        })
         .collect();
     let context = RegionContext {
         bounds: lattice.bounding_box(),
