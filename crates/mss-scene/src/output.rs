@@ -246,9 +246,7 @@ enum Derived {
     InternalForce,
     ExternalForce,
     ContactForce,
-    VolumetricStrain,
-    ShearStrain,
-    CorrectionForce,
+    Cell(CellMeasure),
 }
 
 impl Derived {
@@ -258,9 +256,9 @@ impl Derived {
         Derived::ExternalForce,
     ];
     const CELL_FIELDS: [Derived; 3] = [
-        Derived::VolumetricStrain,
-        Derived::ShearStrain,
-        Derived::CorrectionForce,
+        Derived::Cell(CellMeasure::VolumetricStrain),
+        Derived::Cell(CellMeasure::ShearStrain),
+        Derived::Cell(CellMeasure::CorrectionForce),
     ];
 
     fn name(self) -> &'static str {
@@ -269,14 +267,14 @@ impl Derived {
             Derived::InternalForce => "internal_force",
             Derived::ExternalForce => "external_force",
             Derived::ContactForce => "contact_force",
-            Derived::VolumetricStrain => "volumetric_strain",
-            Derived::ShearStrain => "shear_strain",
-            Derived::CorrectionForce => "correction_force",
+            Derived::Cell(CellMeasure::VolumetricStrain) => "volumetric_strain",
+            Derived::Cell(CellMeasure::ShearStrain) => "shear_strain",
+            Derived::Cell(CellMeasure::CorrectionForce) => "correction_force",
         }
     }
 
     fn per_cell(self) -> bool {
-        Self::CELL_FIELDS.contains(&self)
+        matches!(self, Derived::Cell(_))
     }
 }
 
@@ -308,23 +306,11 @@ impl DerivedField<'_, '_> {
     }
 }
 
-impl DerivedField<'_, '_> {
-    /// The measure a cell field is of.
-    fn cell_measure(&self) -> Option<CellMeasure> {
-        match self.which {
-            Derived::VolumetricStrain => Some(CellMeasure::VolumetricStrain),
-            Derived::ShearStrain => Some(CellMeasure::ShearStrain),
-            Derived::CorrectionForce => Some(CellMeasure::CorrectionForce),
-            _ => None,
-        }
-    }
-}
-
 impl mss_io::vtk::ComputedValues for DerivedField<'_, '_> {
     /// Cell measures are computed cell by cell: a `.vtu` writer asks for
     /// them a block at a time, and no array of them is held.
     fn values_of(&self, entries: std::ops::Range<usize>, out: &mut Vec<f64>) -> bool {
-        let Some(measure) = self.cell_measure() else {
+        let Derived::Cell(measure) = self.which else {
             return false;
         };
         let start = self.range.start;
@@ -381,8 +367,7 @@ impl mss_io::vtk::ComputedValues for DerivedField<'_, '_> {
                 let f = problem.contact_forces(state);
                 write(mss_core::as_arrays(&f[range]).as_flattened())
             }
-            Derived::VolumetricStrain | Derived::ShearStrain | Derived::CorrectionForce => {
-                let measure = self.cell_measure().unwrap_or(CellMeasure::CorrectionForce);
+            Derived::Cell(measure) => {
                 model.cell_measure_of(&state.x, range, measure, sc.cells);
                 write(sc.cells)
             }
