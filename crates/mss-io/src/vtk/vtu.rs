@@ -4,8 +4,12 @@
 //! copied into its owned model, then builds the whole base64 (and compressed)
 //! text in memory before serialising it, and compresses single-threaded. This
 //! writer streams each array straight from the caller's slices into the file
-//! and compresses the 32 KiB blocks of an array in parallel (the output does
-//! not depend on the number of threads). The `write` bench compares both.
+//! and compresses the 32 KiB blocks of an array in parallel, 64 at a time,
+//! writing each group before the next (the output does not depend on the
+//! number of threads; the array's header, which lists the blocks' sizes and
+//! comes first, is filled in afterwards). Computed fields
+//! ([`super::ComputedValues`]) are asked for when their array is written,
+//! block by block when they can be. The `write` bench compares both.
 //! vtkio is still used to read the files back in the tests.
 //!
 //! Layout, as written by VTK itself: `header_type="UInt64"`, little-endian,
