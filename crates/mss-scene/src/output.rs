@@ -290,6 +290,9 @@ struct FrameSource<'a> {
     problem: &'a Problem,
     state: &'a State,
     scratch: std::sync::Mutex<FrameBuffers<'a>>,
+    /// The contact forces of every node, searched once per frame (they
+    /// were searched again for each body's file).
+    contact: std::sync::OnceLock<Vec<Vec3>>,
 }
 
 /// One body's share of a derived field.
@@ -354,7 +357,8 @@ impl mss_io::vtk::ComputedValues for DerivedField<'_, '_> {
             }
             Derived::InternalForce | Derived::ExternalForce => {
                 // Forces gather over cells and loads: computed for every
-                // node, written for the body's.
+                // node, written for the body's (again for each body of a
+                // scene of several: one node array, not one per field).
                 sc.nodes.fill(Vec3::zeros());
                 if self.which == Derived::InternalForce {
                     model.internal_forces(&state.x, sc.nodes);
@@ -364,7 +368,10 @@ impl mss_io::vtk::ComputedValues for DerivedField<'_, '_> {
                 write(mss_core::as_arrays(&sc.nodes[range]).as_flattened())
             }
             Derived::ContactForce => {
-                let f = problem.contact_forces(state);
+                let f = self
+                    .source
+                    .contact
+                    .get_or_init(|| problem.contact_forces(state));
                 write(mss_core::as_arrays(&f[range]).as_flattened())
             }
             Derived::Cell(measure) => {
@@ -792,6 +799,7 @@ impl FrameWriter {
                 nodes,
                 cells: &mut scratch.cells,
             }),
+            contact: std::sync::OnceLock::new(),
         };
         let result = self.write_frame(
             problem,
