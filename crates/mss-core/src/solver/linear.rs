@@ -283,6 +283,20 @@ pub struct LinearStats {
     pub krylov_iterations: u32,
     /// Multigrid hierarchies built.
     pub hierarchy_builds: u32,
+    /// Iterative solves that reused the previous solve's matrix and
+    /// hierarchy (Newton's chord steps, [`newton`](super::newton)).
+    pub reused_solves: u32,
+}
+
+/// The last iterative solve's operator and hierarchy, kept until the next
+/// Newton iteration decides whether its tangent is still good enough.
+struct LastSolve {
+    mg: super::multigrid::Multigrid,
+    /// The operator is the matrix times `sign`.
+    sign: f64,
+    symmetric: bool,
+    /// Whether the hierarchy becomes the stability test's when released.
+    keep: bool,
 }
 
 /// The linear solver of a Newton solve ([`newton`](super::newton)): a sparse
@@ -303,6 +317,8 @@ pub struct LinearSolver {
     keep_next: bool,
     /// The kept hierarchy: a multigrid cycle of a symmetric stiffness.
     kept: Option<super::multigrid::Multigrid>,
+    /// The last iterative solve, for [`LinearSolver::solve_again`].
+    last: Option<LastSolve>,
 }
 
 impl std::fmt::Debug for LinearSolver {
@@ -380,6 +396,7 @@ impl LinearSolver {
             stats: LinearStats::default(),
             keep_next: false,
             kept: None,
+            last: None,
         }
     }
 
@@ -403,6 +420,7 @@ impl LinearSolver {
         reference: impl FnOnce() -> BlockCsr,
         free: &[bool],
     ) -> Option<bool> {
+        self.release_last();
         if !self.shape.as_ref().is_some_and(|s| s.fits(free)) {
             self.kept = None;
             self.shape = Some(super::multigrid::HierarchyShape::new(
@@ -478,6 +496,7 @@ impl LinearSolver {
         size: f64,
         rtol: f64,
     ) -> Result<Vec<Vec3>, LinearFailure> {
+        self.release_last();
         self.stats.solves += 1;
         // Only the very next solve may keep its hierarchy.
         let keep = std::mem::take(&mut self.keep_next);
@@ -525,31 +544,17 @@ impl LinearSolver {
         // (Newton iterations change the tangent little) was tried and lost,
         // since a stale hierarchy takes more Krylov iterations than a new
         // set-up costs, most of all once the tangent turns non-symmetric.
+        // (Newton's chord steps reuse a matrix with its own hierarchy:
+        // `solve_again`.)
         let mg =
             super::multigrid::Multigrid::new(op, shape).map_err(|e| LinearFailure::Other(e.0))?;
-        let info = super::multigrid::krylov(&mg, &b_signed, &mut y, rtol, 500, symmetric);
         self.stats.hierarchy_builds += 1;
-        self.stats.krylov_iterations += info.iterations;
-        log::debug!(
-            "{} with multigrid ({:?} nodes per level): {} iterations, relative residual {:.2e}",
-            if symmetric { "CG" } else { "GMRES" },
-            mg.level_sizes(),
-            info.iterations,
-            info.relative_residual
-        );
-        let worst = y.iter().map(|v| v.amax()).fold(0.0, f64::max);
-        let usable = info.relative_residual.is_finite()
-            && worst.is_finite()
-            && worst <= 1e6 * size
-            && (info.converged || info.relative_residual <= 0.1);
+        let usable = self.krylov(&mg, symmetric, &b_signed, &mut y, size, rtol);
         if !usable && free_dofs <= FALLBACK_MAX_FREE_DOFS {
             // Near-mechanisms (the lattice's hourglass modes) can stall the
             // preconditioned iteration; a problem that still fits a direct
             // solve gets one, which also tells a singular matrix apart.
-            log::debug!(
-                "iterative solve stalled at relative residual {:.2e}: solving directly",
-                info.relative_residual
-            );
+            log::debug!("iterative solve stalled: solving directly");
             // The operator is the matrix times `sign` with the held dofs
             // decoupled: its free block is that of `sign * a`.
             return solve_free(&mut self.lu, mg.operator().0, &b_signed, free, size);
@@ -564,9 +569,112 @@ impl LinearSolver {
             order.truncate(8);
             return Err(LinearFailure::Singular { nodes: order });
         }
-        if keep && symmetric {
-            self.kept = Some(mg.into_preconditioner());
-        }
+        self.last = Some(LastSolve {
+            mg,
+            sign,
+            symmetric,
+            keep,
+        });
         Ok(y)
+    }
+
+    /// Krylov iterations on `mg`'s operator from `y` (zero) to a relative
+    /// residual `rtol`, counted in the stats; whether the solution is
+    /// usable (finite, below `1e6 size`, converged or at least within 0.1).
+    fn krylov(
+        &mut self,
+        mg: &super::multigrid::Multigrid,
+        symmetric: bool,
+        b: &[Vec3],
+        y: &mut [Vec3],
+        size: f64,
+        rtol: f64,
+    ) -> bool {
+        let info = super::multigrid::krylov(mg, b, y, rtol, 500, symmetric);
+        self.stats.krylov_iterations += info.iterations;
+        log::debug!(
+            "{} with multigrid ({:?} nodes per level): {} iterations, relative residual {:.2e}",
+            if symmetric { "CG" } else { "GMRES" },
+            mg.level_sizes(),
+            info.iterations,
+            info.relative_residual
+        );
+        let worst = y.iter().map(|v| v.amax()).fold(0.0, f64::max);
+        info.relative_residual.is_finite()
+            && worst.is_finite()
+            && worst <= 1e6 * size
+            && (info.converged || info.relative_residual <= 0.1)
+    }
+
+    /// Solves `A y = b` with the matrix and hierarchy of the last iterative
+    /// solve (a chord step of Newton's method: no assembly, no set-up), to a
+    /// relative residual `rtol`. `None` when there is no such solve (direct
+    /// solves keep nothing), its free dofs differ, or the result is not
+    /// usable; the caller then assembles a new matrix.
+    pub(crate) fn solve_again(
+        &mut self,
+        b: &[Vec3],
+        free: &[bool],
+        size: f64,
+        rtol: f64,
+    ) -> Option<Vec<Vec3>> {
+        let last = self.last.take()?;
+        let same_dofs = last
+            .mg
+            .mask()
+            .iter()
+            .flatten()
+            .zip(free)
+            .all(|(m, f)| m == f);
+        if !same_dofs || last.mg.mask().len() != b.len() {
+            self.last = Some(last);
+            self.release_last();
+            return None;
+        }
+        self.stats.solves += 1;
+        self.stats.iterative_solves += 1;
+        self.stats.reused_solves += 1;
+        let b_signed: Vec<Vec3> = b.iter().map(|v| v * last.sign).collect();
+        let mut y = vec![Vec3::zeros(); b.len()];
+        let usable = self.krylov(&last.mg, last.symmetric, &b_signed, &mut y, size, rtol);
+        self.last = Some(last);
+        if usable {
+            Some(y)
+        } else {
+            self.release_last();
+            None
+        }
+    }
+
+    /// `out = A v` on the free dofs (zero on the held ones) with the matrix
+    /// of the last iterative solve, for `v` zero on the held dofs; false
+    /// when no such solve is kept.
+    pub(crate) fn last_product(&self, v: &[Vec3], out: &mut [Vec3]) -> bool {
+        let Some(last) = &self.last else {
+            return false;
+        };
+        let (a, mask) = last.mg.operator();
+        if a.blocks.is_empty() || v.len() != mask.len() {
+            return false;
+        }
+        super::multigrid::mul(a, v, out);
+        for (o, m) in out.iter_mut().zip(mask) {
+            for d in 0..3 {
+                o[d] = if m[d] { o[d] * last.sign } else { 0.0 };
+            }
+        }
+        true
+    }
+
+    /// Drops the last solve's matrix and hierarchy (before a new matrix is
+    /// assembled, so that two are never held); a hierarchy asked for by
+    /// [`LinearSolver::keep_next_hierarchy`] becomes the stability test's.
+    pub(crate) fn release_last(&mut self) {
+        if let Some(last) = self.last.take()
+            && last.keep
+            && last.symmetric
+        {
+            self.kept = Some(last.mg.into_preconditioner());
+        }
     }
 }

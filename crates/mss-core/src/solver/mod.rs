@@ -935,10 +935,13 @@ pub struct NewtonOptions {
 /// Relative accuracy of the first linear solve of a Newton solve (iterative
 /// solvers); it is raised to what reaches the Newton target in one step when
 /// that is looser. Later ones follow Eisenstat and Walker's choice 2,
-/// `0.9 (|R_k| / |R_k-1|)^2`. A loose first solve (0.1) costs Newton
-/// iterations on nearly linear problems (each a tangent assembly and a
-/// hierarchy set-up, more than the Krylov iterations it saves).
-const INITIAL_FORCING: f64 = 1e-8;
+/// `0.9 (|R_k| / |R_k-1|)^2`. Solving the first one exactly (it was 1e-8)
+/// bought nothing on the lattice: its step leaves a nonlinear remainder of a
+/// few percent on the cantilever and the bunny, which the next iteration
+/// solves anyway, and a nearly linear problem finishes with chord steps on
+/// the same tangent (see [`newton`]). Looser than 1e-3 (0.1) costs Newton
+/// iterations, each a tangent assembly and a hierarchy set-up.
+const INITIAL_FORCING: f64 = 1e-3;
 
 /// Loosest linear solve of a Newton step (iterative solvers) before the
 /// target is near. Eisenstat and Walker allow 0.1, but on the lattice a
@@ -994,7 +997,36 @@ fn free_norm(r: &[Vec3], free: &[bool]) -> f64 {
 /// residual norm otherwise. `size` is a length scale of the body and `h` the
 /// cell edge (for the round-off floor of the target). `x` is updated in place
 /// (also on failure: callers keep their own copy). Returns the iterations.
+///
+/// An iteration whose last step showed the tangent still accurate (the
+/// step's nonlinear remainder `R(x + d) - R(x) - J d` predicts a contraction
+/// of at most 1e-2) reuses that tangent and its
+/// multigrid hierarchy instead of assembling new ones (a chord step): nearly
+/// linear problems then cost one assembly and one set-up, however loosely
+/// the first linear solve was asked for.
 pub fn newton(
+    sys: &mut dyn NonlinearSystem,
+    x: &mut [Vec3],
+    free: &[bool],
+    size: f64,
+    h: f64,
+    opts: NewtonOptions,
+    linear: &mut linear::LinearSolver,
+) -> Result<u32, NewtonFailure> {
+    // Nothing of another solve's matrices may serve this one's chord steps.
+    linear.release_last();
+    let result = newton_iterations(sys, x, free, size, h, opts, linear);
+    linear.release_last();
+    result
+}
+
+/// Largest contraction per step, predicted from the last step, for which
+/// [`newton`] reuses the last tangent (a chord step) instead of assembling
+/// one: a reused step costs Krylov iterations only, a new tangent its
+/// assembly and a hierarchy set-up besides (about ten Krylov iterations).
+const CHORD_MAX_CONTRACTION: f64 = 1e-2;
+
+fn newton_iterations(
     sys: &mut dyn NonlinearSystem,
     x: &mut [Vec3],
     free: &[bool],
@@ -1017,23 +1049,14 @@ pub fn newton(
     let mut floor = 0.0;
     let mut target = opts.rtol * scale;
     let mut previous_norm: Option<f64> = None;
+    // The contraction a step with the last tangent is predicted to reach.
+    let mut chord: Option<f64> = None;
     for it in 0..opts.max_iterations {
         if norm == 0.0 || (it > 0 && norm <= target.max(floor)) {
             return Ok(it);
         }
         if sys.cancelled() {
             return Err(NewtonFailure::Cancelled);
-        }
-        let jac = sys.jacobian(x);
-        if it == 0 {
-            let kmax = (0..n)
-                .filter_map(|i| jac.find(i, i))
-                .map(|k| jac.blocks[k].abs().max())
-                .fold(0.0, f64::max);
-            floor = 1e-12 * kmax * h * (free.iter().filter(|f| **f).count() as f64).sqrt();
-            if norm <= target.max(floor) {
-                return Ok(0);
-            }
         }
         let neg_r: Vec<Vec3> = r.iter().map(|v| -v).collect();
         // Inexact Newton (Eisenstat-Walker forcing terms): solve only as
@@ -1046,14 +1069,45 @@ pub fn newton(
         // Never beyond what reaches the Newton target from here.
         let eta = forcing.max(0.05 * target.max(floor) / norm).min(0.1);
         previous_norm = Some(norm);
-        let delta = match linear.solve(jac, &neg_r, free, size, eta) {
-            Ok(d) => d,
-            Err(linear::LinearFailure::Singular { nodes }) => {
-                return Err(NewtonFailure::Singular(nodes));
+        let reused = match chord.take() {
+            // A chord step contracts by about q whatever the linear
+            // accuracy: solving much beyond q is wasted.
+            Some(q) if q <= CHORD_MAX_CONTRACTION => {
+                linear.solve_again(&neg_r, free, size, eta.max(0.25 * q).min(0.1))
             }
-            Err(linear::LinearFailure::Other(m)) => return Err(NewtonFailure::Linear(m)),
+            _ => None,
         };
+        let chord_step = reused.is_some();
+        let delta = match reused {
+            Some(d) => d,
+            None => {
+                // Never two tangents alive at once.
+                linear.release_last();
+                let jac = sys.jacobian(x);
+                if it == 0 {
+                    let kmax = (0..n)
+                        .filter_map(|i| jac.find(i, i))
+                        .map(|k| jac.blocks[k].abs().max())
+                        .fold(0.0, f64::max);
+                    floor = 1e-12 * kmax * h * (free.iter().filter(|f| **f).count() as f64).sqrt();
+                    if norm <= target.max(floor) {
+                        return Ok(0);
+                    }
+                }
+                match linear.solve(jac, &neg_r, free, size, eta) {
+                    Ok(d) => d,
+                    Err(linear::LinearFailure::Singular { nodes }) => {
+                        return Err(NewtonFailure::Singular(nodes));
+                    }
+                    Err(linear::LinearFailure::Other(m)) => {
+                        return Err(NewtonFailure::Linear(m));
+                    }
+                }
+            }
+        };
+        let norm_before = norm;
         let mut accepted = false;
+        let mut full_step = false;
         if opts.slope_line_search {
             // The residual norm is a poor merit function in bending: full
             // Newton steps that rotate the body raise |R| (the rest tangent
@@ -1104,6 +1158,7 @@ pub fn newton(
                     }
                 }
                 if found {
+                    full_step = alpha == 1.0;
                     log::trace!(
                         "Newton iteration {it}: slope step {alpha}, residual {norm:e} -> {nt:e}"
                     );
@@ -1124,6 +1179,7 @@ pub fn newton(
             let s = sys.residual(&trial, &mut r_trial);
             let nt = free_norm(&r_trial, free);
             if nt.is_finite() && nt <= (1.0 - 1e-4 * alpha) * norm {
+                full_step = alpha == 1.0;
                 log::trace!("Newton iteration {it}: step {alpha}, residual {norm:e} -> {nt:e}");
                 x.copy_from_slice(&trial);
                 std::mem::swap(&mut r, &mut r_trial);
@@ -1135,6 +1191,14 @@ pub fn newton(
             alpha *= 0.5;
         }
         target = opts.rtol * scale;
+        if !accepted && chord_step {
+            // The old tangent's direction did not descend: a new tangent.
+            linear.release_last();
+            continue;
+        }
+        if accepted && full_step {
+            chord = chord_contraction(linear, &delta, &neg_r, &r, free, norm_before);
+        }
         if !accepted {
             // No decrease along the Newton direction: converged to round-off
             // if the step is negligible, else a failure.
@@ -1164,6 +1228,29 @@ pub fn newton(
         residual: norm,
         target: target.max(floor),
     }))
+}
+
+/// The contraction that a step from the new residual `r` with the last
+/// solve's tangent `J` (taken at the start of the step `delta`, whose
+/// residual was `-neg_r`) is predicted to reach: twice the step's nonlinear
+/// remainder `|R(x + d) - R(x) - J d| / |R(x)|`, since the tangent changed
+/// along the step by what the remainder shows. `None` without a kept
+/// tangent (direct solves).
+fn chord_contraction(
+    linear: &linear::LinearSolver,
+    delta: &[Vec3],
+    neg_r: &[Vec3],
+    r: &[Vec3],
+    free: &[bool],
+    norm_before: f64,
+) -> Option<f64> {
+    let mut jd = vec![Vec3::zeros(); delta.len()];
+    if !(norm_before > 0.0 && linear.last_product(delta, &mut jd)) {
+        return None;
+    }
+    let remainder: Vec<Vec3> = (0..delta.len()).map(|i| r[i] + neg_r[i] - jd[i]).collect();
+    let q = 2.0 * free_norm(&remainder, free) / norm_before;
+    q.is_finite().then_some(q)
 }
 
 fn check_inverted(model: &Model, x: &[Vec3]) -> Option<Divergence> {

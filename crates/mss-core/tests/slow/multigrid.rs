@@ -217,3 +217,40 @@ fn a_huge_load_is_not_reported_as_a_mechanism() {
         }
     }
 }
+
+/// A nearly linear solve assembles one tangent: the first Krylov solve is
+/// loose (Newton's first forcing term), and the steps after it reuse that
+/// tangent and its hierarchy (chord steps), since the step's nonlinear
+/// remainder shows the tangent still accurate; the answer is the direct
+/// solver's. A strongly nonlinear one assembles new tangents.
+#[test]
+fn nearly_linear_solves_reuse_their_tangent_and_agree_with_the_direct_solver() {
+    let param = HourglassControl::new(Box::new(Volumetric), 0.05).unwrap();
+    for (load, nearly_linear) in [(1e-4, true), (6.0, false)] {
+        let p = cantilever(&param, 6, load);
+        let mut s = State::at_rest(p.model());
+        let info = solve_static(
+            &p,
+            &mut s,
+            &StaticOptions {
+                linear_solver: LinearSolverKind::Iterative,
+                accept_unstable: true,
+                ..StaticOptions::default()
+            },
+        )
+        .unwrap();
+        let l = info.linear;
+        if nearly_linear {
+            assert_eq!(l.hierarchy_builds, 1, "{l:?}");
+            assert!(l.reused_solves >= 1, "{l:?}");
+        } else {
+            assert!(l.hierarchy_builds >= 3, "{l:?}");
+        }
+        assert_eq!(l.iterative_solves, l.hierarchy_builds + l.reused_solves);
+        let (direct, _) = solve(&p, LinearSolverKind::Direct);
+        let iterative = s.displacements(p.model());
+        let scale = max_norm(&direct);
+        let diff = max_diff(&direct, &iterative);
+        assert!(diff <= 1e-6 * scale, "load {load}: {diff:e} of {scale:e}");
+    }
+}
