@@ -1172,8 +1172,12 @@ pub(crate) fn definiteness(a: &BlockCsr, mg: &Multigrid) -> (Definiteness, f64) 
         // Ritz values only fall towards the smallest eigenvalue; an outlier
         // below the multigrid's cluster (a softening mode) shows within a
         // few steps, so a value that has stopped moving is the bottom.
+        // "Stopped": within 5 % over five steps. At 1 % the test crept
+        // down the cluster's continuum (19-25 steps at 64x16x16 and
+        // 128x32x32, more the larger the lattice) to a bottom it had
+        // already seen to within a few percent, far above the margin.
         let settled =
-            history.len() > 5 && (history[history.len() - 6] - theta).abs() <= 1e-2 * theta.abs();
+            history.len() > 5 && (history[history.len() - 6] - theta).abs() <= 5e-2 * theta.abs();
         let decided =
             b == 0.0 || (step + 1 >= DEFINITENESS_STEPS.0 && settled && residual <= 0.1 * theta);
         if decided {
