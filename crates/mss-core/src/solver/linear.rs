@@ -476,13 +476,15 @@ impl LinearSolver {
         size: f64,
         rtol: f64,
     ) -> Result<Vec<Vec3>, crate::sparse::LinearSolveError> {
-        self.solve(a.clone(), b, free, size, rtol)
-            .map_err(|e| match e {
-                LinearFailure::Singular { nodes } => crate::sparse::LinearSolveError::Singular {
-                    detail: format!("the solution grows without bound at nodes {nodes:?}"),
-                },
-                LinearFailure::Other(m) => crate::sparse::LinearSolveError::Library(m),
-            })
+        let solved = self.solve(a.clone(), b, free, size, rtol);
+        // A caller of this entry point gets no chord steps: hold nothing.
+        self.release_last();
+        solved.map_err(|e| match e {
+            LinearFailure::Singular { nodes } => crate::sparse::LinearSolveError::Singular {
+                detail: format!("the solution grows without bound at nodes {nodes:?}"),
+            },
+            LinearFailure::Other(m) => crate::sparse::LinearSolveError::Library(m),
+        })
     }
 
     /// Solves `A y = b` on the free dofs to a relative residual `rtol` (the
