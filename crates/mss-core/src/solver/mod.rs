@@ -1244,11 +1244,14 @@ fn chord_contraction(
     free: &[bool],
     norm_before: f64,
 ) -> Option<f64> {
-    let mut jd = vec![Vec3::zeros(); delta.len()];
-    if !(norm_before > 0.0 && linear.last_product(delta, &mut jd)) {
+    let mut remainder = vec![Vec3::zeros(); delta.len()];
+    if !(norm_before > 0.0 && linear.last_product(delta, &mut remainder)) {
         return None;
     }
-    let remainder: Vec<Vec3> = (0..delta.len()).map(|i| r[i] + neg_r[i] - jd[i]).collect();
+    // J d, turned into R(x + d) - R(x) - J d in place.
+    for ((e, ri), ni) in remainder.iter_mut().zip(r).zip(neg_r) {
+        *e = ri + ni - *e;
+    }
     let q = 2.0 * free_norm(&remainder, free) / norm_before;
     q.is_finite().then_some(q)
 }
