@@ -648,6 +648,23 @@ impl LinearSolver {
         }
     }
 
+    /// Largest distance of a node of a cell from its cell's mean under the
+    /// displacement `d` (m): how far `d` deforms or turns any cell, which
+    /// bounds how much it changes the cell's tangent. Zero without cells
+    /// (direct solvers).
+    pub(crate) fn largest_cell_distortion(&self, d: &[Vec3]) -> f64 {
+        use rayon::prelude::*;
+        self.cells
+            .par_iter()
+            .map(|cell| {
+                let mean = cell.iter().map(|&n| d[n as usize]).sum::<Vec3>() / 8.0;
+                cell.iter()
+                    .map(|&n| (d[n as usize] - mean).norm())
+                    .fold(0.0, f64::max)
+            })
+            .reduce(|| 0.0, f64::max)
+    }
+
     /// `out = A v` on the free dofs (zero on the held ones) with the matrix
     /// of the last iterative solve, for `v` zero on the held dofs; false
     /// when no such solve is kept.

@@ -998,12 +998,15 @@ fn free_norm(r: &[Vec3], free: &[bool]) -> f64 {
 /// cell edge (for the round-off floor of the target). `x` is updated in place
 /// (also on failure: callers keep their own copy). Returns the iterations.
 ///
-/// An iteration whose last step showed the tangent still accurate (the
-/// step's nonlinear remainder `R(x + d) - R(x) - J d` predicts a contraction
-/// of at most 1e-2) reuses that tangent and its
-/// multigrid hierarchy instead of assembling new ones (a chord step): nearly
-/// linear problems then cost one assembly and one set-up, however loosely
-/// the first linear solve was asked for.
+/// An iteration whose last step showed the tangent still accurate reuses
+/// that tangent and its multigrid hierarchy instead of assembling new ones
+/// (a chord step): after a step with a new tangent whose nonlinear
+/// remainder `R(x + d) - R(x) - J d` predicts a contraction of at most 1e-2;
+/// once per solve, on trial, after a step with a new tangent that
+/// contracted the residual by less than a factor of twenty (far from the
+/// solution) but deformed no cell by more than a twentieth of its size; and after a chord step while chord steps contract it by a
+/// factor of twenty or more. Nearly linear problems then cost one assembly and
+/// one set-up, however loosely the first linear solve was asked for.
 pub fn newton(
     sys: &mut dyn NonlinearSystem,
     x: &mut [Vec3],
@@ -1025,6 +1028,26 @@ pub fn newton(
 /// one: a reused step costs Krylov iterations only, a new tangent its
 /// assembly and a hierarchy set-up besides (about ten Krylov iterations).
 const CHORD_MAX_CONTRACTION: f64 = 1e-2;
+
+/// Largest contraction a chord step may have shown for [`newton`] to take
+/// another, and smallest that a step with a new tangent may have shown for
+/// it to try a chord step whatever the remainder predicts. A chord step
+/// contracting by `c` costs one Krylov solve per factor `1/c`; a new tangent
+/// costs its assembly and set-up (about two solves) besides, and near the
+/// solution gains about three decades: the two cost the same per decade near
+/// `c` = 0.1, and half that leaves room for chord steps slowing down as the
+/// tangent ages (the paper model's soft modes at 128x32x32: 0.03, 0.02, 0.09,
+/// then 0.78). Far from the solution, where a step with a new tangent gains
+/// less than a decade, the remainder misjudges the next chord step: it is
+/// quadratic in the whole step just taken, while the chord step's error is
+/// the tangent's change times a mere correction (the small-load cantilever
+/// from rest: remainder 0.83 of the residual, chord steps then contracting
+/// by 0.03 and 0.02). The trial needs a step that moved no node of a cell
+/// from the cell's mean by more than this fraction of the cell edge: the
+/// tangent of a cell changes about as much as the cell deforms or turns, and
+/// after a step that changed it more, chord steps lead elsewhere (large
+/// deflections with several equilibria).
+const CHORD_KEEP_CONTRACTION: f64 = 0.05;
 
 fn newton_iterations(
     sys: &mut dyn NonlinearSystem,
@@ -1051,6 +1074,7 @@ fn newton_iterations(
     let mut previous_norm: Option<f64> = None;
     // The contraction a step with the last tangent is predicted to reach.
     let mut chord: Option<f64> = None;
+    let mut trial_left = true;
     for it in 0..opts.max_iterations {
         if norm == 0.0 || (it > 0 && norm <= target.max(floor)) {
             return Ok(it);
@@ -1072,10 +1096,8 @@ fn newton_iterations(
         let reused = match chord.take() {
             // A chord step contracts by about q whatever the linear
             // accuracy: solving much beyond q is wasted.
-            Some(q) if q <= CHORD_MAX_CONTRACTION => {
-                linear.solve_again(&neg_r, free, size, eta.max(0.25 * q).min(0.1))
-            }
-            _ => None,
+            Some(q) => linear.solve_again(&neg_r, free, size, eta.max(0.25 * q).min(0.1)),
+            None => None,
         };
         let chord_step = reused.is_some();
         let delta = match reused {
@@ -1197,7 +1219,25 @@ fn newton_iterations(
             continue;
         }
         if accepted && full_step {
-            chord = chord_contraction(linear, &delta, &neg_r, &r, free, norm_before);
+            let contracted = norm / norm_before;
+            let far = contracted > CHORD_KEEP_CONTRACTION;
+            chord = if chord_step && far {
+                None
+            } else {
+                match chord_contraction(linear, &delta, &neg_r, &r, free, norm_before) {
+                    Some(q) if chord_step || q <= CHORD_MAX_CONTRACTION => Some(q),
+                    Some(q)
+                        if far
+                            && trial_left
+                            && linear.largest_cell_distortion(&delta)
+                                <= CHORD_KEEP_CONTRACTION * h =>
+                    {
+                        trial_left = false;
+                        Some(q)
+                    }
+                    _ => None,
+                }
+            };
         }
         if !accepted {
             // No decrease along the Newton direction: converged to round-off
