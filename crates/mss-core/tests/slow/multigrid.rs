@@ -8,8 +8,8 @@ use mss_core::constraints::{ConstraintSpec, Face, NodeSelector};
 use mss_core::loads::{Damping, LoadSpec};
 use mss_core::model::{HourglassControl, PaperModel, SpringsOnly, Volumetric};
 use mss_core::solver::{
-    Implicit, ImplicitOptions, Integrator, LinearSolverKind, Problem, State, StaticOptions,
-    solve_static,
+    Implicit, ImplicitOptions, Integrator, LinearSolverKind, Problem, State, StaticInfo,
+    StaticOptions, solve_static,
 };
 use mss_core::{Material, Model, Parameterization, Vec3};
 
@@ -37,15 +37,24 @@ fn cantilever(param: &dyn Parameterization, n: u32, load: f64) -> Problem {
 }
 
 fn solve(problem: &Problem, kind: LinearSolverKind) -> (Vec<Vec3>, u32) {
+    let (u, info) = solve_with_info(problem, kind, true);
+    (u, info.newton_iterations)
+}
+
+/// The static solve's displacements and report; `accept_unstable` when the
+/// solvers' agreement is tested, not the stability of the equilibrium.
+fn solve_with_info(
+    problem: &Problem,
+    kind: LinearSolverKind,
+    accept_unstable: bool,
+) -> (Vec<Vec3>, StaticInfo) {
     let mut s = State::at_rest(problem.model());
     let info = solve_static(
         problem,
         &mut s,
         &StaticOptions {
             linear_solver: kind,
-            // The solvers' agreement is tested here, not the stability of
-            // the equilibrium.
-            accept_unstable: true,
+            accept_unstable,
             ..StaticOptions::default()
         },
     )
@@ -56,7 +65,7 @@ fn solve(problem: &Problem, kind: LinearSolverKind) -> (Vec<Vec3>, u32) {
     } else {
         assert_eq!(info.linear.iterative_solves, 0);
     }
-    (s.displacements(problem.model()), info.newton_iterations)
+    (s.displacements(problem.model()), info)
 }
 
 fn max_norm(u: &[Vec3]) -> f64 {
@@ -228,17 +237,7 @@ fn nearly_linear_solves_reuse_their_tangent_and_agree_with_the_direct_solver() {
     let param = HourglassControl::new(Box::new(Volumetric), 0.05).unwrap();
     for (load, nearly_linear) in [(1e-4, true), (6.0, false)] {
         let p = cantilever(&param, 6, load);
-        let mut s = State::at_rest(p.model());
-        let info = solve_static(
-            &p,
-            &mut s,
-            &StaticOptions {
-                linear_solver: LinearSolverKind::Iterative,
-                accept_unstable: true,
-                ..StaticOptions::default()
-            },
-        )
-        .unwrap();
+        let (iterative, info) = solve_with_info(&p, LinearSolverKind::Iterative, true);
         let l = info.linear;
         if nearly_linear {
             assert_eq!(l.hierarchy_builds, 1, "{l:?}");
@@ -248,7 +247,6 @@ fn nearly_linear_solves_reuse_their_tangent_and_agree_with_the_direct_solver() {
         }
         assert_eq!(l.iterative_solves, l.hierarchy_builds + l.reused_solves);
         let (direct, _) = solve(&p, LinearSolverKind::Direct);
-        let iterative = s.displacements(p.model());
         let scale = max_norm(&direct);
         let diff = max_diff(&direct, &iterative);
         assert!(diff <= 1e-6 * scale, "load {load}: {diff:e} of {scale:e}");
@@ -283,24 +281,14 @@ fn bending_from_rest_keeps_its_first_tangent_and_agrees_with_the_direct_solver()
             Damping::NONE,
         )
         .unwrap();
-        let mut s = State::at_rest(p.model());
-        let info = solve_static(
-            &p,
-            &mut s,
-            &StaticOptions {
-                linear_solver: LinearSolverKind::Iterative,
-                ..StaticOptions::default()
-            },
-        )
-        .unwrap();
+        let (iterative, info) = solve_with_info(&p, LinearSolverKind::Iterative, false);
         let l = info.linear;
         assert!(l.reused_solves >= 1, "{name}: {l:?}");
         if one_tangent {
             assert_eq!(l.hierarchy_builds, 1, "{name}: {l:?}");
             assert!(l.reused_solves >= 2, "{name}: {l:?}");
         }
-        let (direct, _) = solve(&p, LinearSolverKind::Direct);
-        let iterative = s.displacements(p.model());
+        let (direct, _) = solve_with_info(&p, LinearSolverKind::Direct, false);
         let scale = max_norm(&direct);
         let diff = max_diff(&direct, &iterative);
         assert!(diff <= 1e-6 * scale, "{name}: {diff:e} of {scale:e}");
