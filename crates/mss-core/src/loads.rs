@@ -73,6 +73,13 @@ pub trait Load: Send + Sync + Debug {
     fn add_jacobian(&self, model: &Model, t: f64, x: &[Vec3], scale: f64, jac: &mut BlockCsr) {
         let _ = (model, t, x, scale, jac);
     }
+    /// Whether the load's forces do not depend on positions, so that
+    /// [`Load::add_jacobian`] adds nothing: the static solver may then
+    /// multiply by the model's tangent without assembling it. The default,
+    /// `false`, keeps any load that overrides `add_jacobian` right.
+    fn independent_of_positions(&self) -> bool {
+        false
+    }
     /// Whether the load stiffens the structure (like a drag spring): a static
     /// problem held only by such loads is not a mechanism.
     fn restrains(&self) -> bool {
@@ -113,6 +120,9 @@ impl OnBody {
 impl Load for OnBody {
     fn name(&self) -> String {
         self.inner.name()
+    }
+    fn independent_of_positions(&self) -> bool {
+        self.inner.independent_of_positions()
     }
     fn add_forces(&self, _model: &Model, t: f64, x: &[Vec3], scale: f64, f: &mut [Vec3]) {
         let r = self.nodes.clone();
@@ -342,6 +352,9 @@ impl Load for Gravity {
     fn name(&self) -> String {
         format!("gravity {:?}", self.g.as_slice())
     }
+    fn independent_of_positions(&self) -> bool {
+        true
+    }
     fn add_forces(&self, model: &Model, _t: f64, _x: &[Vec3], scale: f64, f: &mut [Vec3]) {
         let g = self.g * scale;
         for (fi, &m) in f.iter_mut().zip(model.masses()) {
@@ -363,6 +376,9 @@ impl Load for NodalForce {
     fn name(&self) -> String {
         format!("force on {} nodes", self.nodes.len())
     }
+    fn independent_of_positions(&self) -> bool {
+        true
+    }
     fn add_forces(&self, _model: &Model, _t: f64, _x: &[Vec3], scale: f64, f: &mut [Vec3]) {
         for &n in &self.nodes {
             f[n as usize] += self.per_node * scale;
@@ -382,6 +398,9 @@ pub struct Traction {
 impl Load for Traction {
     fn name(&self) -> String {
         format!("traction on {} faces", self.faces.len())
+    }
+    fn independent_of_positions(&self) -> bool {
+        true
     }
     fn add_forces(&self, _model: &Model, _t: f64, _x: &[Vec3], scale: f64, f: &mut [Vec3]) {
         for face in &self.faces {

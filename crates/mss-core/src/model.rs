@@ -1391,26 +1391,72 @@ impl Model {
         // threads from paying).
         let shared = SharedBlocks(m.blocks.as_mut_ptr());
         let (row_offsets, col_indices) = (&m.row_offsets, &m.col_indices);
+        self.each_cell_by_layers(|cell| {
+            let jac = kernel::cell_jacobian(self.params_of(cell), &self.corners(x, cell));
+            let s = shared;
+            // SAFETY: a cell writes only the rows of its own nodes, and the
+            // nodes of a layer of this phase's parity belong to no other task
+            // of the phase (as in the force pass); every block index is
+            // within the pattern, which `blocks` has one entry per.
+            unsafe {
+                add_cell_matrix(s.0, row_offsets, col_indices, &self.cells[cell], &jac);
+            }
+        });
+        m
+    }
+
+    /// Calls `visit` with every cell in the force pass's layer order: the
+    /// even layers in parallel, then the odd ones, each layer's cells in
+    /// order; two tasks of a phase never share a node.
+    fn each_cell_by_layers(&self, visit: impl Fn(usize) + Sync) {
         for parity in 0..2 {
             (parity..self.layers.count())
                 .into_par_iter()
                 .step_by(2)
-                .for_each(|l| {
-                    for cell in self.layers.range(l) {
-                        let jac =
-                            kernel::cell_jacobian(self.params_of(cell), &self.corners(x, cell));
-                        let s = shared;
-                        // SAFETY: a cell writes only the rows of its own
-                        // nodes, and the nodes of a layer of this phase's
-                        // parity belong to no other task of the phase (as in
-                        // the force pass); every block index is within the
-                        // pattern, which `blocks` has one entry per.
-                        unsafe {
-                            add_cell_matrix(s.0, row_offsets, col_indices, &self.cells[cell], &jac);
+                .for_each(|l| self.layers.range(l).for_each(&visit));
+        }
+    }
+
+    /// The symmetric part of the stiffness, `-(T + T^T) / 2` with `T` the
+    /// [`Model::tangent`] at `x`, stored once per pair of blocks: each cell's
+    /// matrix is symmetrized where it is computed and only its blocks on and
+    /// above the diagonal are added (in the force pass's layer order, as the
+    /// tangent's), so the full matrix is never held.
+    pub(crate) fn symmetric_stiffness_upper(&self, x: &[Vec3]) -> crate::sparse::SymmetricUpper {
+        assert_eq!(x.len(), self.num_nodes(), "positions: one per node");
+        let (row_offsets, col_indices) = self.tangent_pattern.get_or_init(|| {
+            let p = BlockCsr::lattice_pattern(self.num_nodes(), &self.cells);
+            (p.row_offsets, p.col_indices)
+        });
+        let mut m = crate::sparse::SymmetricUpper::upper_pattern_of(row_offsets, col_indices);
+        let shared = SharedBlocks(m.upper.blocks.as_mut_ptr());
+        let (row_offsets, col_indices) = (&m.upper.row_offsets, &m.upper.col_indices);
+        self.each_cell_by_layers(|cell| {
+            let jac = kernel::cell_jacobian(self.params_of(cell), &self.corners(x, cell));
+            let nodes = &self.cells[cell];
+            let s = shared;
+            for (b, &rb) in nodes.iter().enumerate() {
+                let lo = row_offsets[rb as usize] as usize;
+                let hi = row_offsets[rb as usize + 1] as usize;
+                for (a, &ca) in nodes.iter().enumerate().filter(|&(_, &ca)| ca >= rb) {
+                    let k = lo
+                        + col_indices[lo..hi]
+                            .binary_search(&ca)
+                            .expect("cell pair in the upper pattern");
+                    // SAFETY: as in `tangent`: a cell writes only the rows of
+                    // its own nodes, which no other task of the phase has; `k`
+                    // is within the pattern, which the blocks have one entry
+                    // per.
+                    let blk = unsafe { &mut *s.0.add(k) };
+                    for e in 0..3 {
+                        for d in 0..3 {
+                            blk[(e, d)] -=
+                                0.5 * (jac[3 * b + e][3 * a + d] + jac[3 * a + d][3 * b + e]);
                         }
                     }
-                });
-        }
+                }
+            }
+        });
         m
     }
 

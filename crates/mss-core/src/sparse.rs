@@ -613,6 +613,69 @@ mod tests {
     use super::*;
     use std::collections::BTreeSet;
 
+    /// The symmetric part stored once per pair of blocks multiplies as the
+    /// full `(K + K^T) / 2` of a non-symmetric tangent (the paper model's,
+    /// deformed), to round-off, with the same bits on any thread count.
+    #[test]
+    fn symmetric_upper_half_multiplies_as_the_symmetric_part() {
+        let l = hexmesh::Lattice::block([5, 4, 3], 0.1, [0.0; 3]).unwrap();
+        let model = crate::Model::new(
+            &l,
+            crate::Material::new(1e4, 0.3, 1000.0).unwrap(),
+            &crate::model::PaperModel,
+        )
+        .unwrap();
+        let wave = |i: usize, k: usize| 0.02 * ((i * 7 + k * 3) as f64).sin();
+        let x: Vec<Vec3> = model
+            .rest_positions()
+            .iter()
+            .enumerate()
+            .map(|(i, p)| p + Vec3::new(wave(i, 0), wave(i, 1), wave(i, 2)))
+            .collect();
+        let k = model.stiffness(&x);
+        let v: Vec<Vec3> = (0..x.len())
+            .map(|i| Vec3::new(wave(i, 5), wave(i, 6), wave(i, 7)))
+            .collect();
+        let mut kv = vec![Vec3::zeros(); v.len()];
+        let mut ktv = vec![Vec3::zeros(); v.len()];
+        for i in 0..k.num_rows() {
+            for p in k.row_offsets[i] as usize..k.row_offsets[i + 1] as usize {
+                let j = k.col_indices[p] as usize;
+                kv[i] += k.blocks[p] * v[j];
+                ktv[j] += k.blocks[p].transpose() * v[i];
+            }
+        }
+        let asymmetry = kv
+            .iter()
+            .zip(&ktv)
+            .map(|(a, b)| (a - b).norm())
+            .fold(0.0, f64::max);
+        let scale = kv.iter().map(|a| a.norm()).fold(0.0, f64::max);
+        assert!(
+            asymmetry > 1e-6 * scale,
+            "the test needs a non-symmetric tangent"
+        );
+        let upper = model.symmetric_stiffness_upper(&x);
+        let run = |threads: usize| {
+            let mut out = vec![Vec3::zeros(); v.len()];
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| upper.mul(&v, &mut out));
+            out
+        };
+        let one = run(1);
+        assert_eq!(one, run(3));
+        for ((o, a), b) in one.iter().zip(&kv).zip(&ktv) {
+            assert!(
+                (o - (a + b) * 0.5).norm() <= 1e-12 * scale,
+                "{o} vs {}",
+                (a + b) * 0.5
+            );
+        }
+    }
+
     /// The pattern is exactly "the diagonal and every pair of nodes that
     /// share a cell", rows sorted, on cells scattered over more rows than one
     /// task takes (and nodes in no cell).
@@ -650,5 +713,89 @@ mod tests {
             assert_eq!(&m.col_indices[lo..hi], &expected[..], "row {i}");
         }
         assert_eq!(m.blocks.len(), m.col_indices.len());
+    }
+}
+
+/// A symmetric block matrix stored once per pair of blocks: the blocks on and
+/// above the diagonal (`upper`, column `>=` row in each row), with an index
+/// of the blocks strictly above the diagonal by column, so that the product
+/// gathers per row (in parallel, each row summed in a fixed order: the same
+/// bits for any thread count) without a transposed copy. Half the `f64`
+/// blocks of the full matrix: the static solver's stability test holds one
+/// beside its preconditioner at its memory peak.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct SymmetricUpper {
+    /// Row offsets, columns and blocks of the upper half.
+    pub upper: BlockCsr,
+    /// Start of each column's entries in `by_column`; length rows + 1.
+    column_offsets: Vec<u32>,
+    /// For each column `j`, the blocks `k` (indices into `upper`) strictly
+    /// above the diagonal in that column, with their rows, by row.
+    by_column: Vec<(u32, u32)>,
+}
+
+impl SymmetricUpper {
+    /// The zero matrix on the upper half of `full`'s pattern (which must hold
+    /// the diagonal and be structurally symmetric).
+    pub(crate) fn upper_pattern_of(full_rows: &[u32], full_cols: &[u32]) -> Self {
+        let n = full_rows.len() - 1;
+        let mut row_offsets = Vec::with_capacity(n + 1);
+        let mut col_indices = Vec::with_capacity(full_cols.len() / 2 + n);
+        row_offsets.push(0u32);
+        let mut column_counts = vec![0u32; n + 1];
+        for i in 0..n {
+            for &j in &full_cols[full_rows[i] as usize..full_rows[i + 1] as usize] {
+                if j as usize >= i {
+                    col_indices.push(j);
+                    if j as usize > i {
+                        column_counts[j as usize + 1] += 1;
+                    }
+                }
+            }
+            row_offsets.push(col_indices.len() as u32);
+        }
+        for j in 0..n {
+            column_counts[j + 1] += column_counts[j];
+        }
+        let column_offsets = column_counts;
+        let mut next = column_offsets.clone();
+        let mut by_column = vec![(0u32, 0u32); column_offsets[n] as usize];
+        for i in 0..n {
+            let row = row_offsets[i] as usize..row_offsets[i + 1] as usize;
+            for (k, &j) in row.clone().zip(&col_indices[row]) {
+                let j = j as usize;
+                if j > i {
+                    by_column[next[j] as usize] = (k as u32, i as u32);
+                    next[j] += 1;
+                }
+            }
+        }
+        let blocks = vec![Mat3::zeros(); col_indices.len()];
+        Self {
+            upper: BlockCsr {
+                row_offsets,
+                col_indices,
+                blocks,
+            },
+            column_offsets,
+            by_column,
+        }
+    }
+
+    /// `out = A v`.
+    pub(crate) fn mul(&self, v: &[Vec3], out: &mut [Vec3]) {
+        use rayon::prelude::*;
+        let a = &self.upper;
+        out.par_iter_mut().enumerate().for_each(|(i, o)| {
+            let mut acc = Vec3::zeros();
+            for k in a.row_offsets[i] as usize..a.row_offsets[i + 1] as usize {
+                acc += a.blocks[k] * v[a.col_indices[k] as usize];
+            }
+            let column = self.column_offsets[i] as usize..self.column_offsets[i + 1] as usize;
+            for &(k, row) in &self.by_column[column] {
+                acc += a.blocks[k as usize].tr_mul(&v[row as usize]);
+            }
+            *o = acc;
+        });
     }
 }

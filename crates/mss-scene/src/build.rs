@@ -77,6 +77,7 @@ impl SceneInput {
             // come along their paths from there.
             obstacles_from: Some(0.0),
             accept_mechanisms: false,
+            ..mss_core::solver::StaticOptions::default()
         }
     }
 

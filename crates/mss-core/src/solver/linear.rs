@@ -272,6 +272,62 @@ pub const DIRECT_MAX_FREE_DOFS: usize = 4_000;
 /// iterative one stalls (about 1 GB of LU factors).
 const FALLBACK_MAX_FREE_DOFS: usize = 30_000;
 
+/// `out = A v` for the Jacobian `A` of a Newton iteration, without a matrix.
+pub(crate) type Action<'a> = &'a dyn Fn(&[Vec3], &mut [Vec3]);
+
+/// A product `out = A v` owned by whoever made it.
+type Product<'a> = Box<dyn Fn(&[Vec3], &mut [Vec3]) + 'a>;
+
+/// `action` times `sign` on the free dofs (`mask`), as the product of the
+/// operator with the held dofs decoupled: the held components of the input
+/// are taken as zero and those of the output are zero.
+fn masked_action<'a>(
+    action: Action<'a>,
+    mask: &'a [[bool; 3]],
+    sign: f64,
+) -> impl Fn(&[Vec3], &mut [Vec3]) + 'a {
+    let free_part = std::cell::RefCell::new(Vec::<Vec3>::new());
+    move |v: &[Vec3], out: &mut [Vec3]| {
+        let mut w = free_part.borrow_mut();
+        w.clear();
+        w.extend(
+            v.iter()
+                .zip(mask)
+                .map(|(vi, m)| Vec3::from_fn(|d, _| if m[d] { vi[d] } else { 0.0 })),
+        );
+        action(&w, out);
+        for (o, m) in out.iter_mut().zip(mask) {
+            for d in 0..3 {
+                o[d] = if m[d] { sign * o[d] } else { 0.0 };
+            }
+        }
+    }
+}
+
+/// `out = A v` with `mg`'s operator (the matrix times `sign`, held dofs
+/// decoupled): through `action` when given (the solve kept no matrix),
+/// else with the operator's blocks.
+fn operator_product<'a>(
+    mg: &'a super::multigrid::Multigrid,
+    action: Option<Action<'a>>,
+    sign: f64,
+) -> Product<'a> {
+    match action {
+        Some(action) => Box::new(masked_action(action, mg.mask(), sign)),
+        None => Box::new(move |v: &[Vec3], out: &mut [Vec3]| {
+            super::multigrid::mul(mg.operator().0, v, out)
+        }),
+    }
+}
+
+/// The stiffness whose definiteness is tested: assembled, or its product.
+pub(crate) enum Stiffness<'a> {
+    /// The symmetric matrix.
+    Matrix(BlockCsr),
+    /// `out = K v` of a symmetric `K`, given by its product.
+    Action(Action<'a>),
+}
+
 /// Counts of what the linear solver of a Newton solve did.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct LinearStats {
@@ -297,6 +353,9 @@ struct LastSolve {
     symmetric: bool,
     /// Whether the hierarchy becomes the stability test's when released.
     keep: bool,
+    /// Whether the matrix was dropped: products go through the Jacobian's
+    /// action.
+    lean: bool,
 }
 
 /// The linear solver of a Newton solve ([`newton`](super::newton)): a sparse
@@ -319,6 +378,9 @@ pub struct LinearSolver {
     kept: Option<super::multigrid::Multigrid>,
     /// The last iterative solve, for [`LinearSolver::solve_again`].
     last: Option<LastSolve>,
+    /// Free dofs above which a solve given the matrix's action keeps no
+    /// `f64` matrix.
+    matrix_free_above: usize,
 }
 
 impl std::fmt::Debug for LinearSolver {
@@ -397,7 +459,16 @@ impl LinearSolver {
             keep_next: false,
             kept: None,
             last: None,
+            matrix_free_above: usize::MAX,
         }
+    }
+
+    /// Iterative solves of more than `free_dofs` free dofs that are given
+    /// the matrix's action keep no `f64` matrix: the hierarchy drops it once
+    /// its single-precision copy is made, and the Krylov products (and
+    /// [`LinearSolver::last_product`]) use the action. Never by default.
+    pub(crate) fn set_matrix_free_above(&mut self, free_dofs: usize) {
+        self.matrix_free_above = free_dofs;
     }
 
     /// What the solver did so far.
@@ -416,7 +487,7 @@ impl LinearSolver {
     /// not called.
     pub(crate) fn is_positive_definite(
         &mut self,
-        stiffness: BlockCsr,
+        stiffness: Stiffness<'_>,
         reference: impl FnOnce() -> BlockCsr,
         free: &[bool],
     ) -> Option<bool> {
@@ -435,7 +506,7 @@ impl LinearSolver {
             Some(mg) => mg,
             None => {
                 let pre = super::multigrid::Operator::from_owned(reference(), free);
-                match super::multigrid::Multigrid::new(pre, shape) {
+                match super::multigrid::Multigrid::new(pre, shape, false) {
                     Ok(mg) => mg,
                     Err(e) => {
                         log::debug!("definiteness test: no preconditioner ({})", e.0);
@@ -444,8 +515,19 @@ impl LinearSolver {
                 }
             }
         };
-        let op = super::multigrid::Operator::from_owned(stiffness, free);
-        let (verdict, theta) = super::multigrid::definiteness(op.matrix(), &mg);
+        let (verdict, theta) = match stiffness {
+            Stiffness::Matrix(k) => {
+                let op = super::multigrid::Operator::from_owned(k, free);
+                let product = |v: &[Vec3], out: &mut [Vec3]| {
+                    super::multigrid::mul(op.matrix(), v, out);
+                };
+                super::multigrid::definiteness(&product, &mg)
+            }
+            Stiffness::Action(action) => {
+                let product = masked_action(action, mg.mask(), 1.0);
+                super::multigrid::definiteness(&product, &mg)
+            }
+        };
         log::debug!(
             "definiteness test: {verdict:?}, smallest eigenvalue against the rest stiffness {theta:.3e}"
         );
@@ -476,7 +558,7 @@ impl LinearSolver {
         size: f64,
         rtol: f64,
     ) -> Result<Vec<Vec3>, crate::sparse::LinearSolveError> {
-        let solved = self.solve(a.clone(), b, free, size, rtol);
+        let solved = self.solve(a.clone(), b, free, size, rtol, None);
         // A caller of this entry point gets no chord steps: hold nothing.
         self.release_last();
         solved.map_err(|e| match e {
@@ -489,7 +571,10 @@ impl LinearSolver {
 
     /// Solves `A y = b` on the free dofs to a relative residual `rtol` (the
     /// direct solve is exact). `size` is a length scale of the body: a
-    /// solution above `1e6 size` means a singular matrix.
+    /// solution above `1e6 size` means a singular matrix. With `action`
+    /// (`A`'s product), a large iterative solve keeps no `f64` matrix
+    /// ([`LinearSolver::set_matrix_free_above`]); later [`LinearSolver::solve_again`] and
+    /// [`LinearSolver::last_product`] calls then need that action again.
     pub(crate) fn solve(
         &mut self,
         a: BlockCsr,
@@ -497,6 +582,7 @@ impl LinearSolver {
         free: &[bool],
         size: f64,
         rtol: f64,
+        action: Option<Action<'_>>,
     ) -> Result<Vec<Vec3>, LinearFailure> {
         self.release_last();
         self.stats.solves += 1;
@@ -548,10 +634,13 @@ impl LinearSolver {
         // set-up costs, most of all once the tangent turns non-symmetric.
         // (Newton's chord steps reuse a matrix with its own hierarchy:
         // `solve_again`.)
-        let mg =
-            super::multigrid::Multigrid::new(op, shape).map_err(|e| LinearFailure::Other(e.0))?;
+        let lean = action.is_some() && free_dofs > self.matrix_free_above;
+        let mg = super::multigrid::Multigrid::new(op, shape, lean)
+            .map_err(|e| LinearFailure::Other(e.0))?;
         self.stats.hierarchy_builds += 1;
-        let usable = self.krylov(&mg, symmetric, &b_signed, &mut y, size, rtol);
+        let product = operator_product(&mg, action.filter(|_| lean), sign);
+        let usable = self.krylov(&mg, &*product, symmetric, &b_signed, &mut y, size, rtol);
+        drop(product);
         if !usable && free_dofs <= FALLBACK_MAX_FREE_DOFS {
             // Near-mechanisms (the lattice's hourglass modes) can stall the
             // preconditioned iteration; a problem that still fits a direct
@@ -576,6 +665,7 @@ impl LinearSolver {
             sign,
             symmetric,
             keep,
+            lean,
         });
         Ok(y)
     }
@@ -583,16 +673,18 @@ impl LinearSolver {
     /// Krylov iterations on `mg`'s operator from `y` (zero) to a relative
     /// residual `rtol`, counted in the stats; whether the solution is
     /// usable (finite, below `1e6 size`, converged or at least within 0.1).
+    #[allow(clippy::too_many_arguments)]
     fn krylov(
         &mut self,
         mg: &super::multigrid::Multigrid,
+        product: &dyn Fn(&[Vec3], &mut [Vec3]),
         symmetric: bool,
         b: &[Vec3],
         y: &mut [Vec3],
         size: f64,
         rtol: f64,
     ) -> bool {
-        let info = super::multigrid::krylov(mg, b, y, rtol, 500, symmetric);
+        let info = super::multigrid::krylov(mg, product, b, y, rtol, 500, symmetric);
         self.stats.krylov_iterations += info.iterations;
         log::debug!(
             "{} with multigrid ({:?} nodes per level): {} iterations, relative residual {:.2e}",
@@ -612,13 +704,15 @@ impl LinearSolver {
     /// solve (a chord step of Newton's method: no assembly, no set-up), to a
     /// relative residual `rtol`. `None` when there is no such solve (direct
     /// solves keep nothing), its free dofs differ, or the result is not
-    /// usable; the caller then assembles a new matrix.
+    /// usable; the caller then assembles a new matrix. `action` is the
+    /// matrix's product, needed when the solve kept no matrix.
     pub(crate) fn solve_again(
         &mut self,
         b: &[Vec3],
         free: &[bool],
         size: f64,
         rtol: f64,
+        action: Option<Action<'_>>,
     ) -> Option<Vec<Vec3>> {
         let last = self.last.take()?;
         let same_dofs = last
@@ -628,7 +722,7 @@ impl LinearSolver {
             .flatten()
             .zip(free)
             .all(|(m, f)| m == f);
-        if !same_dofs || last.mg.mask().len() != b.len() {
+        if !same_dofs || last.mg.mask().len() != b.len() || (last.lean && action.is_none()) {
             self.last = Some(last);
             self.release_last();
             return None;
@@ -638,7 +732,17 @@ impl LinearSolver {
         self.stats.reused_solves += 1;
         let b_signed: Vec<Vec3> = b.iter().map(|v| v * last.sign).collect();
         let mut y = vec![Vec3::zeros(); b.len()];
-        let usable = self.krylov(&last.mg, last.symmetric, &b_signed, &mut y, size, rtol);
+        let product = operator_product(&last.mg, action.filter(|_| last.lean), last.sign);
+        let usable = self.krylov(
+            &last.mg,
+            &*product,
+            last.symmetric,
+            &b_signed,
+            &mut y,
+            size,
+            rtol,
+        );
+        drop(product);
         self.last = Some(last);
         if usable {
             Some(y)
@@ -666,14 +770,30 @@ impl LinearSolver {
     }
 
     /// `out = A v` on the free dofs (zero on the held ones) with the matrix
-    /// of the last iterative solve, for `v` zero on the held dofs; false
-    /// when no such solve is kept.
-    pub(crate) fn last_product(&self, v: &[Vec3], out: &mut [Vec3]) -> bool {
+    /// of the last iterative solve, for `v` zero on the held dofs (through
+    /// `action` when the solve kept no matrix); false when no such solve is
+    /// kept.
+    pub(crate) fn last_product(
+        &self,
+        v: &[Vec3],
+        out: &mut [Vec3],
+        action: Option<Action<'_>>,
+    ) -> bool {
         let Some(last) = &self.last else {
             return false;
         };
         let (a, mask) = last.mg.operator();
-        if a.blocks.is_empty() || v.len() != mask.len() {
+        if v.len() != mask.len() {
+            return false;
+        }
+        if last.lean {
+            let Some(action) = action else {
+                return false;
+            };
+            masked_action(action, mask, 1.0)(v, out);
+            return true;
+        }
+        if a.blocks.is_empty() {
             return false;
         }
         super::multigrid::mul(a, v, out);

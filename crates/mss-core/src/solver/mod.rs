@@ -49,8 +49,9 @@ pub use explicit::{
 pub use implicit::{Implicit, ImplicitOptions};
 pub use linear::{DIRECT_MAX_FREE_DOFS, LinearSolver, LinearSolverKind, LinearStats};
 pub use statics::{
-    FOLLOW_DEPTH, MAX_FAILED_INCREMENTS, OBSTACLE_INCREMENT, STABILITY_TEST_MAX_FACTOR_BYTES,
-    Stability, StaticInfo, StaticOptions, solve_static, solve_static_cancellable,
+    FOLLOW_DEPTH, MATRIX_FREE_ABOVE, MAX_FAILED_INCREMENTS, OBSTACLE_INCREMENT,
+    STABILITY_TEST_MAX_FACTOR_BYTES, Stability, StaticInfo, StaticOptions, solve_static,
+    solve_static_cancellable,
 };
 
 use crate::constraints::{ConstraintError, ConstraintSpec, Constraints};
@@ -960,6 +961,18 @@ pub trait NonlinearSystem {
     fn residual(&mut self, x: &[Vec3], r: &mut [Vec3]) -> f64;
     /// The Jacobian at `x`.
     fn jacobian(&mut self, x: &[Vec3]) -> BlockCsr;
+    /// Whether [`NonlinearSystem::jacobian_mul`] gives the product with the
+    /// Jacobian. Then large solves keep no matrix for their Krylov products
+    /// (only the preconditioner's single-precision copy).
+    fn has_jacobian_mul(&self) -> bool {
+        false
+    }
+    /// `out = J(x) v`, without a matrix; called only when
+    /// [`NonlinearSystem::has_jacobian_mul`]. The default writes zeros.
+    fn jacobian_mul(&self, x: &[Vec3], v: &[Vec3], out: &mut [Vec3]) {
+        let _ = (x, v);
+        out.fill(Vec3::zeros());
+    }
     /// Whether the caller asked to stop (checked before every Newton
     /// iteration, so that a stop takes one iteration, not a whole solve).
     fn cancelled(&self) -> bool {
@@ -1075,6 +1088,9 @@ fn newton_iterations(
     // The contraction a step with the last tangent is predicted to reach.
     let mut chord: Option<f64> = None;
     let mut trial_left = true;
+    // Where the last tangent was taken, for its product without a matrix.
+    let matrix_free = sys.has_jacobian_mul();
+    let mut x_lin: Vec<Vec3> = Vec::new();
     for it in 0..opts.max_iterations {
         if norm == 0.0 || (it > 0 && norm <= target.max(floor)) {
             return Ok(it);
@@ -1096,7 +1112,12 @@ fn newton_iterations(
         let reused = match chord.take() {
             // A chord step contracts by about q whatever the linear
             // accuracy: solving much beyond q is wasted.
-            Some(q) => linear.solve_again(&neg_r, free, size, eta.max(0.25 * q).min(0.1)),
+            Some(q) => {
+                let system: &dyn NonlinearSystem = &*sys;
+                let product = |v: &[Vec3], out: &mut [Vec3]| system.jacobian_mul(&x_lin, v, out);
+                let action: Option<linear::Action<'_>> = matrix_free.then_some(&product);
+                linear.solve_again(&neg_r, free, size, eta.max(0.25 * q).min(0.1), action)
+            }
             None => None,
         };
         let chord_step = reused.is_some();
@@ -1116,7 +1137,14 @@ fn newton_iterations(
                         return Ok(0);
                     }
                 }
-                match linear.solve(jac, &neg_r, free, size, eta) {
+                if matrix_free {
+                    x_lin.clear();
+                    x_lin.extend_from_slice(x);
+                }
+                let system: &dyn NonlinearSystem = &*sys;
+                let product = |v: &[Vec3], out: &mut [Vec3]| system.jacobian_mul(&x_lin, v, out);
+                let action: Option<linear::Action<'_>> = matrix_free.then_some(&product);
+                match linear.solve(jac, &neg_r, free, size, eta, action) {
                     Ok(d) => d,
                     Err(linear::LinearFailure::Singular { nodes }) => {
                         return Err(NewtonFailure::Singular(nodes));
@@ -1224,7 +1252,10 @@ fn newton_iterations(
             chord = if chord_step && far {
                 None
             } else {
-                match chord_contraction(linear, &delta, &neg_r, &r, free, norm_before) {
+                let system: &dyn NonlinearSystem = &*sys;
+                let product = |v: &[Vec3], out: &mut [Vec3]| system.jacobian_mul(&x_lin, v, out);
+                let action: Option<linear::Action<'_>> = matrix_free.then_some(&product);
+                match chord_contraction(linear, action, &delta, &neg_r, &r, free, norm_before) {
                     Some(q) if chord_step || q <= CHORD_MAX_CONTRACTION => Some(q),
                     Some(q)
                         if far
@@ -1278,6 +1309,7 @@ fn newton_iterations(
 /// tangent (direct solves).
 fn chord_contraction(
     linear: &linear::LinearSolver,
+    action: Option<linear::Action<'_>>,
     delta: &[Vec3],
     neg_r: &[Vec3],
     r: &[Vec3],
@@ -1285,7 +1317,7 @@ fn chord_contraction(
     norm_before: f64,
 ) -> Option<f64> {
     let mut remainder = vec![Vec3::zeros(); delta.len()];
-    if !(norm_before > 0.0 && linear.last_product(delta, &mut remainder)) {
+    if !(norm_before > 0.0 && linear.last_product(delta, &mut remainder, action)) {
         return None;
     }
     // J d, turned into R(x + d) - R(x) - J d in place.

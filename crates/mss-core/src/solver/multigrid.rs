@@ -133,6 +133,13 @@ struct Level {
     mask: Vec<[bool; 3]>,
 }
 
+impl Level {
+    /// Block `k` of the single-precision copy, column-major, in `f64`.
+    fn smoothing_block(&self, k: usize) -> [f64; 9] {
+        std::array::from_fn(|e| f64::from(self.smoothing[9 * k + e]))
+    }
+}
+
 /// The structure of a hierarchy: grid coordinates, prolongations and coarse
 /// patterns, which depend only on the lattice and the held dofs and are
 /// reused for every matrix of a Newton solve.
@@ -531,10 +538,17 @@ pub(crate) struct SetupError(pub String);
 
 impl Multigrid {
     /// The hierarchy of the operator `a` (free dofs `shape`'s) with the
-    /// cached `shape`.
-    pub(crate) fn new(a: Operator, shape: &HierarchyShape) -> Result<Self, SetupError> {
+    /// cached `shape`. When `lean`, the finest level's `f64` blocks are
+    /// dropped as soon as their single-precision copy is made, before the
+    /// coarse levels are built from that copy: the caller multiplies by the
+    /// operator without a matrix, and [`Multigrid::operator`] then has no
+    /// blocks.
+    pub(crate) fn new(a: Operator, shape: &HierarchyShape, lean: bool) -> Result<Self, SetupError> {
         let mut levels = Vec::with_capacity(shape.num_levels());
         levels.push(level_of(a.a, a.mask));
+        if lean {
+            levels[0].a.blocks = Vec::new();
+        }
 
         for ((p, pattern), &companions) in shape
             .prolongations
@@ -543,7 +557,13 @@ impl Multigrid {
             .zip(&shape.first_companions)
         {
             let fine = &levels[levels.len() - 1];
-            let (ac, mask) = galerkin(&fine.a, &fine.mask, p, pattern, companions);
+            let (ac, mask) = if fine.a.blocks.is_empty() {
+                let block = |k: usize| Mat3::from_column_slice(&fine.smoothing_block(k));
+                galerkin(&fine.a, &block, &fine.mask, p, pattern, companions)
+            } else {
+                let block = |k: usize| fine.a.blocks[k];
+                galerkin(&fine.a, &block, &fine.mask, p, pattern, companions)
+            };
             levels.push(level_of(ac, mask));
         }
         let last = &levels[levels.len() - 1];
@@ -682,10 +702,12 @@ fn level_of(a: BlockCsr, mask: Vec<[bool; 3]>) -> Level {
     }
 }
 
-/// `P^T A P` on the coarse pattern; coarse dofs without a free child are
-/// decoupled (identity).
+/// `P^T A P` on the coarse pattern, with `A` on the pattern of `a` and its
+/// blocks given by `block`; coarse dofs without a free child are decoupled
+/// (identity).
 fn galerkin(
     a: &BlockCsr,
+    block: &(dyn Fn(usize) -> Mat3 + Sync),
     mask: &[[bool; 3]],
     p: &Prolongation,
     pattern: &BlockCsr,
@@ -732,7 +754,7 @@ fn galerkin(
                         let j = a.col_indices[k] as usize;
                         // M A M: a held row or column contributes nothing; the
                         // row's weights scale the block's rows once.
-                        let mut blk = a.blocks[k];
+                        let mut blk = block(k);
                         for e in 0..3 {
                             for d in 0..3 {
                                 blk[(e, d)] = if mask[i][e] && mask[j][d] {
@@ -923,17 +945,20 @@ pub(crate) struct KrylovInfo {
 
 /// Solves `A x = b` on the free dofs (`mask`; held components of `b` and `x`
 /// are zero) to a relative residual `rtol`, preconditioned by `mg`: CG when
-/// `symmetric`, BiCGStab otherwise. `x` starts at zero.
+/// `symmetric`, GMRES otherwise. `x` starts at zero. `product` is
+/// `out = A v` for `v` zero on the held dofs (zero there too): the product
+/// with `mg`'s operator, or the same without a matrix.
 pub(crate) fn krylov(
     mg: &Multigrid,
+    product: &dyn Fn(&[Vec3], &mut [Vec3]),
     b: &[Vec3],
     x: &mut [Vec3],
     rtol: f64,
     max_iterations: u32,
     symmetric: bool,
 ) -> KrylovInfo {
-    let (op, mask) = mg.operator();
-    let n = op.num_rows();
+    let mask = mg.mask();
+    let n = mask.len();
     let masked = |v: &mut [Vec3]| zero_held(v, mask);
     let mut r: Vec<Vec3> = b.to_vec();
     masked(&mut r);
@@ -955,7 +980,7 @@ pub(crate) fn krylov(
         let mut pdir = z.clone();
         let mut rz = dot(&r, &z);
         for it in 1..=max_iterations {
-            mul(op, &pdir, &mut q);
+            product(&pdir, &mut q);
             let pq = dot(&pdir, &q);
             if !(pq.is_finite() && pq > 0.0) {
                 return KrylovInfo {
@@ -992,7 +1017,7 @@ pub(crate) fn krylov(
         let mut w = vec![Vec3::zeros(); n];
         while total < max_iterations {
             // r = b - A x (masked b, held rows are identity with x = 0 there).
-            mul(op, x, &mut q);
+            product(x, &mut q);
             r.par_iter_mut()
                 .zip(b.par_iter().zip(q.par_iter().zip(mask.par_iter())))
                 .for_each(|(ri, (bi, (qi, m)))| {
@@ -1021,7 +1046,7 @@ pub(crate) fn krylov(
             let mut res = beta;
             for k in 0..restart {
                 mg.apply(&basis[k], &mut z);
-                mul(op, &z, &mut w);
+                product(&z, &mut w);
                 // Modified Gram-Schmidt with ordered reductions.
                 for (j, vj) in basis.iter().enumerate() {
                     let hjk = dot(&w, vj);
@@ -1079,7 +1104,7 @@ pub(crate) fn krylov(
         iterations = total;
     }
     // Report the true residual of the iterate.
-    mul(op, x, &mut q);
+    product(x, &mut q);
     let mut res = b.to_vec();
     masked(&mut res);
     let rn = res
@@ -1117,17 +1142,21 @@ pub(crate) const DEFINITENESS_MARGIN: f64 = 1e-6;
 /// Lanczos steps of [`definiteness`] (fewest before deciding, most).
 const DEFINITENESS_STEPS: (usize, usize) = (15, 200);
 
-/// Whether the symmetric `a` (held dofs decoupled, same free dofs as
-/// `mg`'s operator) is positive definite on the free dofs, by the Lanczos
+/// Whether the symmetric `a`, given by `product` (`out = a v` for `v` zero
+/// on the held dofs, zero there too; same free dofs as `mg`'s operator), is
+/// positive definite on the free dofs, by the Lanczos
 /// iteration on the pencil `(a, M)` with `M^-1` the V-cycle of `mg` (built
 /// on a positive definite matrix, so `M` is symmetric positive definite and
 /// `M^-1 a` has the inertia of `a`, Sylvester). The smallest Ritz value is
 /// a Rayleigh quotient `y.a y / y.M y`: a negative one is a certificate.
 /// A positive one is accepted once its residual is small against it and it
 /// has settled. Deterministic (fixed start vector, fixed-order sums).
-pub(crate) fn definiteness(a: &BlockCsr, mg: &Multigrid) -> (Definiteness, f64) {
+pub(crate) fn definiteness(
+    product: &dyn Fn(&[Vec3], &mut [Vec3]),
+    mg: &Multigrid,
+) -> (Definiteness, f64) {
     let mask = mg.mask();
-    let n = a.num_rows();
+    let n = mask.len();
     let masked = |v: &mut [Vec3]| zero_held(v, mask);
     let mut v = crate::krylov::start_vector(n);
     masked(&mut v);
@@ -1147,7 +1176,7 @@ pub(crate) fn definiteness(a: &BlockCsr, mg: &Multigrid) -> (Definiteness, f64) 
     let (mut alpha, mut beta) = (Vec::<f64>::new(), Vec::<f64>::new());
     let mut history: Vec<f64> = Vec::new();
     for step in 0..DEFINITENESS_STEPS.1 {
-        mul(a, &w, &mut u);
+        product(&w, &mut u);
         masked(&mut u);
         let al = dot(&w, &u);
         let b_prev = beta.last().copied().unwrap_or(0.0);

@@ -13,7 +13,7 @@
 //! [`SolverError::Mechanism`].
 #![allow(clippy::needless_range_loop)] // loops over several per-node arrays at once
 
-use super::linear::{LinearSolver, LinearSolverKind, LinearStats};
+use super::linear::{LinearSolver, LinearSolverKind, LinearStats, Stiffness};
 use super::{
     Divergence, NewtonFailure, NewtonOptions, NonlinearSystem, Problem, STATIC_HINT, SolverError,
     State, check_inverted, free_norm, newton,
@@ -61,7 +61,23 @@ pub struct StaticOptions {
     /// itself (the validation experiments' 4 x 1 x 1 beams), not for
     /// scenes.
     pub accept_mechanisms: bool,
+    /// Free dofs above which the iterative Newton solves keep no `f64`
+    /// tangent: the multigrid hierarchy drops it once it has its
+    /// single-precision copy, and the Krylov products use the tangent's
+    /// action (`Model::tangent_mul`); for problems whose Jacobian is the
+    /// model's tangent alone (no contact, loads that do not depend on
+    /// positions). Default [`MATRIX_FREE_ABOVE`].
+    pub matrix_free_above: usize,
 }
+
+/// Default of [`StaticOptions::matrix_free_above`] (about 100,000 nodes).
+/// From about this size the assembled product runs at the memory's speed,
+/// where the action costs 1.1 (`paper`) to 2.1 (the default model) times
+/// as much (the same time over a whole solve, measured at 128x32x32), and
+/// the `f64` tangent is the largest thing a Newton step holds (2 GB at a
+/// million nodes); below it the product is in cache and several times
+/// cheaper than the action (docs/solvers.md, "Matrix-free or assembled").
+pub const MATRIX_FREE_ABOVE: usize = 300_000;
 
 /// How far an obstacle moves along its path per load increment of a static
 /// solve that follows it (in cells of the model).
@@ -109,6 +125,7 @@ impl Default for StaticOptions {
             accept_unstable: false,
             obstacles_from: None,
             accept_mechanisms: false,
+            matrix_free_above: MATRIX_FREE_ABOVE,
         }
     }
 }
@@ -186,6 +203,15 @@ impl NonlinearSystem for StaticSystem<'_> {
             r[i] += self.scratch[i];
         }
         s.sqrt()
+    }
+
+    fn has_jacobian_mul(&self) -> bool {
+        let p = self.problem;
+        p.contact().is_none() && p.loads().iter().all(|l| l.independent_of_positions())
+    }
+
+    fn jacobian_mul(&self, x: &[Vec3], v: &[Vec3], out: &mut [Vec3]) {
+        self.problem.model().tangent_mul(x, v, out);
     }
 
     fn jacobian(&mut self, x: &[Vec3]) -> BlockCsr {
@@ -345,6 +371,7 @@ fn solve_static_here(
         slope_line_search: true,
     };
     let mut linear = LinearSolver::new(model, opts.linear_solver);
+    linear.set_matrix_free_above(opts.matrix_free_above);
     if opts.small_strain {
         return solve_small_strain(&mut sys, state, &x_target, &free, &mut linear, opts);
     }
@@ -633,8 +660,24 @@ fn equilibrium_stability(
 ) -> Stability {
     let free_dofs = free.iter().filter(|f| **f).count();
     if free_dofs > super::linear::DIRECT_MAX_FREE_DOFS {
-        // One matrix alive at a time besides the test's own.
-        let k = symmetric_stiffness(sys.jacobian(x));
+        // One matrix alive at a time besides the test's own. When the
+        // Jacobian is the model's tangent alone, its symmetric part is
+        // assembled once per pair of blocks: at a million nodes the full
+        // `f64` matrix (2 GB) beside the kept hierarchy was the solve's
+        // memory peak.
+        let problem = sys.problem;
+        let upper = sys
+            .has_jacobian_mul()
+            .then(|| problem.model().symmetric_stiffness_upper(x));
+        let upper_mul = |v: &[Vec3], out: &mut [Vec3]| {
+            if let Some(u) = &upper {
+                u.mul(v, out);
+            }
+        };
+        let k = match &upper {
+            Some(_) => Stiffness::Action(&upper_mul),
+            None => Stiffness::Matrix(symmetric_stiffness(sys.jacobian(x))),
+        };
         let reference = || symmetric_stiffness(sys.jacobian(x0));
         match linear.is_positive_definite(k, reference, free) {
             Some(true) => return Stability::Stable,
@@ -687,7 +730,7 @@ fn singular_at_rest(
         .map(|i| Vec3::new(1.0, -0.5, 0.25) * (1.0 + (i % 7) as f64))
         .collect();
     matches!(
-        linear.solve(jac, &b, free, sys.problem.size(), 1e-8),
+        linear.solve(jac, &b, free, sys.problem.size(), 1e-8, None),
         Err(super::linear::LinearFailure::Singular { .. })
     )
 }
@@ -721,7 +764,7 @@ fn solve_small_strain(
     let scale = sys.residual(&x0, &mut r);
     let jac = sys.jacobian(rest);
     let neg_r: Vec<Vec3> = r.iter().map(|v| -v).collect();
-    let du = match linear.solve(jac.clone(), &neg_r, free, problem.size(), opts.rtol) {
+    let du = match linear.solve(jac.clone(), &neg_r, free, problem.size(), opts.rtol, None) {
         Ok(d) => d,
         Err(super::linear::LinearFailure::Singular { nodes }) => {
             return Err(SolverError::Mechanism {
