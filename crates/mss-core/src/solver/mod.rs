@@ -1017,9 +1017,12 @@ fn free_norm(r: &[Vec3], free: &[bool]) -> f64 {
 /// remainder `R(x + d) - R(x) - J d` predicts a contraction of at most 1e-2;
 /// once per solve, on trial, after a step with a new tangent that
 /// contracted the residual by less than a factor of twenty (far from the
-/// solution) but deformed no cell by more than a twentieth of its size; and after a chord step while chord steps contract it by a
-/// factor of twenty or more. Nearly linear problems then cost one assembly and
-/// one set-up, however loosely the first linear solve was asked for.
+/// solution) but deformed no cell by more than a twentieth of its size; and
+/// after a chord step while chord steps contract it by a factor of twenty or
+/// more. Nearly linear problems then cost one assembly and one set-up,
+/// however loosely the first linear solve was asked for. When `sys` has the
+/// Jacobian's product ([`NonlinearSystem::has_jacobian_mul`]), `linear` may
+/// keep no matrix and multiply through it.
 pub fn newton(
     sys: &mut dyn NonlinearSystem,
     x: &mut [Vec3],
@@ -1113,8 +1116,7 @@ fn newton_iterations(
             // A chord step contracts by about q whatever the linear
             // accuracy: solving much beyond q is wasted.
             Some(q) => {
-                let system: &dyn NonlinearSystem = &*sys;
-                let product = |v: &[Vec3], out: &mut [Vec3]| system.jacobian_mul(&x_lin, v, out);
+                let product = jacobian_product(&*sys, &x_lin);
                 let action: Option<linear::Action<'_>> = matrix_free.then_some(&product);
                 linear.solve_again(&neg_r, free, size, eta.max(0.25 * q).min(0.1), action)
             }
@@ -1141,8 +1143,7 @@ fn newton_iterations(
                     x_lin.clear();
                     x_lin.extend_from_slice(x);
                 }
-                let system: &dyn NonlinearSystem = &*sys;
-                let product = |v: &[Vec3], out: &mut [Vec3]| system.jacobian_mul(&x_lin, v, out);
+                let product = jacobian_product(&*sys, &x_lin);
                 let action: Option<linear::Action<'_>> = matrix_free.then_some(&product);
                 match linear.solve(jac, &neg_r, free, size, eta, action) {
                     Ok(d) => d,
@@ -1252,8 +1253,7 @@ fn newton_iterations(
             chord = if chord_step && far {
                 None
             } else {
-                let system: &dyn NonlinearSystem = &*sys;
-                let product = |v: &[Vec3], out: &mut [Vec3]| system.jacobian_mul(&x_lin, v, out);
+                let product = jacobian_product(&*sys, &x_lin);
                 let action: Option<linear::Action<'_>> = matrix_free.then_some(&product);
                 match chord_contraction(linear, action, &delta, &neg_r, &r, free, norm_before) {
                     Some(q) if chord_step || q <= CHORD_MAX_CONTRACTION => Some(q),
@@ -1307,6 +1307,15 @@ fn newton_iterations(
 /// remainder `|R(x + d) - R(x) - J d| / |R(x)|`, since the tangent changed
 /// along the step by what the remainder shows. `None` without a kept
 /// tangent (direct solves).
+/// `out = J(x_lin) v` through `sys`'s product (the tangent a Newton step
+/// took at `x_lin`, for a solve that kept no matrix).
+fn jacobian_product<'a>(
+    sys: &'a dyn NonlinearSystem,
+    x_lin: &'a [Vec3],
+) -> impl Fn(&[Vec3], &mut [Vec3]) + 'a {
+    move |v: &[Vec3], out: &mut [Vec3]| sys.jacobian_mul(x_lin, v, out)
+}
+
 fn chord_contraction(
     linear: &linear::LinearSolver,
     action: Option<linear::Action<'_>>,
