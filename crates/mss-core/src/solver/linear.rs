@@ -641,7 +641,9 @@ impl LinearSolver {
         let product = operator_product(&mg, action.filter(|_| lean), sign);
         let usable = self.krylov(&mg, &*product, symmetric, &b_signed, &mut y, size, rtol);
         drop(product);
-        if !usable && free_dofs <= FALLBACK_MAX_FREE_DOFS {
+        // A solve that kept no matrix has none to factor: it reports as a
+        // large solve does.
+        if !usable && free_dofs <= FALLBACK_MAX_FREE_DOFS && !lean {
             // Near-mechanisms (the lattice's hourglass modes) can stall the
             // preconditioned iteration; a problem that still fits a direct
             // solve gets one, which also tells a singular matrix apart.
