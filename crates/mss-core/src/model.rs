@@ -1373,10 +1373,7 @@ impl Model {
     /// has correction forces.
     pub fn tangent(&self, x: &[Vec3]) -> BlockCsr {
         assert_eq!(x.len(), self.num_nodes(), "positions: one per node");
-        let (row_offsets, col_indices) = self.tangent_pattern.get_or_init(|| {
-            let p = BlockCsr::lattice_pattern(self.num_nodes(), &self.cells);
-            (p.row_offsets, p.col_indices)
-        });
+        let (row_offsets, col_indices) = self.tangent_pattern();
         let mut m = BlockCsr {
             row_offsets: row_offsets.clone(),
             col_indices: col_indices.clone(),
@@ -1405,6 +1402,15 @@ impl Model {
         m
     }
 
+    /// The tangent's block pattern (row offsets, column indices), built on
+    /// first use and kept.
+    fn tangent_pattern(&self) -> &(Vec<u32>, Vec<u32>) {
+        self.tangent_pattern.get_or_init(|| {
+            let p = BlockCsr::lattice_pattern(self.num_nodes(), &self.cells);
+            (p.row_offsets, p.col_indices)
+        })
+    }
+
     /// Calls `visit` with every cell in the force pass's layer order: the
     /// even layers in parallel, then the odd ones, each layer's cells in
     /// order; two tasks of a phase never share a node.
@@ -1424,10 +1430,7 @@ impl Model {
     /// tangent's), so the full matrix is never held.
     pub(crate) fn symmetric_stiffness_upper(&self, x: &[Vec3]) -> crate::sparse::SymmetricUpper {
         assert_eq!(x.len(), self.num_nodes(), "positions: one per node");
-        let (row_offsets, col_indices) = self.tangent_pattern.get_or_init(|| {
-            let p = BlockCsr::lattice_pattern(self.num_nodes(), &self.cells);
-            (p.row_offsets, p.col_indices)
-        });
+        let (row_offsets, col_indices) = self.tangent_pattern();
         let mut m = crate::sparse::SymmetricUpper::upper_pattern_of(row_offsets, col_indices);
         let shared = SharedBlocks(m.upper.blocks.as_mut_ptr());
         let (row_offsets, col_indices) = (&m.upper.row_offsets, &m.upper.col_indices);
@@ -1592,25 +1595,18 @@ impl Model {
         out.par_chunks_mut(4 * CHUNK)
             .for_each(|c| c.fill(Vec3::zeros()));
         let shared = SharedForces(out.as_mut_ptr());
-        for parity in 0..2 {
-            (parity..self.layers.count())
-                .into_par_iter()
-                .step_by(2)
-                .for_each(|l| {
-                    for cell in self.layers.range(l) {
-                        let corner = per_cell(cell);
-                        let s = shared;
-                        for (&n, f) in self.cells[cell].iter().zip(corner) {
-                            // SAFETY: as in the force pass, the nodes of a
-                            // layer of this phase's parity belong to no other
-                            // task of the phase; `out` has one entry per node.
-                            unsafe {
-                                *s.0.add(n as usize) += f;
-                            }
-                        }
-                    }
-                });
-        }
+        self.each_cell_by_layers(|cell| {
+            let corner = per_cell(cell);
+            let s = shared;
+            for (&n, f) in self.cells[cell].iter().zip(corner) {
+                // SAFETY: as in the force pass, the nodes of a layer of this
+                // phase's parity belong to no other task of the phase; `out`
+                // has one entry per node.
+                unsafe {
+                    *s.0.add(n as usize) += f;
+                }
+            }
+        });
     }
 
     /// Per-cell strain measures and correction-force magnitude at `x`.
