@@ -1427,15 +1427,31 @@ impl Model {
     /// [`Model::tangent`] at `x`, stored once per pair of blocks: each cell's
     /// matrix is symmetrized where it is computed and only its blocks on and
     /// above the diagonal are added (in the force pass's layer order, as the
-    /// tangent's), so the full matrix is never held.
-    pub(crate) fn symmetric_stiffness_upper(&self, x: &[Vec3]) -> crate::sparse::SymmetricUpper {
+    /// tangent's), so the full matrix is never held. It records whether
+    /// every cell's matrix was symmetric (to 1e-10 of its largest entry).
+    pub fn symmetric_stiffness_upper(&self, x: &[Vec3]) -> crate::sparse::SymmetricUpper {
+        use std::sync::atomic::{AtomicBool, Ordering};
         assert_eq!(x.len(), self.num_nodes(), "positions: one per node");
         let (row_offsets, col_indices) = self.tangent_pattern();
         let mut m = crate::sparse::SymmetricUpper::upper_pattern_of(row_offsets, col_indices);
         let shared = SharedBlocks(m.upper.blocks.as_mut_ptr());
         let (row_offsets, col_indices) = (&m.upper.row_offsets, &m.upper.col_indices);
+        // Any cell's verdict decides: the same for any order of the cells.
+        let skewed = AtomicBool::new(false);
         self.each_cell_by_layers(|cell| {
             let jac = kernel::cell_jacobian(self.params_of(cell), &self.corners(x, cell));
+            if !skewed.load(Ordering::Relaxed) {
+                let (mut largest, mut skew) = (0.0f64, 0.0f64);
+                for (p, row) in jac.iter().enumerate() {
+                    for (q, v) in row.iter().enumerate() {
+                        largest = largest.max(v.abs());
+                        skew = skew.max((v - jac[q][p]).abs());
+                    }
+                }
+                if skew > 1e-10 * largest {
+                    skewed.store(true, Ordering::Relaxed);
+                }
+            }
             let nodes = &self.cells[cell];
             let s = shared;
             for (b, &rb) in nodes.iter().enumerate() {
@@ -1460,6 +1476,7 @@ impl Model {
                 }
             }
         });
+        m.from_symmetric = !skewed.into_inner();
         m
     }
 

@@ -656,6 +656,25 @@ mod tests {
             "the test needs a non-symmetric tangent"
         );
         let upper = model.symmetric_stiffness_upper(&x);
+        assert!(!upper.of_a_symmetric_matrix());
+        // At rest, and for a conservative model anywhere, the tangent is
+        // symmetric, and the half says so.
+        assert!(
+            model
+                .symmetric_stiffness_upper(model.rest_positions())
+                .of_a_symmetric_matrix()
+        );
+        let springs = crate::Model::new(
+            &l,
+            crate::Material::new(1e4, 0.3, 1000.0).unwrap(),
+            &crate::model::SpringsOnly,
+        )
+        .unwrap();
+        assert!(
+            springs
+                .symmetric_stiffness_upper(&x)
+                .of_a_symmetric_matrix()
+        );
         let run = |threads: usize| {
             let mut out = vec![Vec3::zeros(); v.len()];
             rayon::ThreadPoolBuilder::new()
@@ -722,11 +741,17 @@ mod tests {
 /// gathers per row (in parallel, each row summed in a fixed order: the same
 /// bits for any thread count) without a transposed copy. Half the `f64`
 /// blocks of the full matrix: the static solver's stability test holds one
-/// beside its preconditioner at its memory peak.
+/// beside its preconditioner at its memory peak, and the multigrid of a large
+/// solve builds its levels from one without a full matrix ever being held
+/// ([`crate::solver::NonlinearSystem::symmetric_stiffness`]).
 #[derive(Debug, Clone, PartialEq)]
-pub(crate) struct SymmetricUpper {
+pub struct SymmetricUpper {
     /// Row offsets, columns and blocks of the upper half.
     pub upper: BlockCsr,
+    /// Whether the matrix this is the symmetric part of was itself
+    /// symmetric (to round-off) as far as its assembly could tell: false
+    /// when some summed part had a skew part.
+    pub(crate) from_symmetric: bool,
     /// Start of each column's entries in `by_column`; length rows + 1.
     column_offsets: Vec<u32>,
     /// For each column `j`, the blocks `k` (indices into `upper`) strictly
@@ -738,6 +763,15 @@ impl SymmetricUpper {
     /// The zero matrix on the upper half of `full`'s pattern (which must hold
     /// the diagonal and be structurally symmetric).
     pub(crate) fn upper_pattern_of(full_rows: &[u32], full_cols: &[u32]) -> Self {
+        let mut m = Self::upper_pattern_only(full_rows, full_cols);
+        m.upper.blocks = vec![Mat3::zeros(); m.upper.col_indices.len()];
+        m
+    }
+
+    /// The upper half of `full`'s pattern with its by-column index and no
+    /// blocks (`upper.blocks` empty): the structure of a matrix whose blocks
+    /// are kept elsewhere (in single precision, by the multigrid's levels).
+    pub(crate) fn upper_pattern_only(full_rows: &[u32], full_cols: &[u32]) -> Self {
         let n = full_rows.len() - 1;
         let mut row_offsets = Vec::with_capacity(n + 1);
         let mut col_indices = Vec::with_capacity(full_cols.len() / 2 + n);
@@ -770,20 +804,69 @@ impl SymmetricUpper {
                 }
             }
         }
-        let blocks = vec![Mat3::zeros(); col_indices.len()];
         Self {
             upper: BlockCsr {
                 row_offsets,
                 col_indices,
-                blocks,
+                blocks: Vec::new(),
             },
             column_offsets,
             by_column,
+            from_symmetric: true,
         }
     }
 
-    /// `out = A v`.
-    pub(crate) fn mul(&self, v: &[Vec3], out: &mut [Vec3]) {
+    /// Number of block rows.
+    pub fn num_rows(&self) -> usize {
+        self.upper.num_rows()
+    }
+
+    /// Whether the matrix this is the symmetric part of was itself symmetric
+    /// (every part its assembly summed was, to round-off).
+    pub fn of_a_symmetric_matrix(&self) -> bool {
+        self.from_symmetric
+    }
+
+    /// The largest absolute entry of the diagonal blocks.
+    pub fn max_diagonal_block_entry(&self) -> f64 {
+        let a = &self.upper;
+        (0..a.num_rows())
+            .filter_map(|i| {
+                let k = a.row_offsets[i] as usize;
+                (k < a.row_offsets[i + 1] as usize && a.col_indices[k] as usize == i)
+                    .then(|| a.blocks[k].abs().max())
+            })
+            .fold(0.0, f64::max)
+    }
+
+    /// The blocks strictly above the diagonal in column `j`, as (index into
+    /// `upper`, row), by row: row `j`'s blocks below the diagonal are their
+    /// transposes.
+    pub(crate) fn column(&self, j: usize) -> &[(u32, u32)] {
+        &self.by_column[self.column_offsets[j] as usize..self.column_offsets[j + 1] as usize]
+    }
+
+    /// The full pattern's rows and columns (both halves), in order.
+    pub(crate) fn full_pattern(&self) -> (Vec<u32>, Vec<u32>) {
+        let n = self.num_rows();
+        let mut rows = Vec::with_capacity(n + 1);
+        let mut cols = Vec::with_capacity(2 * self.upper.col_indices.len());
+        rows.push(0u32);
+        for i in 0..n {
+            cols.extend(self.column(i).iter().map(|&(_, r)| r));
+            let (lo, hi) = (
+                self.upper.row_offsets[i] as usize,
+                self.upper.row_offsets[i + 1] as usize,
+            );
+            cols.extend_from_slice(&self.upper.col_indices[lo..hi]);
+            rows.push(cols.len() as u32);
+        }
+        (rows, cols)
+    }
+
+    /// `out = A v` (rows in parallel, each summed in a fixed order: the same
+    /// bits for any thread count).
+    pub fn mul(&self, v: &[Vec3], out: &mut [Vec3]) {
         use rayon::prelude::*;
         let a = &self.upper;
         out.par_iter_mut().enumerate().for_each(|(i, o)| {

@@ -358,6 +358,19 @@ struct LastSolve {
     lean: bool,
 }
 
+/// The 8 nodes where the unusable solution `y` of a singular solve is
+/// largest (non-finite first): where the mechanism moves most.
+fn largest_entries(y: &[Vec3]) -> Vec<u32> {
+    let mut order: Vec<u32> = (0..y.len() as u32).collect();
+    let mag = |i: u32| {
+        let v = y[i as usize].norm();
+        if v.is_finite() { v } else { f64::INFINITY }
+    };
+    order.sort_by(|&p, &q| mag(q).total_cmp(&mag(p)));
+    order.truncate(8);
+    order
+}
+
 /// The linear solver of a Newton solve ([`newton`](super::newton)): a sparse
 /// LU with its symbolic analysis cached per pattern, or multigrid-
 /// preconditioned Krylov with the hierarchy's structure cached per free mask.
@@ -492,15 +505,7 @@ impl LinearSolver {
         free: &[bool],
     ) -> Option<bool> {
         self.release_last();
-        if !self.shape.as_ref().is_some_and(|s| s.fits(free)) {
-            self.kept = None;
-            self.shape = Some(super::multigrid::HierarchyShape::new(
-                &self.cells,
-                &self.coords,
-                free,
-                self.enrich,
-            ));
-        }
+        self.fit_shape(free);
         let shape = self.shape.as_ref()?;
         let mg = match self.kept.take() {
             Some(mg) => mg,
@@ -598,14 +603,7 @@ impl LinearSolver {
             return solve_free(&mut self.lu, &a, b, free, size);
         }
         self.stats.iterative_solves += 1;
-        if !self.shape.as_ref().is_some_and(|s| s.fits(free)) {
-            self.shape = Some(super::multigrid::HierarchyShape::new(
-                &self.cells,
-                &self.coords,
-                free,
-                self.enrich,
-            ));
-        }
+        self.fit_shape(free);
         let Some(shape) = self.shape.as_ref() else {
             return Err(LinearFailure::Other("no multigrid hierarchy".into()));
         };
@@ -652,23 +650,102 @@ impl LinearSolver {
             // decoupled: its free block is that of `sign * a`.
             return solve_free(&mut self.lu, mg.operator().0, &b_signed, free, size);
         }
-        if !usable {
-            let mut order: Vec<u32> = (0..y.len() as u32).collect();
-            let mag = |i: u32| {
-                let v = y[i as usize].norm();
-                if v.is_finite() { v } else { f64::INFINITY }
-            };
-            order.sort_by(|&p, &q| mag(q).total_cmp(&mag(p)));
-            order.truncate(8);
-            return Err(LinearFailure::Singular { nodes: order });
-        }
-        self.last = Some(LastSolve {
+        let last = LastSolve {
             mg,
             sign,
             symmetric,
             keep,
             lean,
-        });
+        };
+        self.finish(y, usable, last)
+    }
+
+    /// Makes the cached hierarchy shape that of `free` (a new one drops any
+    /// kept hierarchy, which was built for other free dofs).
+    fn fit_shape(&mut self, free: &[bool]) {
+        if !self.shape.as_ref().is_some_and(|s| s.fits(free)) {
+            self.kept = None;
+            self.shape = Some(super::multigrid::HierarchyShape::new(
+                &self.cells,
+                &self.coords,
+                free,
+                self.enrich,
+            ));
+        }
+    }
+
+    /// Whether a solve of `free_dofs` free dofs given the matrix's action
+    /// keeps no matrix ([`LinearSolver::set_matrix_free_above`]): its caller
+    /// then gives [`LinearSolver::solve_without_matrix`] the symmetric part
+    /// of the stiffness instead of assembling the matrix.
+    pub(crate) fn keeps_no_matrix(&self, free_dofs: usize) -> bool {
+        let iterative = match self.kind {
+            LinearSolverKind::Direct => false,
+            LinearSolverKind::Iterative => true,
+            LinearSolverKind::Auto => free_dofs > DIRECT_MAX_FREE_DOFS,
+        };
+        iterative && free_dofs > self.matrix_free_above
+    }
+
+    /// Solves `J y = b` on the free dofs to a relative residual `rtol`, for
+    /// a Jacobian `J = -K` known by its product `action` and the symmetric
+    /// part of the stiffness `K`, `stiffness` (positive definite where the
+    /// solve is well posed), from which the hierarchy is built: no `f64`
+    /// matrix is ever held. A solve that fails is not retried directly (it
+    /// reports as a large solve does). Later [`LinearSolver::solve_again`]
+    /// and [`LinearSolver::last_product`] calls need the action again.
+    pub(crate) fn solve_without_matrix(
+        &mut self,
+        stiffness: crate::sparse::SymmetricUpper,
+        b: &[Vec3],
+        free: &[bool],
+        size: f64,
+        rtol: f64,
+        action: Action<'_>,
+    ) -> Result<Vec<Vec3>, LinearFailure> {
+        self.release_last();
+        self.stats.solves += 1;
+        self.stats.iterative_solves += 1;
+        let keep = std::mem::take(&mut self.keep_next);
+        self.fit_shape(free);
+        let Some(shape) = self.shape.as_ref() else {
+            return Err(LinearFailure::Other("no multigrid hierarchy".into()));
+        };
+        // The operator is the stiffness, -J: solve K y = -b.
+        let sign = -1.0;
+        let symmetric = stiffness.of_a_symmetric_matrix();
+        let b_signed: Vec<Vec3> = b.iter().map(|v| v * sign).collect();
+        let mg = super::multigrid::Multigrid::of_symmetric(stiffness, free, shape)
+            .map_err(|e| LinearFailure::Other(e.0))?;
+        self.stats.hierarchy_builds += 1;
+        let mut y = vec![Vec3::zeros(); b.len()];
+        let product = operator_product(&mg, Some(action), sign);
+        let usable = self.krylov(&mg, &*product, symmetric, &b_signed, &mut y, size, rtol);
+        drop(product);
+        let last = LastSolve {
+            mg,
+            sign,
+            symmetric,
+            keep,
+            lean: true,
+        };
+        self.finish(y, usable, last)
+    }
+
+    /// The solution `y` of an iterative solve, kept as `last` for chord
+    /// steps when `usable`; otherwise the singular solve's nodes.
+    fn finish(
+        &mut self,
+        y: Vec<Vec3>,
+        usable: bool,
+        last: LastSolve,
+    ) -> Result<Vec<Vec3>, LinearFailure> {
+        if !usable {
+            return Err(LinearFailure::Singular {
+                nodes: largest_entries(&y),
+            });
+        }
+        self.last = Some(last);
         Ok(y)
     }
 

@@ -973,6 +973,15 @@ pub trait NonlinearSystem {
         let _ = (x, v);
         out.fill(Vec3::zeros());
     }
+    /// The symmetric part of the stiffness `-J(x)`, stored once per pair of
+    /// blocks ([`crate::Model::symmetric_stiffness_upper`]), when
+    /// [`NonlinearSystem::has_jacobian_mul`]: a solve that keeps no matrix
+    /// builds its preconditioner from it, so the Jacobian is never
+    /// assembled. The default (`None`) makes such solves assemble it.
+    fn symmetric_stiffness(&mut self, x: &[Vec3]) -> Option<crate::sparse::SymmetricUpper> {
+        let _ = x;
+        None
+    }
     /// Whether the caller asked to stop (checked before every Newton
     /// iteration, so that a stop takes one iteration, not a whole solve).
     fn cancelled(&self) -> bool {
@@ -1093,6 +1102,7 @@ fn newton_iterations(
     let mut trial_left = true;
     // Where the last tangent was taken, for its product without a matrix.
     let matrix_free = sys.has_jacobian_mul();
+    let free_dofs = free.iter().filter(|f| **f).count();
     let mut x_lin: Vec<Vec3> = Vec::new();
     for it in 0..opts.max_iterations {
         if norm == 0.0 || (it > 0 && norm <= target.max(floor)) {
@@ -1128,12 +1138,26 @@ fn newton_iterations(
             None => {
                 // Never two tangents alive at once.
                 linear.release_last();
-                let jac = sys.jacobian(x);
+                // A solve that keeps no matrix needs only the stiffness's
+                // symmetric part, for its preconditioner.
+                let half = if matrix_free && linear.keeps_no_matrix(free_dofs) {
+                    sys.symmetric_stiffness(x)
+                } else {
+                    None
+                };
+                let jac = match half {
+                    Some(_) => None,
+                    None => Some(sys.jacobian(x)),
+                };
                 if it == 0 {
-                    let kmax = (0..n)
-                        .filter_map(|i| jac.find(i, i))
-                        .map(|k| jac.blocks[k].abs().max())
-                        .fold(0.0, f64::max);
+                    let kmax = match (&jac, &half) {
+                        (Some(jac), _) => (0..n)
+                            .filter_map(|i| jac.find(i, i))
+                            .map(|k| jac.blocks[k].abs().max())
+                            .fold(0.0, f64::max),
+                        (None, Some(half)) => half.max_diagonal_block_entry(),
+                        (None, None) => unreachable!("one of the two is made"),
+                    };
                     floor = 1e-12 * kmax * h * (free.iter().filter(|f| **f).count() as f64).sqrt();
                     if norm <= target.max(floor) {
                         return Ok(0);
@@ -1145,7 +1169,14 @@ fn newton_iterations(
                 }
                 let product = jacobian_product(&*sys, &x_lin);
                 let action: Option<linear::Action<'_>> = matrix_free.then_some(&product);
-                match linear.solve(jac, &neg_r, free, size, eta, action) {
+                let solved = match (jac, half) {
+                    (Some(jac), _) => linear.solve(jac, &neg_r, free, size, eta, action),
+                    (None, Some(half)) => {
+                        linear.solve_without_matrix(half, &neg_r, free, size, eta, &product)
+                    }
+                    (None, None) => unreachable!("one of the two is made"),
+                };
+                match solved {
                     Ok(d) => d,
                     Err(linear::LinearFailure::Singular { nodes }) => {
                         return Err(NewtonFailure::Singular(nodes));

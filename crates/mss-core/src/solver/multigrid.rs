@@ -40,10 +40,17 @@
 //!   on the interval `[1.5 rho / 30, 1.5 rho]` with `rho` the largest eigenvalue of
 //!   `D^-1 A` estimated by power iterations. Chebyshev needs no inner products
 //!   and updates every node from the previous iterate only, so the result is
-//!   bitwise the same for any thread count (colouring is not needed). It
-//!   multiplies by a single-precision copy of the blocks (sums in `f64`):
-//!   the products are memory bound, and a preconditioner needs no more
-//!   digits; the Krylov method's own products use the `f64` operator.
+//!   bitwise the same for any thread count (colouring is not needed).
+//! - **What the levels hold**: the *symmetric part* of the operator, once per
+//!   pair of blocks (the blocks on and above the diagonal, [`HalfMatrix`]),
+//!   in single precision (sums in `f64`). The products are memory bound and
+//!   a preconditioner needs no more digits; the symmetric part is the
+//!   operator itself for the conservative models and at rest, and differs
+//!   from it by the correction forces' small skew part at large strain,
+//!   which the Krylov method (GMRES, with the `f64` operator's own products)
+//!   takes care of. A quarter of the bytes of the `f64` operator, so that a
+//!   million-node hierarchy fits beside the solver's vectors, and half the
+//!   work of the Galerkin products.
 //! - **Coarsest level**: a sparse direct solve (LU) once it has at most
 //!   [`COARSEST_NODES`] nodes.
 //!
@@ -58,7 +65,7 @@ use std::collections::HashMap;
 use rayon::prelude::*;
 
 use crate::krylov::dot;
-use crate::sparse::{BlockCsr, Factorization};
+use crate::sparse::{BlockCsr, Factorization, SymmetricUpper};
 use crate::{Mat3, Vec3};
 
 /// A level stops being coarsened once it has at most this many nodes; it is
@@ -113,31 +120,235 @@ fn hourglass_signs(g: [i64; 3]) -> Vec3 {
     Vec3::new(sign(g[1] + g[2]), sign(g[0] + g[2]), sign(g[0] + g[1]))
 }
 
+/// A symmetric block matrix in single precision, stored once per pair of
+/// blocks: the pattern of the blocks on and above the diagonal with its
+/// by-column index ([`SymmetricUpper`], without `f64` blocks) and the blocks,
+/// 9 per block in column-major order plus 3 of padding at the end (see
+/// [`HalfMatrix::mul`]).
+#[derive(Debug, Clone)]
+pub(crate) struct HalfMatrix {
+    pattern: SymmetricUpper,
+    blocks: Vec<f32>,
+}
+
+impl HalfMatrix {
+    /// Single-precision blocks of `blocks`, padded.
+    fn single(blocks: &[Mat3]) -> Vec<f32> {
+        let mut out: Vec<f32> = Vec::with_capacity(9 * blocks.len() + 3);
+        out.par_extend(
+            blocks
+                .par_iter()
+                .flat_map_iter(|b| b.as_slice().iter().map(|&v| v as f32)),
+        );
+        out.extend([0.0; 3]);
+        out
+    }
+
+    /// The matrix `m` in single precision (its `f64` blocks are freed).
+    pub(crate) fn from_upper(mut m: SymmetricUpper) -> Self {
+        let blocks = Self::single(&m.upper.blocks);
+        m.upper.blocks = Vec::new();
+        Self { pattern: m, blocks }
+    }
+
+    /// The symmetric part `(A + A^T) / 2` of `a` (structurally symmetric,
+    /// with its diagonal) in single precision.
+    fn symmetric_part_of(a: &BlockCsr) -> Self {
+        let pattern = SymmetricUpper::upper_pattern_only(&a.row_offsets, &a.col_indices);
+        let upper = &pattern.upper;
+        let mut blocks = vec![0.0f32; 9 * upper.col_indices.len() + 3];
+        let body = blocks.len() - 3;
+        row_chunks(&upper.row_offsets, &mut blocks[..body])
+            .into_par_iter()
+            .for_each(|(rows, chunk)| {
+                let first = upper.row_offsets[rows.start] as usize;
+                for i in rows {
+                    for k in upper.row_offsets[i] as usize..upper.row_offsets[i + 1] as usize {
+                        let j = upper.col_indices[k] as usize;
+                        let here = a.find(i, j).map_or(Mat3::zeros(), |q| a.blocks[q]);
+                        let mirror = a.find(j, i).map_or(Mat3::zeros(), |q| a.blocks[q]);
+                        let sym = (here + mirror.transpose()) * 0.5;
+                        let out = &mut chunk[9 * (k - first)..9 * (k - first) + 9];
+                        for (o, v) in out.iter_mut().zip(sym.as_slice()) {
+                            *o = *v as f32;
+                        }
+                    }
+                }
+            });
+        Self { pattern, blocks }
+    }
+
+    /// Number of block rows.
+    fn num_rows(&self) -> usize {
+        self.pattern.num_rows()
+    }
+
+    /// Block `k` (of the upper half) in `f64`.
+    fn block(&self, k: usize) -> Mat3 {
+        Mat3::from_fn(|e, d| f64::from(self.blocks[9 * k + 3 * d + e]))
+    }
+
+    /// Calls `f(j, A_ij)` for every block of row `i`, in column order.
+    fn for_each_in_row(&self, i: usize, mut f: impl FnMut(usize, Mat3)) {
+        for &(k, row) in self.pattern.column(i) {
+            f(row as usize, self.block(k as usize).transpose());
+        }
+        let u = &self.pattern.upper;
+        for k in u.row_offsets[i] as usize..u.row_offsets[i + 1] as usize {
+            f(u.col_indices[k] as usize, self.block(k));
+        }
+    }
+
+    /// The diagonal block of row `i` (zero if the pattern lacks it).
+    fn diagonal(&self, i: usize) -> Mat3 {
+        let u = &self.pattern.upper;
+        let k = u.row_offsets[i] as usize;
+        if k < u.row_offsets[i + 1] as usize && u.col_indices[k] as usize == i {
+            self.block(k)
+        } else {
+            Mat3::zeros()
+        }
+    }
+
+    /// Held dofs decoupled (identity rows and columns), in place.
+    fn decouple(&mut self, mask: &[[bool; 3]]) {
+        let u = &self.pattern.upper;
+        let body = self.blocks.len() - 3;
+        row_chunks(&u.row_offsets, &mut self.blocks[..body])
+            .into_par_iter()
+            .for_each(|(rows, chunk)| {
+                let first = u.row_offsets[rows.start] as usize;
+                for i in rows {
+                    for k in u.row_offsets[i] as usize..u.row_offsets[i + 1] as usize {
+                        let j = u.col_indices[k] as usize;
+                        let b = &mut chunk[9 * (k - first)..9 * (k - first) + 9];
+                        for d in 0..3 {
+                            for e in 0..3 {
+                                if !(mask[i][e] && mask[j][d]) {
+                                    b[3 * d + e] = if i == j && e == d { 1.0 } else { 0.0 };
+                                }
+                            }
+                        }
+                    }
+                }
+            });
+    }
+
+    /// Both halves in `f64` (for the coarsest level's factorization).
+    fn to_full(&self) -> BlockCsr {
+        let (row_offsets, col_indices) = self.pattern.full_pattern();
+        let mut blocks = Vec::with_capacity(col_indices.len());
+        for i in 0..self.num_rows() {
+            self.for_each_in_row(i, |_, b| blocks.push(b));
+        }
+        BlockCsr {
+            row_offsets,
+            col_indices,
+            blocks,
+        }
+    }
+
+    /// `y = A x`, rows in parallel, each row summed in a fixed order (the
+    /// same bits for any thread count), in `f64`. Row `i`'s blocks below the
+    /// diagonal are read from the rows above it through the by-column index:
+    /// those were read shortly before (a plane of the lattice back), so the
+    /// second read mostly hits the cache. Each block adds its three columns
+    /// to a four-lane accumulator (the fourth lane reads the next block's
+    /// first entry and is discarded, hence the padding); a transposed block
+    /// multiplies its columns by `x` lane-wise into three accumulators
+    /// summed at the row's end. The compiler turns both into vector
+    /// instructions.
+    fn mul(&self, x: &[Vec3], y: &mut [Vec3]) {
+        #[cfg(target_arch = "x86_64")]
+        let avx2 = std::arch::is_x86_feature_detected!("avx2");
+        y.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, yc)| {
+            #[cfg(target_arch = "x86_64")]
+            if avx2 {
+                // SAFETY: the CPU supports AVX2 (checked above). The rows are
+                // a separate function: the closure would not get the feature.
+                unsafe { half_mul_rows_avx2(self, x, yc, ci * CHUNK) };
+                return;
+            }
+            half_mul_rows(self, x, yc, ci * CHUNK);
+        });
+    }
+}
+
+/// `blocks` (9 entries per block of the pattern `row_offsets`) split into
+/// chunks of [`CHUNK`] rows, with the rows of each: for loops over rows in
+/// parallel that write their rows' blocks.
+fn row_chunks<'a>(
+    row_offsets: &[u32],
+    mut blocks: &'a mut [f32],
+) -> Vec<(std::ops::Range<usize>, &'a mut [f32])> {
+    let n = row_offsets.len() - 1;
+    let mut out = Vec::with_capacity(n.div_ceil(CHUNK));
+    for start in (0..n).step_by(CHUNK) {
+        let end = (start + CHUNK).min(n);
+        let len = 9 * (row_offsets[end] - row_offsets[start]) as usize;
+        let (head, tail) = blocks.split_at_mut(len);
+        out.push((start..end, head));
+        blocks = tail;
+    }
+    out
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn half_mul_rows_avx2(a: &HalfMatrix, x: &[Vec3], y: &mut [Vec3], first: usize) {
+    half_mul_rows(a, x, y, first);
+}
+
+/// Rows `first..first + y.len()` of [`HalfMatrix::mul`]; no FMA on any
+/// path, so every path gives the same bits.
+#[inline(always)]
+fn half_mul_rows(a: &HalfMatrix, x: &[Vec3], y: &mut [Vec3], first: usize) {
+    let u = &a.pattern.upper;
+    let blocks = &a.blocks;
+    for (k, yi) in y.iter_mut().enumerate() {
+        let i = first + k;
+        let mut below = [[0.0f64; 4]; 3];
+        for &(p, j) in a.pattern.column(i) {
+            let v = &x[j as usize];
+            let xv = [v.x, v.y, v.z, 0.0];
+            let b = &blocks[9 * p as usize..9 * p as usize + 12];
+            for (e, acc) in below.iter_mut().enumerate() {
+                let col = &b[3 * e..3 * e + 4];
+                for l in 0..4 {
+                    acc[l] += col[l] as f64 * xv[l];
+                }
+            }
+        }
+        let mut acc = [0.0f64; 4];
+        let lo = u.row_offsets[i] as usize;
+        let hi = u.row_offsets[i + 1] as usize;
+        for (p, &c) in (lo..hi).zip(&u.col_indices[lo..hi]) {
+            let v = &x[c as usize];
+            let b = &blocks[9 * p..9 * p + 12];
+            for (d, xd) in [v.x, v.y, v.z].into_iter().enumerate() {
+                let col = &b[3 * d..3 * d + 4];
+                for l in 0..4 {
+                    acc[l] += col[l] as f64 * xd;
+                }
+            }
+        }
+        *yi = Vec3::from_fn(|e, _| acc[e] + ((below[e][0] + below[e][1]) + below[e][2]));
+    }
+}
+
 /// One level of the hierarchy above the finest (or the finest itself).
 #[derive(Debug, Clone)]
 struct Level {
-    /// The operator, with held dofs decoupled (identity rows and columns).
-    /// Below the finest level its blocks are dropped once the hierarchy is
-    /// set up (the pattern stays): the cycle uses `smoothing` only.
-    a: BlockCsr,
-    /// The blocks of `a` in single precision, 9 per block in column-major
-    /// order plus 3 of padding at the end (see [`mul_smoothing`]), for the
-    /// smoother and the cycle's residuals: they move half the bytes of `f64`
-    /// blocks, and a preconditioner needs no more digits (sums stay in `f64`).
-    smoothing: Vec<f32>,
+    /// The symmetric part of the level's operator, held dofs decoupled
+    /// (identity rows and columns), in single precision: the smoother's and
+    /// the cycle's residuals' matrix.
+    a: HalfMatrix,
     /// Inverses of the 3 x 3 diagonal blocks.
     inv_diag: Vec<Mat3>,
     /// Largest eigenvalue estimate of `D^-1 A` (for Chebyshev).
     rho: f64,
     /// Free-dof mask of the level, per node.
     mask: Vec<[bool; 3]>,
-}
-
-impl Level {
-    /// Block `k` of the single-precision copy, column-major, in `f64`.
-    fn smoothing_block(&self, k: usize) -> [f64; 9] {
-        std::array::from_fn(|e| f64::from(self.smoothing[9 * k + e]))
-    }
 }
 
 /// The structure of a hierarchy: grid coordinates, prolongations and coarse
@@ -147,8 +358,8 @@ impl Level {
 pub(crate) struct HierarchyShape {
     /// Prolongation from level `k + 1` to level `k`.
     prolongations: Vec<Prolongation>,
-    /// Empty operators with the pattern of each coarse level.
-    coarse_patterns: Vec<BlockCsr>,
+    /// The upper half's pattern of each coarse level.
+    coarse_patterns: Vec<SymmetricUpper>,
     /// Per coarse level, the index of its first companion node
     /// (`u32::MAX`: none).
     first_companions: Vec<u32>,
@@ -285,9 +496,10 @@ impl HierarchyShape {
                 let shifted: Vec<[u32; 8]> = cells.iter().map(|c| c.map(|n| n + nc)).collect();
                 cells.extend(shifted);
             }
-            coarse_patterns.push(BlockCsr::lattice_pattern(
-                level_size(nc as usize, enrich),
-                &cells,
+            let full = BlockCsr::lattice_pattern(level_size(nc as usize, enrich), &cells);
+            coarse_patterns.push(SymmetricUpper::upper_pattern_only(
+                &full.row_offsets,
+                &full.col_indices,
             ));
             first_companions.push(if enrich { nc } else { u32::MAX });
             prolongations.push(Prolongation {
@@ -322,14 +534,8 @@ fn masks_of(free: &[bool]) -> Vec<[bool; 3]> {
     free.chunks(3).map(|c| [c[0], c[1], c[2]]).collect()
 }
 
-/// `M A M + (I - M)` for the free-dof mask `M`: held dofs decoupled.
-fn decoupled(a: &BlockCsr, mask: &[[bool; 3]]) -> BlockCsr {
-    let mut out = a.clone();
-    decouple(&mut out, mask);
-    out
-}
-
-/// [`decoupled`] in place.
+/// `M A M + (I - M)` for the free-dof mask `M` (held dofs decoupled), in
+/// place.
 fn decouple(a: &mut BlockCsr, mask: &[[bool; 3]]) {
     let offsets = &a.row_offsets;
     let cols = &a.col_indices;
@@ -358,11 +564,11 @@ fn decouple(a: &mut BlockCsr, mask: &[[bool; 3]]) {
         });
 }
 
-fn inverse_diagonal(a: &BlockCsr) -> Vec<Mat3> {
+fn inverse_diagonal(a: &HalfMatrix) -> Vec<Mat3> {
     (0..a.num_rows())
         .into_par_iter()
         .map(|i| {
-            let d = a.find(i, i).map_or(Mat3::identity(), |k| a.blocks[k]);
+            let d = a.diagonal(i);
             d.try_inverse().unwrap_or_else(|| {
                 // A singular diagonal block: invert what can be inverted.
                 Mat3::from_diagonal(&Vec3::from_fn(|k, _| {
@@ -390,57 +596,6 @@ pub(crate) fn mul(a: &BlockCsr, x: &[Vec3], y: &mut [Vec3]) {
     });
 }
 
-/// `y = A x` with the single-precision blocks `blocks` (the layout of
-/// [`Level::smoothing`]) on the pattern of `a`, summed in `f64`
-/// (deterministic like [`mul`]). Each block adds its three columns to a
-/// four-lane accumulator (the fourth lane reads the next block's first entry
-/// and is discarded, hence the padding), which the compiler turns into
-/// vector instructions.
-fn mul_smoothing(a: &BlockCsr, blocks: &[f32], x: &[Vec3], y: &mut [Vec3]) {
-    assert_eq!(blocks.len(), 9 * a.col_indices.len() + 3);
-    #[cfg(target_arch = "x86_64")]
-    let avx2 = std::arch::is_x86_feature_detected!("avx2");
-    y.par_chunks_mut(CHUNK).enumerate().for_each(|(ci, yc)| {
-        #[cfg(target_arch = "x86_64")]
-        if avx2 {
-            // SAFETY: the CPU supports AVX2 (checked above). The rows are
-            // a separate function: the closure would not get the feature.
-            unsafe { mul_smoothing_rows_avx2(a, blocks, x, yc, ci * CHUNK) };
-            return;
-        }
-        mul_smoothing_rows(a, blocks, x, yc, ci * CHUNK);
-    });
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn mul_smoothing_rows_avx2(a: &BlockCsr, blocks: &[f32], x: &[Vec3], y: &mut [Vec3], first: usize) {
-    mul_smoothing_rows(a, blocks, x, y, first);
-}
-
-/// Rows `first..first + y.len()` of [`mul_smoothing`]; no FMA on any path,
-/// so every path gives the same bits.
-#[inline(always)]
-fn mul_smoothing_rows(a: &BlockCsr, blocks: &[f32], x: &[Vec3], y: &mut [Vec3], first: usize) {
-    for (k, yi) in y.iter_mut().enumerate() {
-        let i = first + k;
-        let lo = a.row_offsets[i] as usize;
-        let hi = a.row_offsets[i + 1] as usize;
-        let mut acc = [0.0f64; 4];
-        for (p, &c) in (lo..hi).zip(&a.col_indices[lo..hi]) {
-            let v = &x[c as usize];
-            let b = &blocks[9 * p..9 * p + 12];
-            for (d, xd) in [v.x, v.y, v.z].into_iter().enumerate() {
-                let col = &b[3 * d..3 * d + 4];
-                for l in 0..4 {
-                    acc[l] += col[l] as f64 * xd;
-                }
-            }
-        }
-        *yi = Vec3::new(acc[0], acc[1], acc[2]);
-    }
-}
-
 fn axpy(y: &mut [Vec3], alpha: f64, x: &[Vec3]) {
     y.par_iter_mut()
         .zip(x.par_iter())
@@ -449,7 +604,7 @@ fn axpy(y: &mut [Vec3], alpha: f64, x: &[Vec3]) {
 
 /// Largest eigenvalue estimate of `D^-1 A` by power iterations from a fixed
 /// start vector.
-fn spectral_radius(a: &BlockCsr, inv_diag: &[Mat3], mask: &[[bool; 3]]) -> f64 {
+fn spectral_radius(a: &HalfMatrix, inv_diag: &[Mat3], mask: &[[bool; 3]]) -> f64 {
     let n = a.num_rows();
     let mut v: Vec<Vec3> = (0..n)
         .map(|i| {
@@ -473,7 +628,7 @@ fn spectral_radius(a: &BlockCsr, inv_diag: &[Mat3], mask: &[[bool; 3]]) -> f64 {
             break;
         }
         v.par_iter_mut().for_each(|x| *x /= norm);
-        mul(a, &v, &mut av);
+        a.mul(&v, &mut av);
         av.par_iter_mut()
             .zip(inv_diag.par_iter())
             .for_each(|(x, d)| *x = d * *x);
@@ -485,6 +640,10 @@ fn spectral_radius(a: &BlockCsr, inv_diag: &[Mat3], mask: &[[bool; 3]]) -> f64 {
 
 /// A multigrid V-cycle preconditioner for one matrix.
 pub(crate) struct Multigrid {
+    /// The finest level's operator in `f64` (held dofs decoupled), for the
+    /// Krylov method's products; without blocks when the caller multiplies
+    /// without a matrix or the hierarchy is only a preconditioner.
+    operator: BlockCsr,
     levels: Vec<Level>,
     prolongations: Vec<Prolongation>,
     coarsest: Option<Factorization>,
@@ -544,12 +703,43 @@ impl Multigrid {
     /// operator without a matrix, and [`Multigrid::operator`] then has no
     /// blocks.
     pub(crate) fn new(a: Operator, shape: &HierarchyShape, lean: bool) -> Result<Self, SetupError> {
-        let mut levels = Vec::with_capacity(shape.num_levels());
-        levels.push(level_of(a.a, a.mask));
+        let fine = HalfMatrix::symmetric_part_of(&a.a);
+        let mut operator = a.a;
         if lean {
-            levels[0].a.blocks = Vec::new();
+            operator.blocks = Vec::new();
         }
+        Self::on(operator, fine, a.mask, shape)
+    }
 
+    /// The hierarchy of the symmetric `upper` (the dofs not in `free`, which
+    /// must be `shape`'s, are decoupled here), for a caller that multiplies
+    /// by the operator without a matrix: [`Multigrid::operator`] has no
+    /// pattern and no blocks. No `f64` copy of the operator is ever made.
+    pub(crate) fn of_symmetric(
+        upper: SymmetricUpper,
+        free: &[bool],
+        shape: &HierarchyShape,
+    ) -> Result<Self, SetupError> {
+        let mask = masks_of(free);
+        let mut fine = HalfMatrix::from_upper(upper);
+        fine.decouple(&mask);
+        let operator = BlockCsr {
+            row_offsets: vec![0],
+            col_indices: Vec::new(),
+            blocks: Vec::new(),
+        };
+        Self::on(operator, fine, mask, shape)
+    }
+
+    /// The levels below `fine` (mask `mask`), built by Galerkin products.
+    fn on(
+        operator: BlockCsr,
+        fine: HalfMatrix,
+        mask: Vec<[bool; 3]>,
+        shape: &HierarchyShape,
+    ) -> Result<Self, SetupError> {
+        let mut levels = Vec::with_capacity(shape.num_levels());
+        levels.push(level_of(fine, mask));
         for ((p, pattern), &companions) in shape
             .prolongations
             .iter()
@@ -557,36 +747,24 @@ impl Multigrid {
             .zip(&shape.first_companions)
         {
             let fine = &levels[levels.len() - 1];
-            let (ac, mask) = if fine.a.blocks.is_empty() {
-                let block = |k: usize| Mat3::from_column_slice(&fine.smoothing_block(k));
-                galerkin(&fine.a, &block, &fine.mask, p, pattern, companions)
-            } else {
-                let block = |k: usize| fine.a.blocks[k];
-                galerkin(&fine.a, &block, &fine.mask, p, pattern, companions)
-            };
+            let (ac, mask) = galerkin(&fine.a, &fine.mask, p, pattern, companions);
             levels.push(level_of(ac, mask));
         }
         let last = &levels[levels.len() - 1];
-        let regularized;
-        let coarsest_matrix = match shape.first_companions.last() {
-            Some(&first) if (first as usize) < last.a.num_rows() => {
-                regularized = regularize_companions(&last.a, first as usize);
-                &regularized
-            }
-            _ => &last.a,
-        };
+        let mut coarsest_matrix = last.a.to_full();
+        if let Some(&first) = shape.first_companions.last() {
+            regularize_companions(&mut coarsest_matrix, first as usize);
+        }
         let coarsest = match coarsest_matrix.factor_lu(&vec![[false; 3]; last.a.num_rows()]) {
             Ok(f) => Some(f),
             Err(e) => return Err(SetupError(format!("coarsest level: {e}"))),
         };
-        for level in levels.iter_mut().skip(1) {
-            level.a.blocks = Vec::new();
-        }
         let scratch = levels
             .iter()
             .map(|l| Scratch::new(l.a.num_rows()))
             .collect();
         Ok(Self {
+            operator,
             levels,
             prolongations: shape.prolongations.clone(),
             coarsest,
@@ -599,7 +777,7 @@ impl Multigrid {
     /// single-precision copy), are dropped. `operator()` then returns the
     /// pattern with no blocks.
     pub(crate) fn into_preconditioner(mut self) -> Self {
-        self.levels[0].a.blocks = Vec::new();
+        self.operator.blocks = Vec::new();
         self
     }
 
@@ -615,7 +793,7 @@ impl Multigrid {
 
     /// The operator of the finest level (held dofs decoupled).
     pub(crate) fn operator(&self) -> (&BlockCsr, &[[bool; 3]]) {
-        (&self.levels[0].a, &self.levels[0].mask)
+        (&self.operator, &self.levels[0].mask)
     }
 
     /// `z = M^-1 r`: one V-cycle from zero.
@@ -644,7 +822,7 @@ impl Multigrid {
         x.iter_mut().for_each(|v| *v = Vec3::zeros());
         chebyshev(level, b, x, SMOOTHING_STEPS, &mut s.r, &mut s.d, true);
         // Residual, restricted into the coarse level's right-hand side.
-        mul_smoothing(&level.a, &level.smoothing, x, &mut s.t);
+        level.a.mul(x, &mut s.t);
         s.t.par_iter_mut()
             .zip(b.par_iter())
             .for_each(|(ri, bi)| *ri = bi - *ri);
@@ -671,49 +849,47 @@ impl Multigrid {
 /// leaves every other component as it was to this relative order.
 const COARSEST_REGULARIZATION: f64 = 1e-10;
 
-/// `a` with [`COARSEST_REGULARIZATION`] times its largest diagonal entry
-/// added to the diagonal of the nodes from `first` on (the companions).
-fn regularize_companions(a: &BlockCsr, first: usize) -> BlockCsr {
+/// Adds [`COARSEST_REGULARIZATION`] times `a`'s largest diagonal entry to
+/// the diagonal of the nodes from `first` on (the companions; none when
+/// `first` is past the last row).
+fn regularize_companions(a: &mut BlockCsr, first: usize) {
+    if first >= a.num_rows() {
+        return;
+    }
     let largest = (0..a.num_rows())
         .filter_map(|i| a.find(i, i))
         .map(|k| a.blocks[k].diagonal().abs().max())
         .fold(0.0, f64::max);
-    let mut out = a.clone();
     for i in first..a.num_rows() {
-        if let Some(k) = out.find(i, i) {
-            out.blocks[k] += Mat3::identity() * (COARSEST_REGULARIZATION * largest);
+        if let Some(k) = a.find(i, i) {
+            a.blocks[k] += Mat3::identity() * (COARSEST_REGULARIZATION * largest);
         }
     }
-    out
 }
 
-fn level_of(a: BlockCsr, mask: Vec<[bool; 3]>) -> Level {
+fn level_of(a: HalfMatrix, mask: Vec<[bool; 3]>) -> Level {
     let inv_diag = inverse_diagonal(&a);
     let rho = spectral_radius(&a, &inv_diag, &mask);
-    let mut smoothing: Vec<f32> = Vec::with_capacity(9 * a.blocks.len() + 3);
-    smoothing.extend(a.blocks.iter().flat_map(|b| b.iter().map(|&v| v as f32)));
-    smoothing.extend([0.0; 3]);
     Level {
         a,
-        smoothing,
         inv_diag,
         rho,
         mask,
     }
 }
 
-/// `P^T A P` on the coarse pattern, with `A` on the pattern of `a` and its
-/// blocks given by `block`; coarse dofs without a free child are decoupled
-/// (identity).
+/// The symmetric `P^T A P` on the coarse pattern's upper half (only the
+/// coarse blocks on and above the diagonal are summed); coarse dofs without
+/// a free child are decoupled (identity).
 fn galerkin(
-    a: &BlockCsr,
-    block: &(dyn Fn(usize) -> Mat3 + Sync),
+    a: &HalfMatrix,
     mask: &[[bool; 3]],
     p: &Prolongation,
-    pattern: &BlockCsr,
+    pattern: &SymmetricUpper,
     companions: u32,
-) -> (BlockCsr, Vec<[bool; 3]>) {
+) -> (HalfMatrix, Vec<[bool; 3]>) {
     let nc = pattern.num_rows();
+    let upper = &pattern.upper;
     // A coarse dof is free if some free fine dof interpolates from it.
     let mut cmask = vec![[false; 3]; nc];
     for (i, m) in mask.iter().enumerate() {
@@ -740,9 +916,9 @@ fn galerkin(
         .map_init(
             || vec![u32::MAX; nc],
             |position, ca| {
-                let lo = pattern.row_offsets[ca] as usize;
-                let hi = pattern.row_offsets[ca + 1] as usize;
-                let cols = &pattern.col_indices[lo..hi];
+                let lo = upper.row_offsets[ca] as usize;
+                let hi = upper.row_offsets[ca + 1] as usize;
+                let cols = &upper.col_indices[lo..hi];
                 for (k, &c) in cols.iter().enumerate() {
                     position[c as usize] = k as u32;
                 }
@@ -750,11 +926,9 @@ fn galerkin(
                 let mut row = vec![Mat3::zeros(); hi - lo];
                 for &(i, wa) in &children[ca] {
                     let i = i as usize;
-                    for k in a.row_offsets[i] as usize..a.row_offsets[i + 1] as usize {
-                        let j = a.col_indices[k] as usize;
+                    a.for_each_in_row(i, |j, mut blk| {
                         // M A M: a held row or column contributes nothing; the
                         // row's weights scale the block's rows once.
-                        let mut blk = block(k);
                         for e in 0..3 {
                             for d in 0..3 {
                                 blk[(e, d)] = if mask[i][e] && mask[j][d] {
@@ -776,6 +950,8 @@ fn galerkin(
                         } else {
                             parents.start..split
                         };
+                        // Columns left of the diagonal are not in the
+                        // upper half's map: skipped.
                         for q in parents {
                             let pos = position[p.parents[q] as usize];
                             if pos != u32::MAX {
@@ -788,7 +964,7 @@ fn galerkin(
                                 }
                             }
                         }
-                    }
+                    });
                 }
                 for &c in cols {
                     position[c as usize] = u32::MAX;
@@ -797,13 +973,13 @@ fn galerkin(
             },
         )
         .collect();
-    let mut ac = pattern.clone();
-    for (ca, row) in rows.into_iter().enumerate() {
-        let lo = ac.row_offsets[ca] as usize;
-        ac.blocks[lo..lo + row.len()].copy_from_slice(&row);
-    }
+    let blocks: Vec<Mat3> = rows.into_iter().flatten().collect();
+    let mut ac = HalfMatrix {
+        pattern: pattern.clone(),
+        blocks: HalfMatrix::single(&blocks),
+    };
     // Decouple coarse dofs that no free fine dof reaches.
-    let ac = decoupled(&ac, &cmask);
+    ac.decouple(&cmask);
     (ac, cmask)
 }
 
@@ -860,7 +1036,7 @@ fn chebyshev(
     let sigma = theta / delta;
     let mut rho_k = 1.0 / sigma;
     let residual = |x: &[Vec3], r: &mut [Vec3]| {
-        mul_smoothing(&level.a, &level.smoothing, x, r);
+        level.a.mul(x, r);
         r.par_iter_mut()
             .zip(b.par_iter())
             .zip(level.inv_diag.par_iter())
@@ -1235,7 +1411,9 @@ mod tests {
     use super::*;
 
     /// The smoothing product gives the same bits on the AVX2 path and the
-    /// portable one, and agrees with the `f64` product to single precision.
+    /// portable one and for any thread count, and agrees with the `f64`
+    /// product of the symmetric part to single precision; the full matrix
+    /// rebuilt from the half is that symmetric part.
     #[test]
     fn smoothing_product_is_the_same_on_every_path() {
         let l = hexmesh::Lattice::block([5, 4, 3], 0.1, [0.0; 3]).unwrap();
@@ -1253,16 +1431,36 @@ mod tests {
         let x: Vec<Vec3> = (0..a.num_rows())
             .map(|_| Vec3::new(noise(), noise(), noise()))
             .collect();
-        let level = level_of(a.clone(), vec![[true; 3]; a.num_rows()]);
+        let half = HalfMatrix::symmetric_part_of(&a);
+        let mut sym = a.clone();
+        for i in 0..a.num_rows() {
+            for k in a.row_offsets[i] as usize..a.row_offsets[i + 1] as usize {
+                let j = a.col_indices[k] as usize;
+                sym.blocks[k] = (a.blocks[k] + a.blocks[a.find(j, i).unwrap()].transpose()) * 0.5;
+            }
+        }
+        let full = half.to_full();
+        assert_eq!(full.row_offsets, a.row_offsets);
+        assert_eq!(full.col_indices, a.col_indices);
+        for (f, e) in full.blocks.iter().zip(&sym.blocks) {
+            assert!((f - e).amax() <= 1e-7, "{f} vs {e}");
+        }
         let mut fast = vec![Vec3::zeros(); x.len()];
-        mul_smoothing(&level.a, &level.smoothing, &x, &mut fast);
+        half.mul(&x, &mut fast);
         let mut portable = vec![Vec3::zeros(); x.len()];
-        mul_smoothing_rows(&level.a, &level.smoothing, &x, &mut portable, 0);
+        half_mul_rows(&half, &x, &mut portable, 0);
+        let mut threaded = vec![Vec3::zeros(); x.len()];
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(3)
+            .build()
+            .unwrap()
+            .install(|| half.mul(&x, &mut threaded));
         let mut exact = vec![Vec3::zeros(); x.len()];
-        mul(&a, &x, &mut exact);
-        for ((f, p), e) in fast.iter().zip(&portable).zip(&exact) {
+        mul(&sym, &x, &mut exact);
+        for (((f, p), t), e) in fast.iter().zip(&portable).zip(&threaded).zip(&exact) {
             for d in 0..3 {
                 assert_eq!(f[d].to_bits(), p[d].to_bits());
+                assert_eq!(f[d].to_bits(), t[d].to_bits());
                 assert!((f[d] - e[d]).abs() <= 1e-6 * 27.0 * 3.0, "{f} vs {e}");
             }
         }

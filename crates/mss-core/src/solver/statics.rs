@@ -214,6 +214,11 @@ impl NonlinearSystem for StaticSystem<'_> {
         self.problem.model().tangent_mul(x, v, out);
     }
 
+    fn symmetric_stiffness(&mut self, x: &[Vec3]) -> Option<crate::sparse::SymmetricUpper> {
+        self.has_jacobian_mul()
+            .then(|| self.problem.model().symmetric_stiffness_upper(x))
+    }
+
     fn jacobian(&mut self, x: &[Vec3]) -> BlockCsr {
         let p = self.problem;
         let mut j = p.model().tangent(x);
