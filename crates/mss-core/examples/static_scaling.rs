@@ -7,6 +7,12 @@
 //! Prints CPU time (user + system, of this process), Newton and Krylov
 //! iterations, peak memory and the tip deflection, one line per run. Run one
 //! size per process so that the peak memory is that size's.
+//!
+//! `cargo run --release -p mss-core --example static_scaling -- sweep [MODEL...]`
+//! runs 32x8x8, 64x16x16 and 128x32x32 for each model (default: all four)
+//! in child processes, the two smaller sizes three times (the least CPU time
+//! counts: they are short and the machine is noisy), and prints a table
+//! with the cost exponent `ln(t / t0) / ln(nodes / nodes0)` against 32x8x8.
 
 use std::time::Instant;
 
@@ -15,9 +21,75 @@ use common::{cpu_seconds, peak_mib};
 
 use mss_core::solver::{LinearSolverKind, State, StaticOptions, solve_static};
 
+/// The CPU seconds and the whole line of one child run of `n` and `model`.
+fn child_run(n: u32, model: &str) -> (f64, String) {
+    let exe = std::env::current_exe().expect("the example's own path");
+    let out = std::process::Command::new(exe)
+        .args([n.to_string(), model.to_string()])
+        .output()
+        .expect("the example runs itself");
+    let text =
+        String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
+    let line = text
+        .lines()
+        .find(|l| l.contains(" cpu "))
+        .unwrap_or("no result")
+        .to_string();
+    let cpu = line
+        .split(" cpu ")
+        .nth(1)
+        .and_then(|r| r.split(' ').next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(f64::NAN);
+    (cpu, line)
+}
+
+fn sweep(models: Vec<String>) {
+    let models = if models.is_empty() {
+        ["volumetric-barrier+hg", "paper", "springs", "volumetric"]
+            .map(String::from)
+            .to_vec()
+    } else {
+        models
+    };
+    println!("| model | 32x8x8 s | 64x16x16 s | 128x32x32 s | exponent 8->16 | 8->32 |");
+    println!("|---|---|---|---|---|---|");
+    for model in &models {
+        let nodes = |n: u32| f64::from((4 * n + 1) * (n + 1) * (n + 1));
+        let times: Vec<f64> = [8u32, 16, 32]
+            .iter()
+            .map(|&n| {
+                let repeats = if n < 32 { 3 } else { 1 };
+                (0..repeats)
+                    .map(|_| {
+                        let (cpu, line) = child_run(n, model);
+                        eprintln!("{line}");
+                        cpu
+                    })
+                    .fold(f64::INFINITY, f64::min)
+            })
+            .collect();
+        let exponent =
+            |k: usize| (times[k] / times[0]).ln() / (nodes([8, 16, 32][k]) / nodes(8)).ln();
+        println!(
+            "| {model} | {:.2} | {:.2} | {:.2} | {:.3} | {:.3} |",
+            times[0],
+            times[1],
+            times[2],
+            exponent(1),
+            exponent(2)
+        );
+    }
+}
+
 fn main() {
     let mut args = std::env::args().skip(1);
-    let n: u32 = args.next().and_then(|s| s.parse().ok()).unwrap_or(8);
+    let first = args.next();
+    if first.as_deref() == Some("sweep") {
+        sweep(args.collect());
+        return;
+    }
+    let n: u32 = first.and_then(|s| s.parse().ok()).unwrap_or(8);
     let name = args.next().unwrap_or_else(|| "paper".into());
     let kind = match args.next().as_deref() {
         Some("direct") => LinearSolverKind::Direct,
@@ -56,7 +128,7 @@ fn main() {
         tip_nodes.iter().map(|&i| u[i].z).sum::<f64>() / tip_nodes.len() as f64
     };
     println!(
-        "{name} {}x{n}x{n} ({nodes} nodes, {kind:?}): cpu {cpu:.2} s, wall {wall:.2} s, {} Newton iterations, {} linear solves ({} iterative, {} Krylov iterations), peak {:.0} MiB, tip {tip:.6e} m",
+        "{name} {}x{n}x{n} ({nodes} nodes, {kind:?}): cpu {cpu:.3} s, wall {wall:.2} s, {} Newton iterations, {} linear solves ({} iterative, {} Krylov iterations), peak {:.0} MiB, tip {tip:.6e} m",
         4 * n,
         info.newton_iterations,
         info.linear.solves,
