@@ -1315,8 +1315,34 @@ pub(crate) enum Definiteness {
 /// preconditioner's stiffness along some motion.
 pub(crate) const DEFINITENESS_MARGIN: f64 = 1e-6;
 
-/// Lanczos steps of [`definiteness`] (fewest before deciding, most).
-const DEFINITENESS_STEPS: (usize, usize) = (15, 200);
+/// Lanczos steps of [`definiteness`]: fewest before deciding in any case,
+/// fewest that always suffice (see [`steps_to_reveal`]), most.
+const DEFINITENESS_STEPS: (usize, usize, usize) = (6, 15, 200);
+
+/// Lanczos steps after which an eigenvalue at zero below a spectrum from
+/// `bottom` to `top` would have pulled the smallest Ritz value to half of
+/// `bottom`, for a start vector with a component of about `1 / sqrt(dofs)`
+/// along every eigenvector: the Kaniel-Paige bound
+/// `theta - lambda_1 <= (lambda_n - lambda_1) tan^2(phi) / T_{k-1}(1 + 2 gamma)^2`,
+/// `gamma = (lambda_2 - lambda_1) / (lambda_n - lambda_2)`, with `lambda_1 = 0`
+/// and `tan^2(phi) = dofs`. A well-separated bottom (the paper model's
+/// 0.64 of the rest stiffness on the cantilever) needs 6 to 7 steps; a
+/// spectrum reaching down to 0.19 (the default model's) 12 to 14 from
+/// 50,000 to 3 million dofs. Clamped to [`DEFINITENESS_STEPS`]' first two.
+fn steps_to_reveal(dofs: usize, bottom: f64, top: f64) -> usize {
+    let (fewest, enough, _) = DEFINITENESS_STEPS;
+    if !(bottom > 0.0 && top > bottom) {
+        return enough;
+    }
+    let growth = (2.0 * dofs as f64 * top / bottom).sqrt().max(1.0).acosh();
+    let rate = (1.0 + 2.0 * bottom / (top - bottom)).acosh();
+    let steps = 1.0 + (growth / rate).ceil();
+    if steps.is_finite() {
+        (steps as usize).clamp(fewest, enough)
+    } else {
+        enough
+    }
+}
 
 /// Whether the symmetric `a`, given by `product` (`out = a v` for `v` zero
 /// on the held dofs, zero there too; same free dofs as `mg`'s operator), is
@@ -1351,7 +1377,8 @@ pub(crate) fn definiteness(
     let mut z = vec![Vec3::zeros(); n];
     let (mut alpha, mut beta) = (Vec::<f64>::new(), Vec::<f64>::new());
     let mut history: Vec<f64> = Vec::new();
-    for step in 0..DEFINITENESS_STEPS.1 {
+    let dofs = mask.iter().flatten().filter(|m| **m).count();
+    for step in 0..DEFINITENESS_STEPS.2 {
         product(&w, &mut u);
         masked(&mut u);
         let al = dot(&w, &u);
@@ -1383,8 +1410,11 @@ pub(crate) fn definiteness(
         // already seen to within a few percent, far above the margin.
         let settled =
             history.len() > 5 && (history[history.len() - 6] - theta).abs() <= 5e-2 * theta.abs();
-        let decided =
-            b == 0.0 || (step + 1 >= DEFINITENESS_STEPS.0 && settled && residual <= 0.1 * theta);
+        let revealed = step + 1 >= DEFINITENESS_STEPS.0 && {
+            let (top, _) = crate::krylov::extreme_ritz(&alpha, &beta, false);
+            step + 1 >= steps_to_reveal(dofs, theta, top)
+        };
+        let decided = b == 0.0 || (revealed && settled && residual <= 0.1 * theta);
         if decided {
             return if theta > DEFINITENESS_MARGIN {
                 (Definiteness::Positive, theta)
@@ -1463,6 +1493,62 @@ mod tests {
                 assert_eq!(f[d].to_bits(), t[d].to_bits());
                 assert!((f[d] - e[d]).abs() <= 1e-6 * 27.0 * 3.0, "{f} vs {e}");
             }
+        }
+    }
+
+    /// The Lanczos test stops earlier the better the bottom of the spectrum
+    /// is separated from zero, needs more steps for more dofs, and never
+    /// more than the fixed count it used to take.
+    #[test]
+    fn steps_to_reveal_follow_the_lanczos_bound() {
+        let (fewest, enough, _) = DEFINITENESS_STEPS;
+        let paper = steps_to_reveal(421_443, 0.64, 1.5);
+        let default = steps_to_reveal(421_443, 0.19, 1.5);
+        assert!(paper < default, "{paper} vs {default}");
+        assert!(steps_to_reveal(50_000, 0.19, 1.5) <= default);
+        assert!(default <= steps_to_reveal(3_000_000, 0.19, 1.5));
+        for (dofs, bottom) in [(10, 0.9), (1 << 30, 1e-3), (1000, 0.0), (1000, -1.0)] {
+            let k = steps_to_reveal(dofs, bottom, 1.5);
+            assert!((fewest..=enough).contains(&k), "{dofs} {bottom}: {k}");
+        }
+        assert_eq!(steps_to_reveal(1000, 0.0, 1.5), enough);
+    }
+
+    /// A negative eigenvalue localized at one node (a component softened
+    /// below zero), which the start vector hardly contains, is found before
+    /// the test stops; the unsoftened matrix is positive definite.
+    #[test]
+    fn definiteness_finds_a_localized_negative_direction() {
+        let l = hexmesh::Lattice::block([16, 8, 8], 0.01, [0.0; 3]).unwrap();
+        let model = crate::Model::new(
+            &l,
+            crate::Material::new(1e4, 0.3, 1000.0).unwrap(),
+            &crate::model::HourglassControl::new(Box::new(crate::model::VolumetricBarrier), 1.0)
+                .unwrap(),
+        )
+        .unwrap();
+        let rest = model.rest_positions();
+        let free: Vec<bool> = rest.iter().flat_map(|p| [p.x > 1e-9; 3]).collect();
+        let shape = HierarchyShape::new(l.cells(), &model.grid_coords(), &free, false);
+        let k0 = model.rest_stiffness();
+        let mg = Multigrid::new(Operator::from_owned(k0.clone(), &free), &shape, false).unwrap();
+        let middle = rest
+            .iter()
+            .position(|p| (p - Vec3::new(0.1, 0.04, 0.04)).norm() < 1e-9)
+            .unwrap();
+        for softening in [0.0, 1.0005, 1.002, 1.01, 1.05, 1.5] {
+            let mut k = k0.clone();
+            let d = k.find(middle, middle).unwrap();
+            k.blocks[d][(1, 1)] *= 1.0 - softening;
+            let op = Operator::from_owned(k, &free);
+            let product = |v: &[Vec3], out: &mut [Vec3]| mul(op.matrix(), v, out);
+            let (verdict, theta) = definiteness(&product, &mg);
+            let expected = if softening > 1.0 {
+                Definiteness::NotPositive
+            } else {
+                Definiteness::Positive
+            };
+            assert_eq!(verdict, expected, "softening {softening}: theta {theta:e}");
         }
     }
 
