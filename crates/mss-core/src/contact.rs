@@ -634,7 +634,7 @@ pub enum ContactPoints {
 /// The obstacles of a problem and the points that can touch them.
 #[derive(Debug)]
 pub struct Contact {
-    obstacles: Vec<(Box<dyn Obstacle>, ContactSettings)>,
+    obstacles: Vec<(Placed, ContactSettings)>,
     points: Vec<Point>,
     /// Contact's part of `omega_max^2` per unit of `stiffness` (1/(s^2 N/m)):
     /// the largest Gershgorin row sum of the mapped stiffness over a node's mass.
@@ -748,7 +748,10 @@ impl Contact {
         let (node_points, surface_points) =
             (0..points.len() as u32).partition(|&i| points[i as usize].len == 1);
         Self {
-            obstacles,
+            obstacles: obstacles
+                .into_iter()
+                .map(|(o, s)| (Placed::new(o), s))
+                .collect(),
             points,
             omega_sq_per_stiffness,
             surface_omega_sq_per_stiffness,
@@ -917,9 +920,21 @@ impl Contact {
         anchors
     }
 
-    /// The obstacles.
+    /// The obstacles (where a static solve's insertion has put them, see
+    /// [`Contact::shift_obstacles`]).
     pub fn obstacles(&self) -> impl Iterator<Item = (&dyn Obstacle, &ContactSettings)> {
-        self.obstacles.iter().map(|(o, s)| (&**o, s))
+        self.obstacles.iter().map(|(o, s)| (o as &dyn Obstacle, s))
+    }
+
+    /// Translates obstacle `k` by `shifts[k]` (m) from wherever its path puts
+    /// it, for every later query until the next call; `None` puts them all
+    /// back. A static solve whose obstacles start deep in the body inserts
+    /// them this way, from outside along straight lines, as a slow press
+    /// would. Not for use while another solve runs on this contact.
+    pub fn shift_obstacles(&self, shifts: Option<&[Vec3]>) {
+        for (k, (o, _)) in self.obstacles.iter().enumerate() {
+            o.set_shift(shifts.map_or(Vec3::zeros(), |s| s[k]));
+        }
     }
 
     /// Number of points that can touch.
@@ -1289,6 +1304,52 @@ impl Contact {
             }
         }
         e + self.bodies.as_ref().map_or(0.0, |b| b.energy(x))
+    }
+}
+
+/// An obstacle of a [`Contact`] with a translation on top of its own motion
+/// (zero except while a static solve inserts it), held as bits in atomics
+/// so that the contact can be shared between threads and the queries stay
+/// three plain loads.
+#[derive(Debug)]
+struct Placed {
+    inner: Box<dyn Obstacle>,
+    shift: [std::sync::atomic::AtomicU64; 3],
+}
+
+impl Placed {
+    fn new(inner: Box<dyn Obstacle>) -> Self {
+        Self {
+            inner,
+            shift: std::array::from_fn(|_| std::sync::atomic::AtomicU64::new(0.0f64.to_bits())),
+        }
+    }
+
+    fn set_shift(&self, v: Vec3) {
+        for (a, c) in self.shift.iter().zip(v.iter()) {
+            a.store(c.to_bits(), std::sync::atomic::Ordering::Relaxed);
+        }
+    }
+
+    fn shift(&self) -> Vec3 {
+        Vec3::from_fn(|d, _| {
+            f64::from_bits(self.shift[d].load(std::sync::atomic::Ordering::Relaxed))
+        })
+    }
+}
+
+impl Obstacle for Placed {
+    fn name(&self) -> String {
+        self.inner.name()
+    }
+    fn penetration(&self, t: f64, p: Vec3) -> Option<Penetration> {
+        self.inner.penetration(t, p - self.shift())
+    }
+    fn velocity(&self, t: f64) -> Vec3 {
+        self.inner.velocity(t)
+    }
+    fn offset(&self, t: f64) -> Vec3 {
+        self.inner.offset(t) + self.shift()
     }
 }
 

@@ -98,6 +98,97 @@ fn deepest_overlap(contact: &crate::contact::Contact, t: f64, x: &[Vec3]) -> f64
         .fold(0.0, f64::max)
 }
 
+/// Where each obstacle of `contact` (at time `t`) leaves the body `x` with
+/// the least travel: the shortest translation along the three axes (either
+/// way) and against the mean push on the points inside it that leaves no
+/// point of `x` inside it (to a thousandth of `h`); zero for an obstacle at
+/// most [`FOLLOW_DEPTH`] cells in, or one that no such translation frees
+/// (a ground under the whole body frees along its normal).
+fn exit_shifts(contact: &crate::contact::Contact, t: f64, x: &[Vec3], h: f64) -> Vec<Vec3> {
+    use rayon::prelude::*;
+    let points = contact.point_positions(x);
+    let size = {
+        let (mut lo, mut hi) = (Vec3::repeat(f64::INFINITY), Vec3::repeat(f64::NEG_INFINITY));
+        for p in &points {
+            lo = lo.inf(p);
+            hi = hi.sup(p);
+        }
+        (hi - lo).norm()
+    };
+    contact
+        .obstacles()
+        .map(|(o, _)| {
+            // The deepest point inside the obstacle moved by `shift` (order-free
+            // maximum: the same for any thread count).
+            let depth = |shift: Vec3| {
+                points
+                    .par_iter()
+                    .filter_map(|&p| o.penetration(t, p - shift))
+                    .map(|pen| pen.depth)
+                    .reduce(|| 0.0, f64::max)
+            };
+            let deepest = depth(Vec3::zeros());
+            if deepest <= FOLLOW_DEPTH * h {
+                return Vec3::zeros();
+            }
+            // The points are pushed out along the normals: the obstacle
+            // leaves the other way.
+            let push: Vec3 = points
+                .iter()
+                .filter_map(|&p| o.penetration(t, p))
+                .map(|pen| pen.normal * pen.depth)
+                .sum();
+            let mut directions: Vec<Vec3> = (0..3)
+                .flat_map(|k| {
+                    let e = Vec3::from_fn(|d, _| if d == k { 1.0 } else { 0.0 });
+                    [e, -e]
+                })
+                .collect();
+            if push.norm() > 0.0 {
+                directions.push(-push.normalize());
+            }
+            directions
+                .into_iter()
+                .filter_map(|u| {
+                    // Double until free (within a few body sizes), then halve
+                    // the bracket.
+                    let mut hi = deepest;
+                    while depth(u * hi) > 0.0 {
+                        hi *= 2.0;
+                        if hi > 4.0 * size + 4.0 * deepest {
+                            return None;
+                        }
+                    }
+                    let mut lo = 0.0;
+                    while hi - lo > 1e-3 * h {
+                        let mid = 0.5 * (lo + hi);
+                        if depth(u * mid) > 0.0 {
+                            lo = mid;
+                        } else {
+                            hi = mid;
+                        }
+                    }
+                    Some(u * hi)
+                })
+                .min_by(|a, b| a.norm().total_cmp(&b.norm()))
+                .unwrap_or_else(Vec3::zeros)
+        })
+        .collect()
+}
+
+/// Puts the obstacles of a contact back where their paths put them when
+/// dropped: a static solve that inserted them leaves no shift behind,
+/// however it ends.
+struct ObstaclesPutBack<'a>(Option<&'a crate::contact::Contact>);
+
+impl Drop for ObstaclesPutBack<'_> {
+    fn drop(&mut self) {
+        if let Some(c) = self.0 {
+            c.shift_obstacles(None);
+        }
+    }
+}
+
 /// The length of the longest obstacle path of `contact` from `t0` to `t1`
 /// (m), sampled at 256 times.
 fn obstacle_travel(contact: &crate::contact::Contact, t0: f64, t1: f64) -> f64 {
@@ -334,6 +425,40 @@ fn solve_static_here(
         }
         _ => None,
     };
+    // Obstacles that end deep in the body with no path to follow there
+    // (placed there, or barely moved) are inserted from outside, each along
+    // the straight line by which it leaves the body with the least travel,
+    // as a slow press from there would: placed at once, they pushed the
+    // nodes near their edges out through their side faces.
+    let insertion: Option<Vec<Vec3>> = match (problem.contact(), follow_from) {
+        (Some(c), None)
+            if !opts.small_strain
+                && deepest_overlap(c, t_end, &state.x) > FOLLOW_DEPTH * model.h() =>
+        {
+            let shifts = exit_shifts(c, t_end, &state.x, model.h());
+            shifts
+                .iter()
+                .any(|s| s.norm() > OBSTACLE_INCREMENT * model.h())
+                .then_some(shifts)
+        }
+        _ => None,
+    };
+    let _put_back = ObstaclesPutBack(insertion.as_ref().and(problem.contact()));
+    let insertion_travel = insertion
+        .as_ref()
+        .map_or(0.0, |s| s.iter().map(|v| v.norm()).fold(0.0, f64::max));
+    let insert_to = |lambda: f64| {
+        if let (Some(c), Some(shifts)) = (problem.contact(), &insertion) {
+            let at: Vec<Vec3> = shifts.iter().map(|s| s * (1.0 - lambda)).collect();
+            c.shift_obstacles(Some(&at));
+        }
+    };
+    if let Some(shifts) = &insertion {
+        log::info!(
+            "static: obstacles start deep in the body; inserted from outside along {shifts:?}"
+        );
+    }
+    insert_to(0.0);
     let contact_time = |lambda: f64| match follow_from {
         Some((t0, _)) if lambda < 1.0 => t0 + lambda * (t_end - t0),
         _ => t_end,
@@ -350,11 +475,17 @@ fn solve_static_here(
                 dl *= 0.5;
             }
         }
+        while dl > 1e-9 && insertion_travel * dl > step_limit {
+            dl *= 0.5;
+        }
         dl
     };
-    let min_increment = follow_from.map_or(opts.min_load_increment, |(_, travel)| {
+    let travel = follow_from.map_or(insertion_travel, |(_, travel)| travel);
+    let min_increment = if travel > 0.0 {
         opts.min_load_increment.min(step_limit / travel / 64.0)
-    });
+    } else {
+        opts.min_load_increment
+    };
     let anchors = match problem.contact() {
         Some(c) => c.static_anchors(contact_time(0.0), &state.x),
         None => Vec::new(),
@@ -424,6 +555,7 @@ fn solve_static_here(
         }
         sys.lambda = lt;
         sys.t_contact = contact_time(lt);
+        insert_to(lt);
         if load_steps == 0 && trial == x_init {
             // The first tangent is the one at the start: its hierarchy is
             // the stability test's preconditioner.
@@ -450,7 +582,10 @@ fn solve_static_here(
                 previous = Some((lambda, std::mem::replace(&mut x, trial)));
                 lambda = lt;
                 dl = (2.0 * dl).min(1.0);
-                if let (Some(c), Some(_)) = (problem.contact(), follow_from) {
+                if let (Some(c), true) = (
+                    problem.contact(),
+                    follow_from.is_some() || insertion.is_some(),
+                ) {
                     // The contacts made on the way stick where they were
                     // made; sliding ones keep their kinetic offset.
                     c.update_anchors(sys.t_contact, &x, &sys.still, &mut sys.anchors);

@@ -607,16 +607,13 @@ fn deep_press(obstacle: impl Fn(Path) -> Box<dyn Obstacle>, press: f64) -> Probl
     )
 }
 
-#[test]
-fn a_static_solve_follows_an_obstacle_pressed_deep_and_keeps_its_friction() {
-    // A box 1.2 cells and a sphere 2 cells into the block: solved statically
-    // at the end of the press, each must give what the slow press gives in
-    // time (implicit, at rest), friction included. Placed there at once, the
-    // box pushed the nodes near its edges out through its side faces (a fifth
-    // of the force), and the state lost its friction anchors (the sphere's
-    // force 25 % low).
-    type Placed = Box<dyn Fn(Path) -> Box<dyn Obstacle>>;
-    let cases: [(&str, Placed, f64); 2] = [
+/// An obstacle of [`deep_press`] given its path.
+type DeepObstacle = Box<dyn Fn(Path) -> Box<dyn Obstacle>>;
+
+/// A box pressed 1.2 cells and a sphere 2 cells into [`deep_press`]'s block,
+/// with the depth of each press.
+fn deep_obstacles() -> [(&'static str, DeepObstacle, f64); 2] {
+    [
         (
             "box",
             Box::new(|path| {
@@ -633,7 +630,69 @@ fn a_static_solve_follows_an_obstacle_pressed_deep_and_keeps_its_friction() {
             }),
             0.025,
         ),
-    ];
+    ]
+}
+
+#[test]
+fn a_static_solve_inserts_an_obstacle_placed_deep_without_a_path() {
+    // The box and the sphere of the test below, placed where its presses
+    // end, with no path: the static solve inserts each from outside along
+    // its shortest way out (up), and gives what following the press gives
+    // (which the test below checks against the press in time). Placed at
+    // once, the box gave 8.2 N for 57.8 N.
+    let cases = deep_obstacles();
+    for (name, obstacle, press) in cases {
+        let push = |p: &Problem, s: &State| p.contact_forces(s).iter().map(|f| f.z).sum::<f64>();
+        let opts = StaticOptions {
+            obstacles_from: Some(0.0),
+            accept_unstable: true,
+            ..StaticOptions::default()
+        };
+        let followed = deep_press(&obstacle, press);
+        let mut reference = State::at_rest(followed.model());
+        reference.time = 0.8;
+        solve_static(&followed, &mut reference, &opts).unwrap();
+        // The same obstacle held where the press ends.
+        let at_end = Path::new(vec![(0.0, Vec3::new(0.0, 0.0, -press))]).unwrap();
+        let placed = deep_press(|_| obstacle(at_end.clone()), press);
+        for obstacles_from in [None, Some(0.0)] {
+            let mut st = State::at_rest(placed.model());
+            st.time = 0.8;
+            let info = solve_static(
+                &placed,
+                &mut st,
+                &StaticOptions {
+                    obstacles_from,
+                    ..opts
+                },
+            )
+            .unwrap();
+            assert!(info.load_steps >= 5, "{name}: inserted in increments");
+            let (expected, got) = (push(&followed, &reference), push(&placed, &st));
+            assert!(
+                (got - expected).abs() < 0.02 * expected.abs(),
+                "{name}: inserted {got} N vs followed {expected} N"
+            );
+            assert!(
+                st.contact.iter().any(Option::is_some),
+                "{name}: anchors kept"
+            );
+            // The obstacle is back where its path puts it.
+            let (o, _) = placed.contact().unwrap().obstacles().next().unwrap();
+            assert_eq!(o.offset(0.8), Vec3::new(0.0, 0.0, -press), "{name}");
+        }
+    }
+}
+
+#[test]
+fn a_static_solve_follows_an_obstacle_pressed_deep_and_keeps_its_friction() {
+    // A box 1.2 cells and a sphere 2 cells into the block: solved statically
+    // at the end of the press, each must give what the slow press gives in
+    // time (implicit, at rest), friction included. Placed there at once, the
+    // box pushed the nodes near its edges out through its side faces (a fifth
+    // of the force), and the state lost its friction anchors (the sphere's
+    // force 25 % low).
+    let cases = deep_obstacles();
     for (name, obstacle, press) in cases {
         let p = deep_press(obstacle, press);
         let push = |s: &State| p.contact_forces(s).iter().map(|f| f.z).sum::<f64>();
