@@ -761,7 +761,8 @@ pub struct SymmetricUpper {
 
 impl SymmetricUpper {
     /// The zero matrix on the upper half of `full`'s pattern (which must hold
-    /// the diagonal and be structurally symmetric).
+    /// the diagonal; a block whose mirror it lacks has its place above the
+    /// diagonal all the same).
     pub(crate) fn upper_pattern_of(full_rows: &[u32], full_cols: &[u32]) -> Self {
         let mut m = Self::upper_pattern_only(full_rows, full_cols);
         m.upper.blocks = vec![Mat3::zeros(); m.upper.col_indices.len()];
@@ -773,13 +774,44 @@ impl SymmetricUpper {
     /// are kept elsewhere (in single precision, by the multigrid's levels).
     pub(crate) fn upper_pattern_only(full_rows: &[u32], full_cols: &[u32]) -> Self {
         let n = full_rows.len() - 1;
+        // Each block `(i, j)` as the upper block `(min, max)`: a block whose
+        // mirror the pattern lacks (contact can add one side) is kept too.
+        let upper_of = |i: usize, j: u32| {
+            if j as usize >= i {
+                (i, j)
+            } else {
+                (j as usize, i as u32)
+            }
+        };
+        let rows_of = |i: usize| &full_cols[full_rows[i] as usize..full_rows[i + 1] as usize];
+        let mut starts = vec![0usize; n + 1];
+        for i in 0..n {
+            for &j in rows_of(i) {
+                starts[upper_of(i, j).0 + 1] += 1;
+            }
+        }
+        for r in 0..n {
+            starts[r + 1] += starts[r];
+        }
+        let mut gathered = vec![0u32; starts[n]];
+        let mut next = starts.clone();
+        for i in 0..n {
+            for &j in rows_of(i) {
+                let (r, c) = upper_of(i, j);
+                gathered[next[r]] = c;
+                next[r] += 1;
+            }
+        }
         let mut row_offsets = Vec::with_capacity(n + 1);
         let mut col_indices = Vec::with_capacity(full_cols.len() / 2 + n);
         row_offsets.push(0u32);
         let mut column_counts = vec![0u32; n + 1];
         for i in 0..n {
-            for &j in &full_cols[full_rows[i] as usize..full_rows[i + 1] as usize] {
-                if j as usize >= i {
+            let row = &mut gathered[starts[i]..starts[i + 1]];
+            row.sort_unstable();
+            let first = col_indices.len();
+            for &j in row.iter() {
+                if col_indices.len() == first || col_indices.last() != Some(&j) {
                     col_indices.push(j);
                     if j as usize > i {
                         column_counts[j as usize + 1] += 1;
@@ -788,6 +820,7 @@ impl SymmetricUpper {
             }
             row_offsets.push(col_indices.len() as u32);
         }
+        drop(gathered);
         for j in 0..n {
             column_counts[j + 1] += column_counts[j];
         }

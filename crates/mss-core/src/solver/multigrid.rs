@@ -151,8 +151,9 @@ impl HalfMatrix {
         Self { pattern: m, blocks }
     }
 
-    /// The symmetric part `(A + A^T) / 2` of `a` (structurally symmetric,
-    /// with its diagonal) in single precision.
+    /// The symmetric part `(A + A^T) / 2` of `a` (with its diagonal; a
+    /// block whose mirror the pattern lacks counts with a zero mirror) in
+    /// single precision.
     fn symmetric_part_of(a: &BlockCsr) -> Self {
         let pattern = SymmetricUpper::upper_pattern_only(&a.row_offsets, &a.col_indices);
         let upper = &pattern.upper;
@@ -1492,6 +1493,28 @@ mod tests {
                 assert_eq!(f[d].to_bits(), p[d].to_bits());
                 assert_eq!(f[d].to_bits(), t[d].to_bits());
                 assert!((f[d] - e[d]).abs() <= 1e-6 * 27.0 * 3.0, "{f} vs {e}");
+            }
+        }
+    }
+
+    /// A pattern that lacks the mirror of some blocks (contact may add one
+    /// side only) loses nothing: the half holds `(A + A^T) / 2` whole.
+    #[test]
+    fn the_symmetric_half_of_a_structurally_asymmetric_matrix_is_whole() {
+        let m = |v: f64| Mat3::from_fn(|e, d| v + (3 * e + d) as f64);
+        // Blocks (0, 2) and (2, 1) have no mirror.
+        let a = BlockCsr {
+            row_offsets: vec![0, 2, 3, 5],
+            col_indices: vec![0, 2, 1, 1, 2],
+            blocks: vec![m(10.0), m(1.0), m(20.0), m(-2.0), m(30.0)],
+        };
+        let full = HalfMatrix::symmetric_part_of(&a).to_full();
+        let dense =
+            |b: &BlockCsr, i: usize, j: usize| b.find(i, j).map_or(Mat3::zeros(), |k| b.blocks[k]);
+        for i in 0..3 {
+            for j in 0..3 {
+                let expected = (dense(&a, i, j) + dense(&a, j, i).transpose()) * 0.5;
+                assert!((dense(&full, i, j) - expected).amax() <= 1e-5, "({i}, {j})");
             }
         }
     }
