@@ -797,7 +797,8 @@ fn linear_kind(name: &str) -> PyResult<LinearSolverKind> {
 /// `obstacles_from`: the time at which `state` was in equilibrium with the
 /// obstacles (0.0 for a body at rest): they are then moved along their
 /// paths from there, as a slow press would (default: where they are at
-/// `state.time`, at once).
+/// `state.time`; one that starts deep in the body is inserted there from
+/// outside along its shortest way out).
 #[pyfunction(name = "solve_static")]
 #[pyo3(signature = (problem, state = None, *, rtol = None, max_newton = None, linear = false, accept_unstable = false, linear_solver = "auto", obstacles_from = None))]
 #[allow(clippy::too_many_arguments)]

@@ -198,8 +198,10 @@ def test_custom_loads_by_kind_are_the_builtin_tables():
 
 def test_static_solve_follows_a_pressing_obstacle_from_rest():
     # A box moving 1.5 cm (1.2 cells) down into a held block by t = 0.2 s:
-    # followed from rest, the static solve gives the press's force; placed
-    # there at once, it pushes the nodes near its edges out sideways.
+    # followed from rest, the static solve gives the press's force; solved
+    # where it ends, the box is inserted from above (its shortest way out),
+    # the same press. (Placed at once, it pushed the nodes near its edges
+    # out sideways: a seventh of the force.)
     lattice = hexmss.Lattice.block((8, 8, 4), 0.0125)
     model = hexmss.Model(lattice, hexmss.Material(1e5, 0.3, 1000.0), "volumetric-barrier+hg")
     box = {
@@ -214,7 +216,8 @@ def test_static_solve_follows_a_pressing_obstacle_from_rest():
     at_once, _ = hexmss.solve_static(problem, start, accept_unstable=True)
     push = lambda s: problem.contact_forces(s)[:, 2].sum()
     assert info["load_steps"] >= 5
-    assert push(followed) < 4 * push(at_once) < 0
+    assert push(followed) < -50.0
+    assert abs(push(at_once) - push(followed)) < 0.02 * abs(push(followed))
     with pytest.raises(ValueError, match="obstacles_from"):
         hexmss.solve_static(problem, start, obstacles_from=float("nan"))
 

@@ -48,11 +48,12 @@ pub struct StaticOptions {
     /// ends more than [`FOLLOW_DEPTH`] cells inside the starting state, the
     /// solve moves the obstacles along their paths from that time to the
     /// state's, at most [`OBSTACLE_INCREMENT`] of a cell per load increment,
-    /// as a slow press would, friction anchors following. `None` (the default):
-    /// the obstacles are where they are at the state's time from the start,
-    /// and an obstacle that has moved deep into the body pushes its nodes
-    /// out through its nearest faces (a box pressed 1.2 cells into a block
-    /// gave a fifth of the force).
+    /// as a slow press would, friction anchors following. `None` (the default),
+    /// or a path that moved too little to follow: the obstacles are where they
+    /// are at the state's time, and one that starts more than [`FOLLOW_DEPTH`]
+    /// cells in is inserted there from outside along its shortest way out
+    /// (placed at once, a box 1.2 cells into a block pushed its nodes out
+    /// through its side faces and gave a seventh of the force).
     pub obstacles_from: Option<f64>,
     /// Solve even when the held nodes leave zero-energy modes (default
     /// false: [`SolverError::Mechanism`]). The answer is then one of many:
