@@ -1074,6 +1074,14 @@ const CHORD_MAX_CONTRACTION: f64 = 1e-2;
 /// deflections with several equilibria).
 const CHORD_KEEP_CONTRACTION: f64 = 0.05;
 
+/// What a Newton step's linear solve is given: the assembled Jacobian, or
+/// (for a solve that keeps no matrix) the symmetric part of the stiffness
+/// its preconditioner is built from.
+enum Tangent {
+    Assembled(BlockCsr),
+    SymmetricHalf(crate::sparse::SymmetricUpper),
+}
+
 fn newton_iterations(
     sys: &mut dyn NonlinearSystem,
     x: &mut [Vec3],
@@ -1140,25 +1148,22 @@ fn newton_iterations(
                 linear.release_last();
                 // A solve that keeps no matrix needs only the stiffness's
                 // symmetric part, for its preconditioner.
-                let half = if matrix_free && linear.keeps_no_matrix(free_dofs) {
-                    sys.symmetric_stiffness(x)
-                } else {
-                    None
-                };
-                let jac = match half {
-                    Some(_) => None,
-                    None => Some(sys.jacobian(x)),
+                let tangent = match (matrix_free && linear.keeps_no_matrix(free_dofs))
+                    .then(|| sys.symmetric_stiffness(x))
+                    .flatten()
+                {
+                    Some(half) => Tangent::SymmetricHalf(half),
+                    None => Tangent::Assembled(sys.jacobian(x)),
                 };
                 if it == 0 {
-                    let kmax = match (&jac, &half) {
-                        (Some(jac), _) => (0..n)
+                    let kmax = match &tangent {
+                        Tangent::Assembled(jac) => (0..n)
                             .filter_map(|i| jac.find(i, i))
                             .map(|k| jac.blocks[k].abs().max())
                             .fold(0.0, f64::max),
-                        (None, Some(half)) => half.max_diagonal_block_entry(),
-                        (None, None) => unreachable!("one of the two is made"),
+                        Tangent::SymmetricHalf(half) => half.max_diagonal_block_entry(),
                     };
-                    floor = 1e-12 * kmax * h * (free.iter().filter(|f| **f).count() as f64).sqrt();
+                    floor = 1e-12 * kmax * h * (free_dofs as f64).sqrt();
                     if norm <= target.max(floor) {
                         return Ok(0);
                     }
@@ -1169,12 +1174,11 @@ fn newton_iterations(
                 }
                 let product = jacobian_product(&*sys, &x_lin);
                 let action: Option<linear::Action<'_>> = matrix_free.then_some(&product);
-                let solved = match (jac, half) {
-                    (Some(jac), _) => linear.solve(jac, &neg_r, free, size, eta, action),
-                    (None, Some(half)) => {
+                let solved = match tangent {
+                    Tangent::Assembled(jac) => linear.solve(jac, &neg_r, free, size, eta, action),
+                    Tangent::SymmetricHalf(half) => {
                         linear.solve_without_matrix(half, &neg_r, free, size, eta, &product)
                     }
-                    (None, None) => unreachable!("one of the two is made"),
                 };
                 match solved {
                     Ok(d) => d,
