@@ -1294,22 +1294,47 @@ impl Model {
         };
         assert_eq!(x.len(), self.num_nodes(), "positions: one per node");
         assert_eq!(out.len(), self.num_nodes(), "forces: one per node");
-        // SAFETY: Vector3<f64> is a repr(C) wrapper of [[f64; 3]; 1], so the slice
-        // has the layout of a slice of [f64; 3] of the same length.
-        let xs: &[[f64; 3]] =
-            unsafe { std::slice::from_raw_parts(x.as_ptr().cast::<[f64; 3]>(), x.len()) };
+        let xs = crate::as_arrays(x);
         ws.edge_stretch.resize(self.num_nodes(), [0.0; 3]);
         self.edge_pass(xs, &mut ws.edge_stretch, batched);
         let edges = &ws.edge_stretch;
+        self.add_batches_by_layers(out, batched, |first, uniform, fc| {
+            let cells = &self.cells[first..first + fc.len() / 8];
+            if uniform {
+                batch_kernel(self.params_of(first), cells, xs, edges, fc);
+            } else {
+                for (k, f) in fc.chunks_exact_mut(8).enumerate() {
+                    let cell = first + k;
+                    let out8 = cell_kernel(self.params_of(cell), &self.cells[cell], xs, edges);
+                    for (f, o) in f.iter_mut().zip(out8) {
+                        *f = [o[0], o[1], o[2], 0.0];
+                    }
+                }
+            }
+        });
+    }
+
+    /// `out = sum over cells of their 8 corner vectors`, computed by
+    /// `batch(first, uniform, values)` for up to [`FORCE_BATCH`] consecutive
+    /// cells from `first` (8 `[x, y, z, 0]` per cell into `values`; `uniform`
+    /// when `vectorize` is asked for and the cells share one parameter set, so
+    /// that the vector kernel may run), added in the force pass's order.
+    ///
+    /// Two phases: the even layers, then the odd ones. A layer's cells touch
+    /// the node planes z and z + 1 only, so within a phase no two layers
+    /// share a node and each layer is one task, adding its cells' corner
+    /// vectors in cell order. Every node thus sums its (at most 8) cell
+    /// contributions in one fixed order, whatever the thread count.
+    fn add_batches_by_layers(
+        &self,
+        out: &mut [Vec3],
+        vectorize: bool,
+        batch: impl Fn(usize, bool, &mut [[f64; 4]]) + Sync,
+    ) {
         out.par_chunks_mut(4 * CHUNK)
             .for_each(|c| c.fill(Vec3::zeros()));
         let shared = SharedForces(out.as_mut_ptr());
         let one_material = self.cell_material.is_empty();
-        // Two phases: the even layers, then the odd ones. A layer's cells
-        // touch the node planes z and z + 1 only, so within a phase no two
-        // layers share a node and each layer is one task, adding its cells'
-        // corner forces in cell order. Every node thus sums its (at most 8)
-        // cell contributions in one fixed order, whatever the thread count.
         for parity in 0..2 {
             (parity..self.layers.count())
                 .into_par_iter()
@@ -1325,21 +1350,11 @@ impl Model {
                         // A batch of one material (every batch of most
                         // models, and most of a union's or regions') runs
                         // the vector kernel: bitwise equal to the cell path.
-                        let uniform = one_material
-                            || (first..last)
-                                .all(|c| self.cell_material[c] == self.cell_material[first]);
-                        if batched && uniform {
-                            batch_kernel(self.params_of(first), cells, xs, edges, fc);
-                        } else {
-                            for (k, f) in fc.chunks_exact_mut(8).enumerate() {
-                                let cell = first + k;
-                                let out8 =
-                                    cell_kernel(self.params_of(cell), &self.cells[cell], xs, edges);
-                                for (f, o) in f.iter_mut().zip(out8) {
-                                    *f = [o[0], o[1], o[2], 0.0];
-                                }
-                            }
-                        }
+                        let uniform = vectorize
+                            && (one_material
+                                || (first..last)
+                                    .all(|c| self.cell_material[c] == self.cell_material[first]));
+                        batch(first, uniform, fc);
                         let s = shared;
                         for (cell, f) in cells.iter().zip(fc.chunks_exact(8)) {
                             for (&v, fv) in cell.iter().zip(f) {
@@ -1592,15 +1607,25 @@ impl Model {
         assert_eq!(x.len(), self.num_nodes(), "positions: one per node");
         assert_eq!(v.len(), self.num_nodes(), "directions: one per node");
         assert_eq!(out.len(), self.num_nodes(), "products: one per node");
-        self.add_by_layers(out, |cell| {
-            let nodes = &self.cells[cell];
-            let xd: [[kernel::Dual<1>; 3]; 8] = std::array::from_fn(|a| {
-                let (p, q) = (&x[nodes[a] as usize], &v[nodes[a] as usize]);
-                std::array::from_fn(|d| kernel::Dual { v: p[d], g: [q[d]] })
-            });
-            let mut f = [[<kernel::Dual<1> as kernel::Scalar>::cst(0.0); 3]; 8];
-            kernel::cell_forces(self.params_of(cell), &xd, &mut f);
-            f.map(|fa| Vec3::new(fa[0].g[0], fa[1].g[0], fa[2].g[0]))
+        let (xs, vs) = (crate::as_arrays(x), crate::as_arrays(v));
+        self.add_batches_by_layers(out, true, |first, uniform, fc| {
+            let cells = &self.cells[first..first + fc.len() / 8];
+            if uniform {
+                kernel::tangent_action_batch(self.params_of(first), cells, xs, vs, fc);
+            } else {
+                for (k, f) in fc.chunks_exact_mut(8).enumerate() {
+                    let cell = first + k;
+                    let out8 = kernel::cell_tangent_action(
+                        self.params_of(cell),
+                        &self.cells[cell],
+                        xs,
+                        vs,
+                    );
+                    for (f, o) in f.iter_mut().zip(out8) {
+                        *f = [o[0], o[1], o[2], 0.0];
+                    }
+                }
+            }
         });
     }
 

@@ -1340,6 +1340,11 @@ pub(crate) trait Pack: Scalar {
     const WIDTH: usize;
     /// The value of cell `l`.
     fn lane(self, l: usize) -> f64;
+    /// The pack whose cell `l` holds `f(l)`.
+    fn from_fn(f: impl FnMut(usize) -> f64) -> Self;
+    /// Cell by cell, `if_greater` where `other > self`, else `otherwise`
+    /// (the choice [`Scalar::at_least`] makes, applied to other values).
+    fn pick_where_greater(self, other: Self, if_greater: Self, otherwise: Self) -> Self;
 }
 
 impl<E: Element, const L: usize> Pack for Lanes<E, L> {
@@ -1347,6 +1352,152 @@ impl<E: Element, const L: usize> Pack for Lanes<E, L> {
     #[inline(always)]
     fn lane(self, l: usize) -> f64 {
         self.0[l].to_f64()
+    }
+    #[inline(always)]
+    fn from_fn(mut f: impl FnMut(usize) -> f64) -> Self {
+        Self(std::array::from_fn(|l| E::from_f64(f(l))))
+    }
+    #[inline(always)]
+    fn pick_where_greater(self, other: Self, if_greater: Self, otherwise: Self) -> Self {
+        Self(std::array::from_fn(|l| {
+            if other.0[l] > self.0[l] {
+                if_greater.0[l]
+            } else {
+                otherwise.0[l]
+            }
+        }))
+    }
+}
+
+/// A dual number with one direction over a pack of cells' values: the force
+/// kernel evaluated on it gives the tangent's action on a vector for
+/// [`Pack::WIDTH`] cells per pass ([`tangent_action_batch`]). Every operation
+/// is [`Dual`]'s, in the same order, so each lane has the bits of the scalar
+/// dual, except the barrier's law, which uses [`fast_ln`] as the force pass
+/// does (within an ulp of libm's).
+#[derive(Clone, Copy)]
+pub(crate) struct PackDual<P> {
+    v: P,
+    g: P,
+}
+
+impl<P: Pack> Add for PackDual<P> {
+    type Output = Self;
+    #[inline(always)]
+    fn add(self, o: Self) -> Self {
+        Self {
+            v: self.v + o.v,
+            g: self.g + o.g,
+        }
+    }
+}
+impl<P: Pack> Sub for PackDual<P> {
+    type Output = Self;
+    #[inline(always)]
+    fn sub(self, o: Self) -> Self {
+        Self {
+            v: self.v - o.v,
+            g: self.g - o.g,
+        }
+    }
+}
+// The product rule: the derivative of a product is a sum.
+#[allow(clippy::suspicious_arithmetic_impl)]
+impl<P: Pack> Mul for PackDual<P> {
+    type Output = Self;
+    #[inline(always)]
+    fn mul(self, o: Self) -> Self {
+        Self {
+            v: self.v * o.v,
+            g: self.g * o.v + o.g * self.v,
+        }
+    }
+}
+impl<P: Pack> Div for PackDual<P> {
+    type Output = Self;
+    #[inline(always)]
+    fn div(self, o: Self) -> Self {
+        let v = self.v / o.v;
+        let inv = P::cst(1.0) / o.v;
+        Self {
+            v,
+            g: (self.g - v * o.g) * inv,
+        }
+    }
+}
+impl<P: Pack> Neg for PackDual<P> {
+    type Output = Self;
+    #[inline(always)]
+    fn neg(self) -> Self {
+        Self {
+            v: -self.v,
+            g: -self.g,
+        }
+    }
+}
+impl<P: Pack> AddAssign for PackDual<P> {
+    #[inline(always)]
+    fn add_assign(&mut self, o: Self) {
+        *self = *self + o;
+    }
+}
+impl<P: Pack> SubAssign for PackDual<P> {
+    #[inline(always)]
+    fn sub_assign(&mut self, o: Self) {
+        *self = *self - o;
+    }
+}
+impl<P: Pack + SplitExponent> Scalar for PackDual<P> {
+    #[inline(always)]
+    fn cst(v: f64) -> Self {
+        Self {
+            v: P::cst(v),
+            g: P::cst(0.0),
+        }
+    }
+    #[inline(always)]
+    fn scale(self, k: f64) -> Self {
+        Self {
+            v: self.v.scale(k),
+            g: self.g.scale(k),
+        }
+    }
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        let s = self.v.sqrt();
+        let d = P::cst(0.5) / s;
+        Self {
+            v: s,
+            g: self.g * d,
+        }
+    }
+    #[inline(always)]
+    fn apply(self, f: fn(f64) -> (f64, f64)) -> Self {
+        let v = P::from_fn(|l| f(self.v.lane(l)).0);
+        let d = P::from_fn(|l| f(self.v.lane(l)).1);
+        Self { v, g: self.g * d }
+    }
+    #[inline(always)]
+    fn barrier_slope(self) -> Self {
+        // phi''(J) = (1 - ln J) / J^2 above the knee; below it the straight
+        // continuation's slope, which is that expression at the knee.
+        let above = self.v.at_least(P::cst(BARRIER_KNEE));
+        let d = (P::cst(1.0) - fast_ln(above)) / (above * above);
+        Self {
+            v: fast_barrier_slope(self.v),
+            g: self.g * d,
+        }
+    }
+    #[inline(always)]
+    fn at_least(self, o: Self) -> Self {
+        Self {
+            v: self.v.at_least(o.v),
+            g: self.v.pick_where_greater(o.v, o.g, self.g),
+        }
+    }
+    #[inline(always)]
+    fn any_below(self, v: f64) -> bool {
+        self.v.any_below(v)
     }
 }
 
@@ -1558,7 +1709,7 @@ mod avx2 {
             add $add:ident, sub $sub:ident, mul $mul:ident, div $div:ident,
             xor $xor:ident, set1 $set1:ident, sqrt $sqrt:ident,
             load $load:ident, store $store:ident, max $max:ident, split $split:ident,
-            cmp $cmp:ident, movemask $movemask:ident
+            cmp $cmp:ident, movemask $movemask:ident, blend $blend:ident
         ) => {
             $(#[$doc])*
             #[derive(Clone, Copy)]
@@ -1655,6 +1806,20 @@ mod avx2 {
                 fn lane(self, l: usize) -> f64 {
                     f64::from(self.to_array()[l])
                 }
+                #[inline(always)]
+                fn from_fn(mut f: impl FnMut(usize) -> f64) -> Self {
+                    let r: [$e; $n] = std::array::from_fn(|l| f(l) as $e);
+                    // SAFETY: AVX is available (see `avx_vector`); `r`
+                    // holds one register's worth of lanes.
+                    Self(unsafe { $load(r.as_ptr()) })
+                }
+                #[inline(always)]
+                fn pick_where_greater(self, other: Self, if_greater: Self, otherwise: Self) -> Self {
+                    // SAFETY: AVX is available (see `avx_vector`).
+                    Self(unsafe {
+                        $blend(otherwise.0, if_greater.0, $cmp::<_CMP_GT_OQ>(other.0, self.0))
+                    })
+                }
             }
         };
         (@binary $name:ident, $tr:ident, $f:ident, $intr:ident) => {
@@ -1675,7 +1840,7 @@ mod avx2 {
         add _mm256_add_pd, sub _mm256_sub_pd, mul _mm256_mul_pd, div _mm256_div_pd,
         xor _mm256_xor_pd, set1 _mm256_set1_pd, sqrt _mm256_sqrt_pd,
         load _mm256_loadu_pd, store _mm256_storeu_pd, max _mm256_max_pd, split split_f64x4,
-        cmp _mm256_cmp_pd, movemask _mm256_movemask_pd
+        cmp _mm256_cmp_pd, movemask _mm256_movemask_pd, blend _mm256_blendv_pd
     );
     avx_vector!(
         /// Eight cells' values in single precision, one AVX register.
@@ -1683,7 +1848,7 @@ mod avx2 {
         add _mm256_add_ps, sub _mm256_sub_ps, mul _mm256_mul_ps, div _mm256_div_ps,
         xor _mm256_xor_ps, set1 _mm256_set1_ps, sqrt _mm256_sqrt_ps,
         load _mm256_loadu_ps, store _mm256_storeu_ps, max _mm256_max_ps, split split_f32x8,
-        cmp _mm256_cmp_ps, movemask _mm256_movemask_ps
+        cmp _mm256_cmp_ps, movemask _mm256_movemask_ps, blend _mm256_blendv_ps
     );
 
     /// [`SplitExponent::split_exponent`] of four `f64`, with the same bits
@@ -2023,6 +2188,120 @@ pub(crate) fn forces_batch(
     );
 }
 
+/// The tangent's action on `v` of one cell of parameters `p` at positions
+/// `x`: the force kernel on a scalar dual number along `v`.
+pub(crate) fn cell_tangent_action(
+    p: &CellParams,
+    cell: &[u32; 8],
+    x: &[[f64; 3]],
+    v: &[[f64; 3]],
+) -> [[f64; 3]; 8] {
+    let xd: [V3<Dual<1>>; 8] = std::array::from_fn(|a| {
+        let (p, q) = (x[cell[a] as usize], v[cell[a] as usize]);
+        std::array::from_fn(|d| Dual { v: p[d], g: [q[d]] })
+    });
+    let mut f = [[Dual::<1>::cst(0.0); 3]; 8];
+    cell_forces(p, &xd, &mut f);
+    f.map(|fa| fa.map(|c| c.g[0]))
+}
+
+/// The body of [`tangent_action_batch`]: `P::WIDTH` cells per pass, their
+/// corners and directions gathered by `gather`, the products written out by
+/// `scatter`; the cells after the last whole pack go through
+/// [`cell_tangent_action`].
+#[inline(always)]
+fn tangent_action_body<P: Pack + SplitExponent, G, S>(
+    p: &CellParams,
+    cells: &[[u32; 8]],
+    x: &[[f64; 3]],
+    v: &[[f64; 3]],
+    out: &mut [[f64; 4]],
+    gather: G,
+    scatter: S,
+) where
+    G: Fn(&[[u32; 8]], &[[f64; 3]]) -> [V3<P>; 8],
+    S: Fn(&[V3<P>; 8], &mut [[f64; 4]]),
+{
+    let width = P::WIDTH;
+    let groups = cells.len() / width;
+    for (cg, og) in cells
+        .chunks_exact(width)
+        .zip(out.chunks_exact_mut(8 * width))
+    {
+        let (xl, vl) = (gather(cg, x), gather(cg, v));
+        let xd: [V3<PackDual<P>>; 8] = std::array::from_fn(|a| {
+            std::array::from_fn(|d| PackDual {
+                v: xl[a][d],
+                g: vl[a][d],
+            })
+        });
+        let mut f = [[PackDual::<P>::cst(0.0); 3]; 8];
+        cell_forces(p, &xd, &mut f);
+        scatter(&f.map(|fa| fa.map(|c| c.g)), og);
+    }
+    for (c, o) in cells[groups * width..]
+        .iter()
+        .zip(out[8 * groups * width..].chunks_exact_mut(8))
+    {
+        for (o, f) in o.iter_mut().zip(cell_tangent_action(p, c, x, v)) {
+            *o = [f[0], f[1], f[2], 0.0];
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn tangent_action_avx2(
+    p: &CellParams,
+    cells: &[[u32; 8]],
+    x: &[[f64; 3]],
+    v: &[[f64; 3]],
+    out: &mut [[f64; 4]],
+) {
+    tangent_action_body(
+        p,
+        cells,
+        x,
+        v,
+        out,
+        // SAFETY (both closures): they run inside this AVX2 function.
+        |c: &[[u32; 8]], x: &[[f64; 3]]| unsafe { avx2::gather4(c, x, [0, 1, 2, 3, 4, 5, 6, 7]) },
+        |f: &[V3<avx2::F64x4>; 8], o: &mut [[f64; 4]]| unsafe { avx2::scatter4(f, o) },
+    );
+}
+
+/// The tangent's action on `v` (the directional derivative of the internal
+/// forces at `x`) of consecutive cells sharing the parameters `p`, several
+/// cells per SIMD pass on dual numbers ([`PackDual`]; AVX2 when the CPU has
+/// it, never FMA), into `out` as `[fx, fy, fz, 0]` per corner, cell by cell.
+/// The same values as the scalar dual kernel to round-off (bitwise but for
+/// the barrier's logarithm), whatever path is taken.
+pub(crate) fn tangent_action_batch(
+    p: &CellParams,
+    cells: &[[u32; 8]],
+    x: &[[f64; 3]],
+    v: &[[f64; 3]],
+    out: &mut [[f64; 4]],
+) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU supports AVX2 (checked just above).
+            unsafe { tangent_action_avx2(p, cells, x, v, out) };
+            return;
+        }
+    }
+    tangent_action_body(
+        p,
+        cells,
+        x,
+        v,
+        out,
+        gather_corners::<LANES>,
+        scatter_corners::<f64, LANES>,
+    );
+}
+
 /// Cells evaluated together by [`forces_batch_f32`] (AVX2 holds 8 `f32`).
 pub(crate) const LANES_F32: usize = 8;
 
@@ -2305,6 +2584,79 @@ mod tests {
             }
         }
         assert!(in_barrier > 10 && past_knee > 5, "{in_barrier} {past_knee}");
+    }
+
+    /// The tangent's action on packs of cells (the portable lanes and, where
+    /// the CPU has it, AVX2) is the scalar dual kernel's, cell by cell, to
+    /// round-off (the barrier's logarithm is the force pass's), for every
+    /// term, on cells distorted past the barrier's knee and into the corner
+    /// barrier, with a batch whose cell count is not a multiple of the pack.
+    #[test]
+    fn packed_tangent_action_is_the_scalar_duals() {
+        let h = 0.01;
+        let mut seed = 11;
+        // 7 cells: one pack of 4 and a tail of 3, each cell its own 8
+        // nodes, some with a corner pushed deep in.
+        let cells: Vec<[u32; 8]> = (0..7u32)
+            .map(|c| std::array::from_fn(|k| 8 * c + k as u32))
+            .collect();
+        let x: Vec<[f64; 3]> = (0..56)
+            .map(|i| {
+                let (cell, n) = (i / 8, i % 8);
+                let push = if n == cell % 8 {
+                    [0.0, 0.25, 0.32, 0.5][cell % 4]
+                } else {
+                    0.0
+                };
+                std::array::from_fn(|d| {
+                    let o = CORNER_OFFSETS[n][d] as f64;
+                    (o + push * (1.0 - 2.0 * o) + 0.05 * noise(&mut seed) + 3.0 * cell as f64) * h
+                })
+            })
+            .collect();
+        let v: Vec<[f64; 3]> = (0..56)
+            .map(|_| std::array::from_fn(|_| noise(&mut seed)))
+            .collect();
+        let sets = [
+            params(0.0, false, 0.0),
+            params(0.02, true, 40.0),
+            with_correction(params(0.02, false, 0.0), 0.4),
+            with_corner_barrier(with_correction(params(0.02, true, 40.0), -0.5)),
+        ];
+        for p in &sets {
+            let scalar: Vec<[f64; 3]> = cells
+                .iter()
+                .flat_map(|c| cell_tangent_action(p, c, &x, &v))
+                .collect();
+            let scale = scalar.iter().flatten().fold(0.0f64, |m, a| m.max(a.abs()));
+            let check = |packed: &[[f64; 4]], path: &str| {
+                for (k, (a, b)) in packed.iter().zip(&scalar).enumerate() {
+                    for d in 0..3 {
+                        assert!(
+                            (a[d] - b[d]).abs() <= 1e-13 * scale,
+                            "{path}, {p:?}, corner {k}: {} vs {}",
+                            a[d],
+                            b[d]
+                        );
+                    }
+                    assert_eq!(a[3], 0.0);
+                }
+            };
+            let mut out = vec![[0.0; 4]; 8 * cells.len()];
+            tangent_action_body(
+                p,
+                &cells,
+                &x,
+                &v,
+                &mut out,
+                gather_corners::<LANES>,
+                scatter_corners::<f64, LANES>,
+            );
+            check(&out, "portable");
+            let mut out = vec![[0.0; 4]; 8 * cells.len()];
+            tangent_action_batch(p, &cells, &x, &v, &mut out);
+            check(&out, "dispatched");
+        }
     }
 
     /// The corner barrier's law: zero from its start on, its slope and

@@ -270,7 +270,7 @@ pub const DIRECT_MAX_FREE_DOFS: usize = 4_000;
 
 /// Largest problem (free dofs) that falls back to the direct solver when the
 /// iterative one stalls (about 1 GB of LU factors).
-const FALLBACK_MAX_FREE_DOFS: usize = 30_000;
+pub(crate) const FALLBACK_MAX_FREE_DOFS: usize = 30_000;
 
 /// `out = A v` for the Jacobian `A` of a Newton iteration, without a matrix.
 pub(crate) type Action<'a> = &'a dyn Fn(&[Vec3], &mut [Vec3]);

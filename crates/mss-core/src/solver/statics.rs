@@ -71,14 +71,15 @@ pub struct StaticOptions {
     pub matrix_free_above: usize,
 }
 
-/// Default of [`StaticOptions::matrix_free_above`] (about 100,000 nodes).
-/// From about this size the assembled product runs at the memory's speed,
-/// where the action costs 1.1 (`paper`) to 2.1 (the default model) times
-/// as much (the same time over a whole solve, measured at 128x32x32), and
-/// the `f64` tangent is the largest thing a Newton step holds (2 GB at a
-/// million nodes); below it the product is in cache and several times
-/// cheaper than the action (docs/solvers.md, "Matrix-free or assembled").
-pub const MATRIX_FREE_ABOVE: usize = 300_000;
+/// Default of [`StaticOptions::matrix_free_above`] (about 10,000 nodes):
+/// where a stalled iterative solve can no longer fall back to a direct one
+/// (which needs the assembled matrix). Above it the action, evaluated on
+/// packs of cells, costs 0.4 to 1.4 times the assembled product (less the
+/// larger the lattice, once the matrix has left the cache), and a solve
+/// skips assembling the `f64` tangent (20 to 40 products' worth each time)
+/// and holding it (2 GB at a million nodes): docs/solvers.md, "Matrix-free
+/// or assembled".
+pub const MATRIX_FREE_ABOVE: usize = super::linear::FALLBACK_MAX_FREE_DOFS;
 
 /// How far an obstacle moves along its path per load increment of a static
 /// solve that follows it (in cells of the model).
