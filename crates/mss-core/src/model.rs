@@ -1451,10 +1451,29 @@ impl Model {
         let mut m = crate::sparse::SymmetricUpper::upper_pattern_of(row_offsets, col_indices);
         let shared = SharedBlocks(m.upper.blocks.as_mut_ptr());
         let (row_offsets, col_indices) = (&m.upper.row_offsets, &m.upper.col_indices);
+        // At rest every cell of a parameter set is the same cube: its matrix
+        // is computed once, on the ideal cube of edge h, so that the rows of
+        // alike nodes get the same bits (their corners' coordinates, rounded
+        // where they lie, would make them differ in the last places), which
+        // lets the multigrid store each distinct block once.
+        let at_rest: Option<Vec<[[f64; 24]; 24]>> = (x == self.rest_positions()).then(|| {
+            self.params
+                .iter()
+                .map(|p| {
+                    let cube: [[f64; 3]; 8] = std::array::from_fn(|k| {
+                        hexmesh::CORNER_OFFSETS[k].map(|o| o as f64 * p.rest_edge)
+                    });
+                    kernel::cell_jacobian(p, &cube)
+                })
+                .collect()
+        });
         // Any cell's verdict decides: the same for any order of the cells.
         let skewed = AtomicBool::new(false);
         self.each_cell_by_layers(|cell| {
-            let jac = kernel::cell_jacobian(self.params_of(cell), &self.corners(x, cell));
+            let jac = match &at_rest {
+                Some(mats) => mats[self.param_index(cell)],
+                None => kernel::cell_jacobian(self.params_of(cell), &self.corners(x, cell)),
+            };
             if !skewed.load(Ordering::Relaxed) {
                 let (mut largest, mut skew) = (0.0f64, 0.0f64);
                 for (p, row) in jac.iter().enumerate() {

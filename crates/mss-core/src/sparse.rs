@@ -876,7 +876,19 @@ impl SymmetricUpper {
     /// `upper`, row), by row: row `j`'s blocks below the diagonal are their
     /// transposes.
     pub(crate) fn column(&self, j: usize) -> &[(u32, u32)] {
-        &self.by_column[self.column_offsets[j] as usize..self.column_offsets[j + 1] as usize]
+        &self.by_column[self.column_range(j)]
+    }
+
+    /// Where column `j`'s entries are in the by-column index (the order of
+    /// [`SymmetricUpper::by_column`]).
+    pub(crate) fn column_range(&self, j: usize) -> std::ops::Range<usize> {
+        self.column_offsets[j] as usize..self.column_offsets[j + 1] as usize
+    }
+
+    /// The whole by-column index: every column's [`SymmetricUpper::column`]
+    /// one after the other.
+    pub(crate) fn by_column(&self) -> &[(u32, u32)] {
+        &self.by_column
     }
 
     /// The full pattern's rows and columns (both halves), in order.

@@ -128,8 +128,40 @@ fn hourglass_signs(g: [i64; 3]) -> Vec3 {
 #[derive(Debug, Clone)]
 pub(crate) struct HalfMatrix {
     pattern: SymmetricUpper,
+    /// The blocks in the pattern's order; empty once they are `shared`.
     blocks: Vec<f32>,
+    /// The blocks stored once per distinct value, when few values repeat.
+    shared: Option<SharedBlocks>,
 }
+
+/// The blocks of a [`HalfMatrix`] in which a few distinct blocks repeat, each
+/// stored once. A lattice at rest has such a matrix: the interior nodes'
+/// rows are all alike (their cells' matrices summed in the same order give
+/// the same bits), and only the boundary's rows differ; so have the coarse
+/// levels built from it. The product then reads 8 bytes per block (a
+/// column and an entry of the table, which stays in cache) instead of 40,
+/// which is what it waits on (the smoothing products are memory bound).
+#[derive(Debug, Clone)]
+struct SharedBlocks {
+    /// The distinct blocks, 9 entries each in column-major order, plus 3 of
+    /// padding at the end (as [`HalfMatrix::blocks`]).
+    distinct: Vec<f32>,
+    /// For each block of the upper half, its entry in `distinct`.
+    upper: Vec<u32>,
+    /// The pattern's by-column index with each block's entry in `distinct`
+    /// in place of its position in the upper half.
+    below: Vec<(u32, u32)>,
+}
+
+/// Fewest blocks a level needs for [`HalfMatrix::share_repeated_blocks`] to
+/// be tried: below it the matrix is in cache anyway.
+const SHARE_MIN_BLOCKS: usize = 20_000;
+
+/// Most distinct blocks [`HalfMatrix::share_repeated_blocks`] accepts, as a
+/// fraction of the blocks (and at most [`SHARE_MAX_DISTINCT`]): beyond it the
+/// table would not stay in cache, or would save little.
+const SHARE_MAX_FRACTION: usize = 16;
+const SHARE_MAX_DISTINCT: usize = 1 << 15;
 
 impl HalfMatrix {
     /// Single-precision blocks of `blocks`, padded.
@@ -148,7 +180,11 @@ impl HalfMatrix {
     pub(crate) fn from_upper(mut m: SymmetricUpper) -> Self {
         let blocks = Self::single(&m.upper.blocks);
         m.upper.blocks = Vec::new();
-        Self { pattern: m, blocks }
+        Self {
+            pattern: m,
+            blocks,
+            shared: None,
+        }
     }
 
     /// The symmetric part `(A + A^T) / 2` of `a` (with its diagonal; a
@@ -176,7 +212,11 @@ impl HalfMatrix {
                     }
                 }
             });
-        Self { pattern, blocks }
+        Self {
+            pattern,
+            blocks,
+            shared: None,
+        }
     }
 
     /// Number of block rows.
@@ -186,7 +226,59 @@ impl HalfMatrix {
 
     /// Block `k` (of the upper half) in `f64`.
     fn block(&self, k: usize) -> Mat3 {
-        Mat3::from_fn(|e, d| f64::from(self.blocks[9 * k + 3 * d + e]))
+        let (table, entry) = match &self.shared {
+            Some(s) => (&s.distinct, s.upper[k] as usize),
+            None => (&self.blocks, k),
+        };
+        Mat3::from_fn(|e, d| f64::from(table[9 * entry + 3 * d + e]))
+    }
+
+    /// Stores each distinct block once ([`SharedBlocks`]) when few distinct
+    /// blocks repeat over a matrix large enough to leave the cache; else
+    /// leaves the matrix as it is. The values, and so every product's bits,
+    /// do not change.
+    fn share_repeated_blocks(&mut self) {
+        let count = self.pattern.upper.col_indices.len();
+        if self.shared.is_some() || count < SHARE_MIN_BLOCKS {
+            return;
+        }
+        let limit = (count / SHARE_MAX_FRACTION).min(SHARE_MAX_DISTINCT);
+        let mut seen: std::collections::HashMap<[u32; 9], u32, rustc_hash::FxBuildHasher> =
+            std::collections::HashMap::default();
+        let mut distinct: Vec<f32> = Vec::new();
+        let mut upper = Vec::with_capacity(count);
+        for block in self.blocks[..9 * count].chunks_exact(9) {
+            // By bits: blocks that compare equal but differ in bits (the
+            // signs of zeros) stay apart, so the products keep their bits.
+            let key: [u32; 9] = std::array::from_fn(|e| block[e].to_bits());
+            let next = seen.len() as u32;
+            let entry = *seen.entry(key).or_insert_with(|| {
+                distinct.extend_from_slice(block);
+                next
+            });
+            if seen.len() > limit {
+                log::trace!("multigrid level of {count} blocks: over {limit} distinct, kept whole");
+                return;
+            }
+            upper.push(entry);
+        }
+        log::trace!(
+            "multigrid level of {count} blocks: {} distinct, stored once each",
+            seen.len()
+        );
+        distinct.extend([0.0; 3]);
+        let below = self
+            .pattern
+            .by_column()
+            .iter()
+            .map(|&(k, row)| (upper[k as usize], row))
+            .collect();
+        self.shared = Some(SharedBlocks {
+            distinct,
+            upper,
+            below,
+        });
+        self.blocks = Vec::new();
     }
 
     /// Calls `f(j, A_ij)` for every block of row `i`, in column order.
@@ -213,6 +305,10 @@ impl HalfMatrix {
 
     /// Held dofs decoupled (identity rows and columns), in place.
     fn decouple(&mut self, mask: &[[bool; 3]]) {
+        assert!(
+            self.shared.is_none(),
+            "decoupled before its blocks are shared"
+        );
         let u = &self.pattern.upper;
         let body = self.blocks.len() - 3;
         row_chunks(&u.row_offsets, &mut self.blocks[..body])
@@ -301,15 +397,42 @@ fn half_mul_rows_avx2(a: &HalfMatrix, x: &[Vec3], y: &mut [Vec3], first: usize) 
 }
 
 /// Rows `first..first + y.len()` of [`HalfMatrix::mul`]; no FMA on any
-/// path, so every path gives the same bits.
+/// path, so every path (and either storage of the blocks) gives the same
+/// bits.
 #[inline(always)]
 fn half_mul_rows(a: &HalfMatrix, x: &[Vec3], y: &mut [Vec3], first: usize) {
+    match &a.shared {
+        Some(s) => half_mul_rows_of(
+            a,
+            &s.distinct,
+            |i| &s.below[a.pattern.column_range(i)],
+            |p| s.upper[p] as usize,
+            x,
+            y,
+            first,
+        ),
+        None => half_mul_rows_of(a, &a.blocks, |i| a.pattern.column(i), |p| p, x, y, first),
+    }
+}
+
+/// [`half_mul_rows`] with the blocks in `blocks`: row `i`'s blocks below the
+/// diagonal are `below(i)` (entry in `blocks`, row), block `p` of the upper
+/// half is entry `upper(p)`.
+#[inline(always)]
+fn half_mul_rows_of<'a>(
+    a: &HalfMatrix,
+    blocks: &[f32],
+    below_of: impl Fn(usize) -> &'a [(u32, u32)],
+    upper_entry: impl Fn(usize) -> usize,
+    x: &[Vec3],
+    y: &mut [Vec3],
+    first: usize,
+) {
     let u = &a.pattern.upper;
-    let blocks = &a.blocks;
     for (k, yi) in y.iter_mut().enumerate() {
         let i = first + k;
         let mut below = [[0.0f64; 4]; 3];
-        for &(p, j) in a.pattern.column(i) {
+        for &(p, j) in below_of(i) {
             let v = &x[j as usize];
             let xv = [v.x, v.y, v.z, 0.0];
             let b = &blocks[9 * p as usize..9 * p as usize + 12];
@@ -325,7 +448,8 @@ fn half_mul_rows(a: &HalfMatrix, x: &[Vec3], y: &mut [Vec3], first: usize) {
         let hi = u.row_offsets[i + 1] as usize;
         for (p, &c) in (lo..hi).zip(&u.col_indices[lo..hi]) {
             let v = &x[c as usize];
-            let b = &blocks[9 * p..9 * p + 12];
+            let e = upper_entry(p);
+            let b = &blocks[9 * e..9 * e + 12];
             for (d, xd) in [v.x, v.y, v.z].into_iter().enumerate() {
                 let col = &b[3 * d..3 * d + 4];
                 for l in 0..4 {
@@ -868,7 +992,8 @@ fn regularize_companions(a: &mut BlockCsr, first: usize) {
     }
 }
 
-fn level_of(a: HalfMatrix, mask: Vec<[bool; 3]>) -> Level {
+fn level_of(mut a: HalfMatrix, mask: Vec<[bool; 3]>) -> Level {
+    a.share_repeated_blocks();
     let inv_diag = inverse_diagonal(&a);
     let rho = spectral_radius(&a, &inv_diag, &mask);
     Level {
@@ -978,6 +1103,7 @@ fn galerkin(
     let mut ac = HalfMatrix {
         pattern: pattern.clone(),
         blocks: HalfMatrix::single(&blocks),
+        shared: None,
     };
     // Decouple coarse dofs that no free fine dof reaches.
     ac.decouple(&cmask);
@@ -1495,6 +1621,72 @@ mod tests {
                 assert!((f[d] - e[d]).abs() <= 1e-6 * 27.0 * 3.0, "{f} vs {e}");
             }
         }
+    }
+
+    /// The rest stiffness of a lattice has few distinct blocks: its half is
+    /// stored once per distinct block, and multiplies (and gives its blocks)
+    /// with the same bits as the whole half, on every path and thread
+    /// count; a deformed stiffness, whose blocks all differ, stays whole.
+    #[test]
+    fn repeated_blocks_are_stored_once_with_the_same_products() {
+        let l = hexmesh::Lattice::block([24, 12, 12], 0.01, [0.3, -0.2, 0.1]).unwrap();
+        let model = crate::Model::new(
+            &l,
+            crate::Material::new(1e4, 0.3, 1000.0).unwrap(),
+            &crate::model::HourglassControl::new(Box::new(crate::model::VolumetricBarrier), 1.0)
+                .unwrap(),
+        )
+        .unwrap();
+        let rest = model.rest_positions();
+        let mask: Vec<[bool; 3]> = rest.iter().map(|p| [p.x > 0.3 + 1e-9; 3]).collect();
+        let mut whole = HalfMatrix::from_upper(model.symmetric_stiffness_upper(rest));
+        whole.decouple(&mask);
+        let blocks = whole.pattern.upper.col_indices.len();
+        assert!(blocks >= SHARE_MIN_BLOCKS, "{blocks}");
+        let mut shared = whole.clone();
+        shared.share_repeated_blocks();
+        let distinct = shared.shared.as_ref().map(|s| s.distinct.len() / 9);
+        assert!(
+            distinct.is_some_and(|d| d <= 100),
+            "{distinct:?} of {blocks}"
+        );
+        assert!(shared.blocks.is_empty());
+        for k in 0..blocks {
+            assert_eq!(whole.block(k), shared.block(k), "block {k}");
+        }
+        let x: Vec<Vec3> = (0..rest.len())
+            .map(|i| {
+                let t = i as f64;
+                Vec3::new((0.7 * t).sin(), (1.3 * t).cos(), (0.4 * t).sin() - 0.2)
+            })
+            .collect();
+        let product = |a: &HalfMatrix, threads: usize| {
+            let mut y = vec![Vec3::zeros(); x.len()];
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| a.mul(&x, &mut y));
+            y
+        };
+        let expected = product(&whole, 1);
+        let mut portable = vec![Vec3::zeros(); x.len()];
+        half_mul_rows(&shared, &x, &mut portable, 0);
+        for got in [product(&shared, 1), product(&shared, 2), portable] {
+            assert!(
+                got.iter()
+                    .zip(&expected)
+                    .all(|(a, b)| (0..3).all(|d| a[d].to_bits() == b[d].to_bits()))
+            );
+        }
+        // Deformed: every cell's matrix its own.
+        let bent: Vec<Vec3> = rest
+            .iter()
+            .map(|p| p + Vec3::new(0.01 * (40.0 * p.z).sin(), 0.0, 0.02 * (30.0 * p.x).sin()))
+            .collect();
+        let mut deformed = HalfMatrix::from_upper(model.symmetric_stiffness_upper(&bent));
+        deformed.share_repeated_blocks();
+        assert!(deformed.shared.is_none());
     }
 
     /// A pattern that lacks the mirror of some blocks (contact may add one
