@@ -559,6 +559,7 @@ impl Fem {
             rtol: opts.tolerance,
             // Hyperelastic: the residual is minus the energy's gradient.
             slope_line_search: true,
+            keep_hierarchy: false,
         };
         while lam < 1.0 {
             let target = (lam + dlam).min(1.0);

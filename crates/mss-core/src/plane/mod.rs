@@ -1129,6 +1129,7 @@ impl PlaneProblem {
             max_iterations: 60,
             rtol: 1e-10,
             slope_line_search: false,
+            keep_hierarchy: false,
         };
         newton(
             &mut StaticSystem {
@@ -1211,6 +1212,7 @@ impl PlaneProblem {
             max_iterations: 30,
             rtol: 1e-9,
             slope_line_search: false,
+            keep_hierarchy: false,
         };
         let mut iterations = 0;
         for step in 0..steps {

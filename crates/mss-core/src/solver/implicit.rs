@@ -34,7 +34,24 @@ pub struct ImplicitOptions {
     pub max_halvings: u32,
     /// The linear solver of the Newton steps (default: chosen by size).
     pub linear_solver: super::LinearSolverKind,
+    /// Free dofs above which the iterative Newton solves keep no matrix:
+    /// the Krylov products use the tangent's action (`Model::tangent_mul`
+    /// and the mass term), the multigrid hierarchy is built from the
+    /// symmetric part held once per pair of blocks, and the first tangent's
+    /// hierarchy preconditions the step's later tangents; for problems
+    /// whose Jacobian is the model's tangent and the mass term alone (no
+    /// contact, loads that do not depend on positions, no stiffness
+    /// damping). Default [`IMPLICIT_MATRIX_FREE_ABOVE`].
+    pub matrix_free_above: usize,
 }
+
+/// Default of [`ImplicitOptions::matrix_free_above`]: where the iterative
+/// solver takes over from the direct one. A static solve keeps the matrix up
+/// to where a stalled iterative solve may fall back to a direct one
+/// ([`super::MATRIX_FREE_ABOVE`]); an implicit step's system has the mass
+/// term on its diagonal, and a step whose solve fails is halved instead.
+/// docs/solvers.md ("Matrix-free or assembled") has the measurements.
+pub const IMPLICIT_MATRIX_FREE_ABOVE: usize = super::linear::DIRECT_MAX_FREE_DOFS;
 
 impl Default for ImplicitOptions {
     fn default() -> Self {
@@ -44,6 +61,7 @@ impl Default for ImplicitOptions {
             rtol: super::DEFAULT_NEWTON_RTOL,
             max_halvings: 4,
             linear_solver: super::LinearSolverKind::Auto,
+            matrix_free_above: IMPLICIT_MATRIX_FREE_ABOVE,
         }
     }
 }
@@ -142,10 +160,13 @@ impl Implicit {
                 max_iterations: self.opts.max_newton,
                 rtol: self.opts.rtol,
                 slope_line_search: false,
+                keep_hierarchy: true,
             },
-            self.linear
-                .borrow_mut()
-                .get_or_insert_with(|| LinearSolver::new(model, self.opts.linear_solver)),
+            self.linear.borrow_mut().get_or_insert_with(|| {
+                let mut linear = LinearSolver::new(model, self.opts.linear_solver);
+                linear.set_matrix_free_above(self.opts.matrix_free_above);
+                linear
+            }),
         )
         .map_err(|e| match e {
             NewtonFailure::Diverged(d) => d,
@@ -265,6 +286,15 @@ impl Implicit {
     }
 }
 
+impl BackwardEuler<'_> {
+    /// `(1 + alpha dt) / dt^2`: the inertia and mass damping's part of the
+    /// Jacobian per unit mass (on the diagonal, with a minus sign).
+    fn inertia_factor(&self) -> f64 {
+        let dt = self.dt;
+        (1.0 + self.problem.damping().alpha * dt) / (dt * dt)
+    }
+}
+
 struct BackwardEuler<'a> {
     problem: &'a Problem,
     x0: &'a [Vec3],
@@ -319,6 +349,39 @@ impl NonlinearSystem for BackwardEuler<'_> {
         s_int.sqrt().max(s_ext.sqrt()).max(s_in.sqrt())
     }
 
+    fn has_jacobian_mul(&self) -> bool {
+        // The Jacobian is the model's tangent and the mass term alone: no
+        // contact, loads that do not depend on positions, no stiffness
+        // damping (its rest stiffness would be one more product).
+        let p = self.problem;
+        p.contact().is_none()
+            && p.damping().beta == 0.0
+            && p.loads().iter().all(|l| l.independent_of_positions())
+    }
+
+    fn jacobian_mul(&self, x: &[Vec3], v: &[Vec3], out: &mut [Vec3]) {
+        let p = self.problem;
+        p.model().tangent_mul(x, v, out);
+        let inertia = self.inertia_factor();
+        for ((o, vi), m) in out.iter_mut().zip(v).zip(p.model().masses()) {
+            *o -= vi * (m * inertia);
+        }
+    }
+
+    fn symmetric_stiffness(&mut self, x: &[Vec3]) -> Option<crate::sparse::SymmetricUpper> {
+        if !self.has_jacobian_mul() {
+            return None;
+        }
+        let model = self.problem.model();
+        let mut k = model.symmetric_stiffness_upper(x);
+        let inertia = self.inertia_factor();
+        for (i, m) in model.masses().iter().enumerate() {
+            let d = k.upper.find(i, i).expect("diagonal in the lattice pattern");
+            k.upper.blocks[d] += Mat3::identity() * (m * inertia);
+        }
+        Some(k)
+    }
+
     fn jacobian(&mut self, x: &[Vec3]) -> BlockCsr {
         let p = self.problem;
         let model = p.model();
@@ -328,9 +391,10 @@ impl NonlinearSystem for BackwardEuler<'_> {
         for l in p.loads() {
             l.add_jacobian(model, self.t1, x, 1.0, &mut j);
         }
+        let inertia = self.inertia_factor();
         for (i, &m) in model.masses().iter().enumerate() {
             let k = j.find(i, i).expect("diagonal in the lattice pattern");
-            j.blocks[k] -= Mat3::identity() * (m * (1.0 + d.alpha * dt) / (dt * dt));
+            j.blocks[k] -= Mat3::identity() * (m * inertia);
         }
         if d.beta > 0.0 {
             let k0 = p.rest_stiffness();

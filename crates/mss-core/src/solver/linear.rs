@@ -793,7 +793,45 @@ impl LinearSolver {
         rtol: f64,
         action: Option<Action<'_>>,
     ) -> Option<Vec<Vec3>> {
-        let last = self.last.take()?;
+        self.solve_on_last_hierarchy(b, free, size, rtol, action, false)
+    }
+
+    /// Solves with a new operator, given by its action (a Newton tangent
+    /// taken at a new point), preconditioned by the last solve's hierarchy
+    /// (no assembly, no set-up), with GMRES (the new operator's symmetry is
+    /// not known); later [`LinearSolver::solve_again`] calls multiply by the
+    /// action they are given, as after any solve without a matrix. `None`
+    /// when the last solve kept no matrix-free hierarchy for these dofs, or
+    /// when this solve is not usable (the hierarchy is then released).
+    pub(crate) fn solve_with_new_action(
+        &mut self,
+        b: &[Vec3],
+        free: &[bool],
+        size: f64,
+        rtol: f64,
+        action: Action<'_>,
+    ) -> Option<Vec<Vec3>> {
+        if !self.last.as_ref().is_some_and(|l| l.lean) {
+            return None;
+        }
+        self.solve_on_last_hierarchy(b, free, size, rtol, Some(action), true)
+    }
+
+    /// [`LinearSolver::solve_again`], and with `new_operator` the operator
+    /// changed (see [`LinearSolver::solve_with_new_action`]).
+    fn solve_on_last_hierarchy(
+        &mut self,
+        b: &[Vec3],
+        free: &[bool],
+        size: f64,
+        rtol: f64,
+        action: Option<Action<'_>>,
+        new_operator: bool,
+    ) -> Option<Vec<Vec3>> {
+        let mut last = self.last.take()?;
+        if new_operator {
+            last.symmetric = false;
+        }
         let same_dofs = last
             .mg
             .mask()

@@ -46,7 +46,7 @@ pub use explicit::{
     CONTACT_RESOLUTION, Explicit, ExplicitOptions, ExplicitScheme, NODE_CONTACT_ANGLE,
     explicit_time_step_limit,
 };
-pub use implicit::{Implicit, ImplicitOptions};
+pub use implicit::{IMPLICIT_MATRIX_FREE_ABOVE, Implicit, ImplicitOptions};
 pub use linear::{DIRECT_MAX_FREE_DOFS, LinearSolver, LinearSolverKind, LinearStats};
 pub use statics::{
     FOLLOW_DEPTH, MATRIX_FREE_ABOVE, MAX_FAILED_INCREMENTS, OBSTACLE_INCREMENT,
@@ -931,6 +931,13 @@ pub struct NewtonOptions {
     /// (the energy's directional derivative for conservative forces) instead of
     /// backtracking on `|R|`; `|R|` backtracking remains the fallback.
     pub slope_line_search: bool,
+    /// Keep the first tangent's multigrid hierarchy as the preconditioner
+    /// of the later tangents (their actions the Krylov operator), where the
+    /// solve is matrix-free: no symmetric part and no set-up per tangent.
+    /// A solve it does not serve falls back to a new hierarchy. For
+    /// implicit steps, whose mass term keeps the first tangent's hierarchy
+    /// a good preconditioner of the later ones.
+    pub keep_hierarchy: bool,
 }
 
 /// Relative accuracy of the first linear solve of a Newton solve (iterative
@@ -1141,6 +1148,17 @@ fn newton_iterations(
             None => None,
         };
         let chord_step = reused.is_some();
+        // A new tangent on the kept hierarchy: its action at `x`.
+        let reused = match reused {
+            None if opts.keep_hierarchy && matrix_free && it > 0 => {
+                // The fallback below takes its tangent at `x` too.
+                x_lin.clear();
+                x_lin.extend_from_slice(x);
+                let product = jacobian_product(&*sys, &x_lin);
+                linear.solve_with_new_action(&neg_r, free, size, eta, &product)
+            }
+            other => other,
+        };
         let delta = match reused {
             Some(d) => d,
             None => {

@@ -144,8 +144,11 @@ pub(crate) struct HalfMatrix {
 #[derive(Debug, Clone)]
 struct SharedBlocks {
     /// The distinct blocks, 9 entries each in column-major order, plus 3 of
-    /// padding at the end (as [`HalfMatrix::blocks`]).
-    distinct: Vec<f32>,
+    /// padding at the end (as [`HalfMatrix::blocks`]): the single-precision
+    /// values held in `f64` (exactly), since the table is small, so that the
+    /// product does not convert them at every use (it is then bound by its
+    /// arithmetic, not by memory).
+    distinct: Vec<f64>,
     /// For each block of the upper half, its entry in `distinct`.
     upper: Vec<u32>,
     /// The pattern's by-column index with each block's entry in `distinct`
@@ -226,11 +229,13 @@ impl HalfMatrix {
 
     /// Block `k` (of the upper half) in `f64`.
     fn block(&self, k: usize) -> Mat3 {
-        let (table, entry) = match &self.shared {
-            Some(s) => (&s.distinct, s.upper[k] as usize),
-            None => (&self.blocks, k),
-        };
-        Mat3::from_fn(|e, d| f64::from(table[9 * entry + 3 * d + e]))
+        match &self.shared {
+            Some(s) => {
+                let entry = 9 * s.upper[k] as usize;
+                Mat3::from_fn(|e, d| s.distinct[entry + 3 * d + e])
+            }
+            None => Mat3::from_fn(|e, d| f64::from(self.blocks[9 * k + 3 * d + e])),
+        }
     }
 
     /// Stores each distinct block once ([`SharedBlocks`]) when few distinct
@@ -245,7 +250,7 @@ impl HalfMatrix {
         let limit = (count / SHARE_MAX_FRACTION).min(SHARE_MAX_DISTINCT);
         let mut seen: std::collections::HashMap<[u32; 9], u32, rustc_hash::FxBuildHasher> =
             std::collections::HashMap::default();
-        let mut distinct: Vec<f32> = Vec::new();
+        let mut distinct: Vec<f64> = Vec::new();
         let mut upper = Vec::with_capacity(count);
         for block in self.blocks[..9 * count].chunks_exact(9) {
             // By bits: blocks that compare equal but differ in bits (the
@@ -253,7 +258,7 @@ impl HalfMatrix {
             let key: [u32; 9] = std::array::from_fn(|e| block[e].to_bits());
             let next = seen.len() as u32;
             let entry = *seen.entry(key).or_insert_with(|| {
-                distinct.extend_from_slice(block);
+                distinct.extend(block.iter().map(|&v| f64::from(v)));
                 next
             });
             if seen.len() > limit {
@@ -415,13 +420,30 @@ fn half_mul_rows(a: &HalfMatrix, x: &[Vec3], y: &mut [Vec3], first: usize) {
     }
 }
 
+/// A stored block entry: single precision, or its exact `f64` value.
+trait BlockEntry: Copy {
+    fn widen(self) -> f64;
+}
+impl BlockEntry for f32 {
+    #[inline(always)]
+    fn widen(self) -> f64 {
+        f64::from(self)
+    }
+}
+impl BlockEntry for f64 {
+    #[inline(always)]
+    fn widen(self) -> f64 {
+        self
+    }
+}
+
 /// [`half_mul_rows`] with the blocks in `blocks`: row `i`'s blocks below the
 /// diagonal are `below(i)` (entry in `blocks`, row), block `p` of the upper
 /// half is entry `upper(p)`.
 #[inline(always)]
-fn half_mul_rows_of<'a>(
+fn half_mul_rows_of<'a, B: BlockEntry>(
     a: &HalfMatrix,
-    blocks: &[f32],
+    blocks: &[B],
     below_of: impl Fn(usize) -> &'a [(u32, u32)],
     upper_entry: impl Fn(usize) -> usize,
     x: &[Vec3],
@@ -439,7 +461,7 @@ fn half_mul_rows_of<'a>(
             for (e, acc) in below.iter_mut().enumerate() {
                 let col = &b[3 * e..3 * e + 4];
                 for l in 0..4 {
-                    acc[l] += col[l] as f64 * xv[l];
+                    acc[l] += col[l].widen() * xv[l];
                 }
             }
         }
@@ -453,7 +475,7 @@ fn half_mul_rows_of<'a>(
             for (d, xd) in [v.x, v.y, v.z].into_iter().enumerate() {
                 let col = &b[3 * d..3 * d + 4];
                 for l in 0..4 {
-                    acc[l] += col[l] as f64 * xd;
+                    acc[l] += col[l].widen() * xd;
                 }
             }
         }

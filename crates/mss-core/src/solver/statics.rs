@@ -507,6 +507,7 @@ fn solve_static_here(
         max_iterations: opts.max_newton,
         rtol: opts.rtol,
         slope_line_search: true,
+        keep_hierarchy: false,
     };
     let mut linear = LinearSolver::new(model, opts.linear_solver);
     linear.set_matrix_free_above(opts.matrix_free_above);

@@ -157,29 +157,49 @@ fn implicit_steps_match_the_direct_solver() {
         Box::new(Volumetric),
     ] {
         let p = cantilever(param.as_ref(), 6, 1.0);
-        let run = |kind| {
-            let mut it = Implicit::new(
-                &p,
-                ImplicitOptions {
-                    dt: 0.02,
-                    linear_solver: kind,
-                    ..ImplicitOptions::default()
-                },
-            )
-            .unwrap();
-            let mut s = State::at_rest(p.model());
-            for _ in 0..5 {
-                it.step(&p, &mut s).unwrap();
-            }
-            s.displacements(p.model())
+        let run = |kind, matrix_free_above, threads| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| {
+                let mut it = Implicit::new(
+                    &p,
+                    ImplicitOptions {
+                        dt: 0.02,
+                        linear_solver: kind,
+                        matrix_free_above,
+                        ..ImplicitOptions::default()
+                    },
+                )
+                .unwrap();
+                let mut s = State::at_rest(p.model());
+                for _ in 0..5 {
+                    it.step(&p, &mut s).unwrap();
+                }
+                s.displacements(p.model())
+            })
         };
-        let direct = run(LinearSolverKind::Direct);
-        let iterative = run(LinearSolverKind::Iterative);
+        let direct = run(LinearSolverKind::Direct, usize::MAX, 1);
         let scale = max_norm(&direct);
-        let diff = max_diff(&direct, &iterative);
+        // Assembled, then matrix-free (the tangent's action, the first
+        // tangent's hierarchy kept over each step).
+        for matrix_free_above in [usize::MAX, 0] {
+            let iterative = run(LinearSolverKind::Iterative, matrix_free_above, 1);
+            let diff = max_diff(&direct, &iterative);
+            assert!(
+                diff <= 1e-6 * scale,
+                "{} (matrix-free above {matrix_free_above}): {diff:e} of {scale:e}",
+                param.name()
+            );
+        }
+        let one = run(LinearSolverKind::Iterative, 0, 1);
+        let two = run(LinearSolverKind::Iterative, 0, 2);
         assert!(
-            diff <= 1e-6 * scale,
-            "{}: {diff:e} of {scale:e}",
+            one.iter()
+                .zip(&two)
+                .all(|(a, b)| (0..3).all(|d| a[d].to_bits() == b[d].to_bits())),
+            "{}: matrix-free implicit steps depend on the thread count",
             param.name()
         );
     }
