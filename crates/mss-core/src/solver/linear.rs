@@ -272,6 +272,13 @@ pub const DIRECT_MAX_FREE_DOFS: usize = 4_000;
 /// iterative one stalls (about 1 GB of LU factors).
 pub(crate) const FALLBACK_MAX_FREE_DOFS: usize = 30_000;
 
+/// A kept hierarchy is stale for a new operator that takes more than
+/// `STALE_GROWTH` times the Krylov iterations of the solve that built it,
+/// plus `STALE_SLACK` ([`LinearSolver::solve_with_new_action`]): a new
+/// set-up then costs less than the iterations it saves.
+const STALE_GROWTH: u32 = 2;
+const STALE_SLACK: u32 = 4;
+
 /// `out = A v` for the Jacobian `A` of a Newton iteration, without a matrix.
 pub(crate) type Action<'a> = &'a dyn Fn(&[Vec3], &mut [Vec3]);
 
@@ -348,6 +355,9 @@ pub struct LinearStats {
 /// Newton iteration decides whether its tangent is still good enough.
 struct LastSolve {
     mg: super::multigrid::Multigrid,
+    /// Krylov iterations of the solve that built the hierarchy: a later
+    /// operator that takes many more on it finds it stale.
+    fresh_iterations: u32,
     /// The operator is the matrix times `sign`.
     sign: f64,
     symmetric: bool,
@@ -394,6 +404,10 @@ pub struct LinearSolver {
     /// Free dofs above which a solve given the matrix's action keeps no
     /// `f64` matrix.
     matrix_free_above: usize,
+    /// The largest diagonal entry of the first tangent of the last Newton
+    /// solve (its round-off floor's scale), for a later solve that starts
+    /// on a kept hierarchy without a tangent of its own.
+    newton_scale: Option<f64>,
 }
 
 impl std::fmt::Debug for LinearSolver {
@@ -473,6 +487,7 @@ impl LinearSolver {
             kept: None,
             last: None,
             matrix_free_above: usize::MAX,
+            newton_scale: None,
         }
     }
 
@@ -482,6 +497,18 @@ impl LinearSolver {
     /// [`LinearSolver::last_product`]) use the action. Never by default.
     pub(crate) fn set_matrix_free_above(&mut self, free_dofs: usize) {
         self.matrix_free_above = free_dofs;
+    }
+
+    /// [`LinearSolver::newton_scale`]'s value.
+    pub(crate) fn set_newton_scale(&mut self, largest_diagonal_entry: f64) {
+        self.newton_scale = Some(largest_diagonal_entry);
+    }
+
+    /// The largest diagonal entry of the last Newton solve's first tangent,
+    /// while a matrix-free hierarchy is kept for a new tangent to use.
+    pub(crate) fn newton_scale(&self) -> Option<f64> {
+        self.newton_scale
+            .filter(|_| self.last.as_ref().is_some_and(|l| l.lean))
     }
 
     /// What the solver did so far.
@@ -627,17 +654,19 @@ impl LinearSolver {
         let symmetric = op.matrix().asymmetry() <= 1e-10 * scale;
         let mut y = vec![Vec3::zeros(); n];
         // A hierarchy is built for every matrix: reusing the previous one
-        // (Newton iterations change the tangent little) was tried and lost,
-        // since a stale hierarchy takes more Krylov iterations than a new
-        // set-up costs, most of all once the tangent turns non-symmetric.
+        // for an assembled tangent was tried and lost, since a stale
+        // hierarchy took more Krylov iterations than a new set-up cost.
         // (Newton's chord steps reuse a matrix with its own hierarchy:
-        // `solve_again`.)
+        // `solve_again`; implicit steps without a matrix keep their
+        // hierarchy for new tangents: `solve_with_new_action`.)
         let lean = action.is_some() && free_dofs > self.matrix_free_above;
         let mg = super::multigrid::Multigrid::new(op, shape, lean)
             .map_err(|e| LinearFailure::Other(e.0))?;
         self.stats.hierarchy_builds += 1;
         let product = operator_product(&mg, action.filter(|_| lean), sign);
+        let before = self.stats.krylov_iterations;
         let usable = self.krylov(&mg, &*product, symmetric, &b_signed, &mut y, size, rtol);
+        let fresh_iterations = self.stats.krylov_iterations - before;
         drop(product);
         // A solve that kept no matrix has none to factor: it reports as a
         // large solve does.
@@ -652,6 +681,7 @@ impl LinearSolver {
         }
         let last = LastSolve {
             mg,
+            fresh_iterations,
             sign,
             symmetric,
             keep,
@@ -720,10 +750,13 @@ impl LinearSolver {
         self.stats.hierarchy_builds += 1;
         let mut y = vec![Vec3::zeros(); b.len()];
         let product = operator_product(&mg, Some(action), sign);
+        let before = self.stats.krylov_iterations;
         let usable = self.krylov(&mg, &*product, symmetric, &b_signed, &mut y, size, rtol);
+        let fresh_iterations = self.stats.krylov_iterations - before;
         drop(product);
         let last = LastSolve {
             mg,
+            fresh_iterations,
             sign,
             symmetric,
             keep,
@@ -850,6 +883,7 @@ impl LinearSolver {
         let b_signed: Vec<Vec3> = b.iter().map(|v| v * last.sign).collect();
         let mut y = vec![Vec3::zeros(); b.len()];
         let product = operator_product(&last.mg, action.filter(|_| last.lean), last.sign);
+        let before = self.stats.krylov_iterations;
         let usable = self.krylov(
             &last.mg,
             &*product,
@@ -859,9 +893,19 @@ impl LinearSolver {
             size,
             rtol,
         );
+        let iterations = self.stats.krylov_iterations - before;
         drop(product);
+        // A new operator that takes many more iterations than the one the
+        // hierarchy was built for has moved away from it (a body turned far,
+        // a shorter step): this solve stands, the next tangent gets a new
+        // hierarchy.
+        let stale = new_operator && iterations > STALE_GROWTH * last.fresh_iterations + STALE_SLACK;
         self.last = Some(last);
-        if usable {
+        if usable && !stale {
+            Some(y)
+        } else if usable {
+            log::debug!("kept hierarchy stale ({iterations} Krylov iterations): released");
+            self.release_last();
             Some(y)
         } else {
             self.release_last();

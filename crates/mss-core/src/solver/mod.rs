@@ -1048,10 +1048,15 @@ pub fn newton(
     opts: NewtonOptions,
     linear: &mut linear::LinearSolver,
 ) -> Result<u32, NewtonFailure> {
-    // Nothing of another solve's matrices may serve this one's chord steps.
-    linear.release_last();
+    // Nothing of another solve's matrices may serve this one's chord steps;
+    // a hierarchy kept over solves serves only as a preconditioner.
+    if !opts.keep_hierarchy {
+        linear.release_last();
+    }
     let result = newton_iterations(sys, x, free, size, h, opts, linear);
-    linear.release_last();
+    if !opts.keep_hierarchy || result.is_err() {
+        linear.release_last();
+    }
     result
 }
 
@@ -1148,9 +1153,19 @@ fn newton_iterations(
             None => None,
         };
         let chord_step = reused.is_some();
-        // A new tangent on the kept hierarchy: its action at `x`.
+        // A new tangent on the kept hierarchy (this solve's first, or an
+        // earlier solve's): its action at `x`.
+        let kept_scale = linear.newton_scale();
         let reused = match reused {
-            None if opts.keep_hierarchy && matrix_free && it > 0 => {
+            None if opts.keep_hierarchy && matrix_free && (it > 0 || kept_scale.is_some()) => {
+                if it == 0 {
+                    // The round-off floor from the earlier solve's tangent.
+                    let kmax = kept_scale.unwrap_or(0.0);
+                    floor = 1e-12 * kmax * h * (free_dofs as f64).sqrt();
+                    if norm <= target.max(floor) {
+                        return Ok(0);
+                    }
+                }
                 // The fallback below takes its tangent at `x` too.
                 x_lin.clear();
                 x_lin.extend_from_slice(x);
@@ -1182,6 +1197,7 @@ fn newton_iterations(
                         Tangent::SymmetricHalf(half) => half.max_diagonal_block_entry(),
                     };
                     floor = 1e-12 * kmax * h * (free_dofs as f64).sqrt();
+                    linear.set_newton_scale(kmax);
                     if norm <= target.max(floor) {
                         return Ok(0);
                     }
