@@ -37,8 +37,9 @@ pub struct ImplicitOptions {
     /// Free dofs above which the iterative Newton solves keep no matrix:
     /// the Krylov products use the tangent's action (`Model::tangent_mul`
     /// and the mass term), the multigrid hierarchy is built from the
-    /// symmetric part held once per pair of blocks, and the first tangent's
-    /// hierarchy preconditions the step's later tangents; for problems
+    /// symmetric part held once per pair of blocks, and a tangent's
+    /// hierarchy preconditions the later tangents, of this step and the
+    /// next ones, while it serves them (`NewtonOptions::keep_hierarchy`); for problems
     /// whose Jacobian is the model's tangent and the mass term alone (no
     /// contact, loads that do not depend on positions, no stiffness
     /// damping). Default [`IMPLICIT_MATRIX_FREE_ABOVE`].

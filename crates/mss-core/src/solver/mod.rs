@@ -931,12 +931,14 @@ pub struct NewtonOptions {
     /// (the energy's directional derivative for conservative forces) instead of
     /// backtracking on `|R|`; `|R|` backtracking remains the fallback.
     pub slope_line_search: bool,
-    /// Keep the first tangent's multigrid hierarchy as the preconditioner
-    /// of the later tangents (their actions the Krylov operator), where the
-    /// solve is matrix-free: no symmetric part and no set-up per tangent.
-    /// A solve it does not serve falls back to a new hierarchy. For
-    /// implicit steps, whose mass term keeps the first tangent's hierarchy
-    /// a good preconditioner of the later ones.
+    /// Keep a tangent's multigrid hierarchy as the preconditioner of the
+    /// later tangents (their actions the Krylov operator), of this solve
+    /// and of the next solves with the same linear solver, where the solve
+    /// is matrix-free: no symmetric part and no set-up per tangent. A
+    /// solve it does not serve falls back to a new hierarchy, and one that
+    /// takes many more Krylov iterations on it than its first solve did
+    /// releases it. For implicit steps, whose mass term keeps an earlier
+    /// tangent's hierarchy a good preconditioner of the later ones.
     pub keep_hierarchy: bool,
 }
 
