@@ -20,6 +20,17 @@ pub fn as_arrays(v: &[Vec3]) -> &[[f64; 3]] {
     unsafe { std::slice::from_raw_parts(v.as_ptr().cast::<[f64; 3]>(), v.len()) }
 }
 
+/// Runs `f` on a pool of `threads` threads (the unit tests' check that
+/// results do not depend on the thread count).
+#[cfg(test)]
+pub(crate) fn on_threads<R: Send>(threads: usize, f: impl FnOnce() -> R + Send) -> R {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .expect("a thread pool")
+        .install(f)
+}
+
 /// Runs `f` on a thread of the current rayon pool (the global one outside
 /// any pool), waiting for it. A step makes a dozen parallel passes; called
 /// from a thread outside the pool, each of them would hand its work to the

@@ -634,6 +634,17 @@ impl Layers {
     }
 }
 
+/// Writes the corner vectors of the cells from `first` on, one cell at a
+/// time by `per_cell`, into a batch's `values` (8 `[x, y, z, 0]` per cell):
+/// the cell-by-cell path of [`Model::add_batches_by_layers`]' batches.
+fn fill_cells(values: &mut [[f64; 4]], first: usize, per_cell: impl Fn(usize) -> [[f64; 3]; 8]) {
+    for (k, f) in values.chunks_exact_mut(8).enumerate() {
+        for (f, o) in f.iter_mut().zip(per_cell(first + k)) {
+            *f = [o[0], o[1], o[2], 0.0];
+        }
+    }
+}
+
 /// Node force sums written from several threads at once, each to nodes no
 /// other thread touches in the same phase (see [`Model::internal_forces_with`]).
 #[derive(Clone, Copy)]
@@ -1303,13 +1314,9 @@ impl Model {
             if uniform {
                 batch_kernel(self.params_of(first), cells, xs, edges, fc);
             } else {
-                for (k, f) in fc.chunks_exact_mut(8).enumerate() {
-                    let cell = first + k;
-                    let out8 = cell_kernel(self.params_of(cell), &self.cells[cell], xs, edges);
-                    for (f, o) in f.iter_mut().zip(out8) {
-                        *f = [o[0], o[1], o[2], 0.0];
-                    }
-                }
+                fill_cells(fc, first, |cell| {
+                    cell_kernel(self.params_of(cell), &self.cells[cell], xs, edges)
+                });
             }
         });
     }
@@ -1451,22 +1458,10 @@ impl Model {
         let mut m = crate::sparse::SymmetricUpper::upper_pattern_of(row_offsets, col_indices);
         let shared = SharedBlocks(m.upper.blocks.as_mut_ptr());
         let (row_offsets, col_indices) = (&m.upper.row_offsets, &m.upper.col_indices);
-        // At rest every cell of a parameter set is the same cube: its matrix
-        // is computed once, on the ideal cube of edge h, so that the rows of
-        // alike nodes get the same bits (their corners' coordinates, rounded
-        // where they lie, would make them differ in the last places), which
-        // lets the multigrid store each distinct block once.
-        let at_rest: Option<Vec<[[f64; 24]; 24]>> = (x == self.rest_positions()).then(|| {
-            self.params
-                .iter()
-                .map(|p| {
-                    let cube: [[f64; 3]; 8] = std::array::from_fn(|k| {
-                        hexmesh::CORNER_OFFSETS[k].map(|o| o as f64 * p.rest_edge)
-                    });
-                    kernel::cell_jacobian(p, &cube)
-                })
-                .collect()
-        });
+        // At rest every cell of a parameter set is the same cube: the rows
+        // of alike nodes then get the same bits, which lets the multigrid
+        // store each distinct block once.
+        let at_rest = (x == self.rest_positions()).then(|| self.rest_cell_jacobians());
         // Any cell's verdict decides: the same for any order of the cells.
         let skewed = AtomicBool::new(false);
         self.each_cell_by_layers(|cell| {
@@ -1581,18 +1576,28 @@ impl Model {
         0.9 * self.critical_time_step()
     }
 
-    /// The symmetric rest stiffness of a cell of each parameter set (all
-    /// cells are cubes of edge h, so one matrix per material).
-    fn rest_cell_matrices(&self) -> Vec<[[f64; 24]; 24]> {
+    /// The force Jacobian of a cell of each parameter set at rest, on the
+    /// ideal cube of edge h (all cells are such cubes, so one matrix per
+    /// material; their corners' rounded coordinates would make alike cells'
+    /// matrices differ in their last bits).
+    fn rest_cell_jacobians(&self) -> Vec<[[f64; 24]; 24]> {
         self.params
             .iter()
             .map(|p| {
                 let cube: [[f64; 3]; 8] = std::array::from_fn(|k| {
                     hexmesh::CORNER_OFFSETS[k].map(|o| o as f64 * p.rest_edge)
                 });
-                let j = kernel::cell_jacobian(p, &cube);
-                std::array::from_fn(|r| std::array::from_fn(|c| -0.5 * (j[r][c] + j[c][r])))
+                kernel::cell_jacobian(p, &cube)
             })
+            .collect()
+    }
+
+    /// The symmetric rest stiffness of a cell of each parameter set, from
+    /// [`Model::rest_cell_jacobians`].
+    fn rest_cell_matrices(&self) -> Vec<[[f64; 24]; 24]> {
+        self.rest_cell_jacobians()
+            .into_iter()
+            .map(|j| std::array::from_fn(|r| std::array::from_fn(|c| -0.5 * (j[r][c] + j[c][r]))))
             .collect()
     }
 
@@ -1600,19 +1605,22 @@ impl Model {
     /// matrix-free, in the force pass's layer order (the same bits for any
     /// thread count).
     fn rest_stiffness_mul(&self, mats: &[[[f64; 24]; 24]], v: &[Vec3], out: &mut [Vec3]) {
-        self.add_by_layers(out, |cell| {
-            let k = &mats[self.param_index(cell)];
-            let nodes = &self.cells[cell];
-            let mut local = [0.0f64; 24];
-            for (a, &n) in nodes.iter().enumerate() {
-                let p = &v[n as usize];
-                local[3 * a] = p.x;
-                local[3 * a + 1] = p.y;
-                local[3 * a + 2] = p.z;
-            }
-            std::array::from_fn(|a| {
-                Vec3::from_fn(|d, _| k[3 * a + d].iter().zip(&local).map(|(x, y)| x * y).sum())
-            })
+        self.add_batches_by_layers(out, false, |first, _, fc| {
+            fill_cells(fc, first, |cell| {
+                let k = &mats[self.param_index(cell)];
+                let mut local = [0.0f64; 24];
+                for (a, &n) in self.cells[cell].iter().enumerate() {
+                    let p = &v[n as usize];
+                    local[3 * a] = p.x;
+                    local[3 * a + 1] = p.y;
+                    local[3 * a + 2] = p.z;
+                }
+                std::array::from_fn(|a| {
+                    std::array::from_fn(|d| {
+                        k[3 * a + d].iter().zip(&local).map(|(x, y)| x * y).sum()
+                    })
+                })
+            });
         });
     }
 
@@ -1632,40 +1640,9 @@ impl Model {
             if uniform {
                 kernel::tangent_action_batch(self.params_of(first), cells, xs, vs, fc);
             } else {
-                for (k, f) in fc.chunks_exact_mut(8).enumerate() {
-                    let cell = first + k;
-                    let out8 = kernel::cell_tangent_action(
-                        self.params_of(cell),
-                        &self.cells[cell],
-                        xs,
-                        vs,
-                    );
-                    for (f, o) in f.iter_mut().zip(out8) {
-                        *f = [o[0], o[1], o[2], 0.0];
-                    }
-                }
-            }
-        });
-    }
-
-    /// `out = sum over cells of the cell's 8 corner vectors`, `per_cell(c)`
-    /// giving them, added in the force pass's layer order: the even layers
-    /// in parallel, then the odd ones, each layer's cells in order (the same
-    /// bits for any thread count).
-    fn add_by_layers(&self, out: &mut [Vec3], per_cell: impl Fn(usize) -> [Vec3; 8] + Sync) {
-        out.par_chunks_mut(4 * CHUNK)
-            .for_each(|c| c.fill(Vec3::zeros()));
-        let shared = SharedForces(out.as_mut_ptr());
-        self.each_cell_by_layers(|cell| {
-            let corner = per_cell(cell);
-            let s = shared;
-            for (&n, f) in self.cells[cell].iter().zip(corner) {
-                // SAFETY: as in the force pass, the nodes of a layer of this
-                // phase's parity belong to no other task of the phase; `out`
-                // has one entry per node.
-                unsafe {
-                    *s.0.add(n as usize) += f;
-                }
+                fill_cells(fc, first, |cell| {
+                    kernel::cell_tangent_action(self.params_of(cell), &self.cells[cell], xs, vs)
+                });
             }
         });
     }

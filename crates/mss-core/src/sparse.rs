@@ -677,11 +677,7 @@ mod tests {
         );
         let run = |threads: usize| {
             let mut out = vec![Vec3::zeros(); v.len()];
-            rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap()
-                .install(|| upper.mul(&v, &mut out));
+            crate::on_threads(threads, || upper.mul(&v, &mut out));
             out
         };
         let one = run(1);

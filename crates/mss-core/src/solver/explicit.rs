@@ -1340,11 +1340,7 @@ mod tests {
         for v in [&v, &with_nan] {
             let expected = serial(v);
             for threads in [1, 2, 3] {
-                let pool = rayon::ThreadPoolBuilder::new()
-                    .num_threads(threads)
-                    .build()
-                    .unwrap();
-                let got = pool.install(|| max_cell_velocity_change(&model, v, 0.01));
+                let got = crate::on_threads(threads, || max_cell_velocity_change(&model, v, 0.01));
                 assert_eq!(got.0, expected.0, "{threads} threads");
                 assert_eq!(got.1.to_bits(), expected.1.to_bits(), "{threads} threads");
             }

@@ -664,9 +664,8 @@ impl LinearSolver {
             .map_err(|e| LinearFailure::Other(e.0))?;
         self.stats.hierarchy_builds += 1;
         let product = operator_product(&mg, action.filter(|_| lean), sign);
-        let before = self.stats.krylov_iterations;
-        let usable = self.krylov(&mg, &*product, symmetric, &b_signed, &mut y, size, rtol);
-        let fresh_iterations = self.stats.krylov_iterations - before;
+        let (usable, fresh_iterations) =
+            self.krylov(&mg, &*product, symmetric, &b_signed, &mut y, size, rtol);
         drop(product);
         // A solve that kept no matrix has none to factor: it reports as a
         // large solve does.
@@ -750,9 +749,8 @@ impl LinearSolver {
         self.stats.hierarchy_builds += 1;
         let mut y = vec![Vec3::zeros(); b.len()];
         let product = operator_product(&mg, Some(action), sign);
-        let before = self.stats.krylov_iterations;
-        let usable = self.krylov(&mg, &*product, symmetric, &b_signed, &mut y, size, rtol);
-        let fresh_iterations = self.stats.krylov_iterations - before;
+        let (usable, fresh_iterations) =
+            self.krylov(&mg, &*product, symmetric, &b_signed, &mut y, size, rtol);
         drop(product);
         let last = LastSolve {
             mg,
@@ -784,7 +782,8 @@ impl LinearSolver {
 
     /// Krylov iterations on `mg`'s operator from `y` (zero) to a relative
     /// residual `rtol`, counted in the stats; whether the solution is
-    /// usable (finite, below `1e6 size`, converged or at least within 0.1).
+    /// usable (finite, below `1e6 size`, converged or at least within 0.1),
+    /// and the iterations taken.
     #[allow(clippy::too_many_arguments)]
     fn krylov(
         &mut self,
@@ -795,7 +794,7 @@ impl LinearSolver {
         y: &mut [Vec3],
         size: f64,
         rtol: f64,
-    ) -> bool {
+    ) -> (bool, u32) {
         let info = super::multigrid::krylov(mg, product, b, y, rtol, 500, symmetric);
         self.stats.krylov_iterations += info.iterations;
         log::debug!(
@@ -806,10 +805,11 @@ impl LinearSolver {
             info.relative_residual
         );
         let worst = y.iter().map(|v| v.amax()).fold(0.0, f64::max);
-        info.relative_residual.is_finite()
+        let usable = info.relative_residual.is_finite()
             && worst.is_finite()
             && worst <= 1e6 * size
-            && (info.converged || info.relative_residual <= 0.1)
+            && (info.converged || info.relative_residual <= 0.1);
+        (usable, info.iterations)
     }
 
     /// Solves `A y = b` with the matrix and hierarchy of the last iterative
@@ -883,8 +883,7 @@ impl LinearSolver {
         let b_signed: Vec<Vec3> = b.iter().map(|v| v * last.sign).collect();
         let mut y = vec![Vec3::zeros(); b.len()];
         let product = operator_product(&last.mg, action.filter(|_| last.lean), last.sign);
-        let before = self.stats.krylov_iterations;
-        let usable = self.krylov(
+        let (usable, iterations) = self.krylov(
             &last.mg,
             &*product,
             last.symmetric,
@@ -893,7 +892,6 @@ impl LinearSolver {
             size,
             rtol,
         );
-        let iterations = self.stats.krylov_iterations - before;
         drop(product);
         // A new operator that takes many more iterations than the one the
         // hierarchy was built for has moved away from it (a body turned far,

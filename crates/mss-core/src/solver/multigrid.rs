@@ -1589,6 +1589,17 @@ pub(crate) fn definiteness(
 mod tests {
     use super::*;
 
+    /// The default model (`volumetric-barrier+hg`) on `l`, E = 10 kPa.
+    fn default_model(l: &hexmesh::Lattice) -> crate::Model {
+        crate::Model::new(
+            l,
+            crate::Material::new(1e4, 0.3, 1000.0).unwrap(),
+            &crate::model::HourglassControl::new(Box::new(crate::model::VolumetricBarrier), 1.0)
+                .unwrap(),
+        )
+        .unwrap()
+    }
+
     /// The smoothing product gives the same bits on the AVX2 path and the
     /// portable one and for any thread count, and agrees with the `f64`
     /// product of the symmetric part to single precision; the full matrix
@@ -1629,11 +1640,7 @@ mod tests {
         let mut portable = vec![Vec3::zeros(); x.len()];
         half_mul_rows(&half, &x, &mut portable, 0);
         let mut threaded = vec![Vec3::zeros(); x.len()];
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(3)
-            .build()
-            .unwrap()
-            .install(|| half.mul(&x, &mut threaded));
+        crate::on_threads(3, || half.mul(&x, &mut threaded));
         let mut exact = vec![Vec3::zeros(); x.len()];
         mul(&sym, &x, &mut exact);
         for (((f, p), t), e) in fast.iter().zip(&portable).zip(&threaded).zip(&exact) {
@@ -1652,13 +1659,7 @@ mod tests {
     #[test]
     fn repeated_blocks_are_stored_once_with_the_same_products() {
         let l = hexmesh::Lattice::block([24, 12, 12], 0.01, [0.3, -0.2, 0.1]).unwrap();
-        let model = crate::Model::new(
-            &l,
-            crate::Material::new(1e4, 0.3, 1000.0).unwrap(),
-            &crate::model::HourglassControl::new(Box::new(crate::model::VolumetricBarrier), 1.0)
-                .unwrap(),
-        )
-        .unwrap();
+        let model = default_model(&l);
         let rest = model.rest_positions();
         let mask: Vec<[bool; 3]> = rest.iter().map(|p| [p.x > 0.3 + 1e-9; 3]).collect();
         let mut whole = HalfMatrix::from_upper(model.symmetric_stiffness_upper(rest));
@@ -1684,11 +1685,7 @@ mod tests {
             .collect();
         let product = |a: &HalfMatrix, threads: usize| {
             let mut y = vec![Vec3::zeros(); x.len()];
-            rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap()
-                .install(|| a.mul(&x, &mut y));
+            crate::on_threads(threads, || a.mul(&x, &mut y));
             y
         };
         let expected = product(&whole, 1);
@@ -1757,13 +1754,7 @@ mod tests {
     #[test]
     fn definiteness_finds_a_localized_negative_direction() {
         let l = hexmesh::Lattice::block([16, 8, 8], 0.01, [0.0; 3]).unwrap();
-        let model = crate::Model::new(
-            &l,
-            crate::Material::new(1e4, 0.3, 1000.0).unwrap(),
-            &crate::model::HourglassControl::new(Box::new(crate::model::VolumetricBarrier), 1.0)
-                .unwrap(),
-        )
-        .unwrap();
+        let model = default_model(&l);
         let rest = model.rest_positions();
         let free: Vec<bool> = rest.iter().flat_map(|p| [p.x > 1e-9; 3]).collect();
         let shape = HierarchyShape::new(l.cells(), &model.grid_coords(), &free, false);
