@@ -1461,26 +1461,46 @@ impl Model {
         // At rest every cell of a parameter set is the same cube: the rows
         // of alike nodes then get the same bits, which lets the multigrid
         // store each distinct block once.
-        let at_rest = (x == self.rest_positions()).then(|| self.rest_cell_jacobians());
-        // Any cell's verdict decides: the same for any order of the cells.
-        let skewed = AtomicBool::new(false);
-        self.each_cell_by_layers(|cell| {
-            let jac = match &at_rest {
-                Some(mats) => mats[self.param_index(cell)],
-                None => kernel::cell_jacobian(self.params_of(cell), &self.corners(x, cell)),
-            };
-            if !skewed.load(Ordering::Relaxed) {
-                let (mut largest, mut skew) = (0.0f64, 0.0f64);
-                for (p, row) in jac.iter().enumerate() {
-                    for (q, v) in row.iter().enumerate() {
-                        largest = largest.max(v.abs());
-                        skew = skew.max((v - jac[q][p]).abs());
-                    }
-                }
-                if skew > 1e-10 * largest {
-                    skewed.store(true, Ordering::Relaxed);
+        // The cell's symmetrized stiffness blocks, and whether its Jacobian
+        // was symmetric.
+        let symmetrized = |jac: &[[f64; 24]; 24]| {
+            let (mut largest, mut skew) = (0.0f64, 0.0f64);
+            for (p, row) in jac.iter().enumerate() {
+                for (q, v) in row.iter().enumerate() {
+                    largest = largest.max(v.abs());
+                    skew = skew.max((v - jac[q][p]).abs());
                 }
             }
+            let blocks: [[Mat3; 8]; 8] = std::array::from_fn(|b| {
+                std::array::from_fn(|a| {
+                    Mat3::from_fn(|e, d| {
+                        -(0.5 * (jac[3 * b + e][3 * a + d] + jac[3 * a + d][3 * b + e]))
+                    })
+                })
+            });
+            (blocks, skew <= 1e-10 * largest)
+        };
+        // At rest the blocks of each parameter set are computed once.
+        let at_rest: Option<Vec<([[Mat3; 8]; 8], bool)>> = (x == self.rest_positions())
+            .then(|| self.rest_cell_jacobians().iter().map(symmetrized).collect());
+        // Any cell's verdict decides: the same for any order of the cells.
+        let skewed = AtomicBool::new(at_rest.as_ref().is_some_and(|m| m.iter().any(|(_, s)| !s)));
+        self.each_cell_by_layers(|cell| {
+            let own;
+            let blocks = match &at_rest {
+                Some(mats) => &mats[self.param_index(cell)].0,
+                None => {
+                    let (b, symmetric) = symmetrized(&kernel::cell_jacobian(
+                        self.params_of(cell),
+                        &self.corners(x, cell),
+                    ));
+                    if !symmetric {
+                        skewed.store(true, Ordering::Relaxed);
+                    }
+                    own = b;
+                    &own
+                }
+            };
             let nodes = &self.cells[cell];
             let s = shared;
             for (b, &rb) in nodes.iter().enumerate() {
@@ -1496,12 +1516,7 @@ impl Model {
                     // is within the pattern, which the blocks have one entry
                     // per.
                     let blk = unsafe { &mut *s.0.add(k) };
-                    for e in 0..3 {
-                        for d in 0..3 {
-                            blk[(e, d)] -=
-                                0.5 * (jac[3 * b + e][3 * a + d] + jac[3 * a + d][3 * b + e]);
-                        }
-                    }
+                    *blk += blocks[b][a];
                 }
             }
         });

@@ -931,14 +931,15 @@ pub struct NewtonOptions {
     /// (the energy's directional derivative for conservative forces) instead of
     /// backtracking on `|R|`; `|R|` backtracking remains the fallback.
     pub slope_line_search: bool,
-    /// Keep a tangent's multigrid hierarchy as the preconditioner of the
-    /// later tangents (their actions the Krylov operator), of this solve
-    /// and of the next solves with the same linear solver, where the solve
-    /// is matrix-free: no symmetric part and no set-up per tangent. A
-    /// solve it does not serve falls back to a new hierarchy, and one that
-    /// takes many more Krylov iterations on it than its first solve did
-    /// releases it. For implicit steps, whose mass term keeps an earlier
-    /// tangent's hierarchy a good preconditioner of the later ones.
+    /// Keep a tangent's multigrid hierarchy over solves: the next solves
+    /// with the same linear solver start on it (their tangents' actions the
+    /// Krylov operator) where they are matrix-free. Within one solve a
+    /// matrix-free Newton iteration always does so: no symmetric part and
+    /// no set-up per tangent. A solve it does not serve falls back to a
+    /// new hierarchy, and one that takes many more Krylov iterations on it
+    /// than its first solve took per decade of residual releases it. For
+    /// implicit steps, whose mass term keeps an earlier tangent's hierarchy
+    /// a good preconditioner of the later ones.
     pub keep_hierarchy: bool,
 }
 
@@ -952,6 +953,10 @@ pub struct NewtonOptions {
 /// the same tangent (see [`newton`]). Looser than 1e-3 (0.1) costs Newton
 /// iterations, each a tangent assembly and a hierarchy set-up.
 const INITIAL_FORCING: f64 = 1e-3;
+
+/// Share of the Newton target that a linear solve's residual is allowed
+/// (the forcing term is never below it).
+const NEWTON_TARGET_SHARE: f64 = 0.25;
 
 /// Loosest linear solve of a Newton step (iterative solvers) before the
 /// target is near. Eisenstat and Walker allow 0.1, but on the lattice a
@@ -1141,8 +1146,14 @@ fn newton_iterations(
             Some(prev) if prev > 0.0 => (0.9 * (norm / prev).powi(2)).clamp(1e-8, MAX_FORCING),
             _ => INITIAL_FORCING,
         };
-        // Never beyond what reaches the Newton target from here.
-        let eta = forcing.max(0.05 * target.max(floor) / norm).min(0.1);
+        // Never beyond what reaches the Newton target from here: a linear
+        // residual of a quarter of the target leaves the nonlinear one below
+        // it near convergence, where the remainder is quadratic (a
+        // twentieth asked for Krylov iterations that saved no Newton
+        // iteration).
+        let eta = forcing
+            .max(NEWTON_TARGET_SHARE * target.max(floor) / norm)
+            .min(0.1);
         previous_norm = Some(norm);
         let reused = match chord.take() {
             // A chord step contracts by about q whatever the linear
@@ -1159,7 +1170,7 @@ fn newton_iterations(
         // earlier solve's): its action at `x`.
         let kept_scale = linear.newton_scale();
         let reused = match reused {
-            None if opts.keep_hierarchy && matrix_free && (it > 0 || kept_scale.is_some()) => {
+            None if matrix_free && (it > 0 || (opts.keep_hierarchy && kept_scale.is_some())) => {
                 if it == 0 {
                     // The round-off floor from the earlier solve's tangent.
                     let kmax = kept_scale.unwrap_or(0.0);

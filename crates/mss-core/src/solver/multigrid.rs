@@ -395,19 +395,110 @@ fn row_chunks<'a>(
     out
 }
 
+/// [`half_mul_rows`] in AVX registers: the same operations in the same
+/// order on each lane (so the same bits). Left to itself the compiler drops
+/// the discarded fourth lane and splits the other three into a 2-wide and a
+/// scalar instruction, which doubled the product's instruction count.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 fn half_mul_rows_avx2(a: &HalfMatrix, x: &[Vec3], y: &mut [Vec3], first: usize) {
-    half_mul_rows(a, x, y, first);
+    half_mul_rows_with::<Avx2Rows>(a, x, y, first);
 }
 
-/// Rows `first..first + y.len()` of [`HalfMatrix::mul`]; no FMA on any
-/// path, so every path (and either storage of the blocks) gives the same
-/// bits.
+/// The rows of [`HalfMatrix::mul`] for either storage of the blocks.
+trait HalfRows {
+    /// Rows `first..first + y.len()`: row `i`'s blocks below the diagonal
+    /// are `below_of(i)` (entry in `blocks`, row), block `p` of the upper
+    /// half is entry `upper_entry(p)`.
+    fn rows<'a, B: BlockEntry>(
+        a: &HalfMatrix,
+        blocks: &[B],
+        below_of: impl Fn(usize) -> &'a [(u32, u32)],
+        upper_entry: impl Fn(usize) -> usize,
+        x: &[Vec3],
+        y: &mut [Vec3],
+        first: usize,
+    );
+}
+
+/// The rows on `f64` lanes, left to the compiler.
+struct PortableRows;
+impl HalfRows for PortableRows {
+    #[inline(always)]
+    fn rows<'a, B: BlockEntry>(
+        a: &HalfMatrix,
+        blocks: &[B],
+        below_of: impl Fn(usize) -> &'a [(u32, u32)],
+        upper_entry: impl Fn(usize) -> usize,
+        x: &[Vec3],
+        y: &mut [Vec3],
+        first: usize,
+    ) {
+        let u = &a.pattern.upper;
+        for (k, yi) in y.iter_mut().enumerate() {
+            let i = first + k;
+            let mut below = [[0.0f64; 4]; 3];
+            for &(p, j) in below_of(i) {
+                let v = &x[j as usize];
+                let xv = [v.x, v.y, v.z, 0.0];
+                let b = &blocks[9 * p as usize..9 * p as usize + 12];
+                for (e, acc) in below.iter_mut().enumerate() {
+                    let col = &b[3 * e..3 * e + 4];
+                    for l in 0..4 {
+                        acc[l] += col[l].widen() * xv[l];
+                    }
+                }
+            }
+            // One accumulator per column of the blocks: three independent
+            // chains of additions instead of one three times as long, which
+            // bounded the product by the adder's latency.
+            let mut acc = [[0.0f64; 4]; 3];
+            let lo = u.row_offsets[i] as usize;
+            let hi = u.row_offsets[i + 1] as usize;
+            for (p, &c) in (lo..hi).zip(&u.col_indices[lo..hi]) {
+                let v = &x[c as usize];
+                let e = upper_entry(p);
+                let b = &blocks[9 * e..9 * e + 12];
+                for (d, xd) in [v.x, v.y, v.z].into_iter().enumerate() {
+                    let col = &b[3 * d..3 * d + 4];
+                    for l in 0..4 {
+                        acc[d][l] += col[l].widen() * xd;
+                    }
+                }
+            }
+            *yi = Vec3::from_fn(|e, _| {
+                ((acc[0][e] + acc[1][e]) + acc[2][e]) + ((below[e][0] + below[e][1]) + below[e][2])
+            });
+        }
+    }
+}
+
+/// [`half_mul_rows_avx2_of`]: used by [`half_mul_rows_avx2`] only.
+#[cfg(target_arch = "x86_64")]
+struct Avx2Rows;
+#[cfg(target_arch = "x86_64")]
+impl HalfRows for Avx2Rows {
+    #[inline(always)]
+    fn rows<'a, B: BlockEntry>(
+        a: &HalfMatrix,
+        blocks: &[B],
+        below_of: impl Fn(usize) -> &'a [(u32, u32)],
+        upper_entry: impl Fn(usize) -> usize,
+        x: &[Vec3],
+        y: &mut [Vec3],
+        first: usize,
+    ) {
+        // SAFETY: only `half_mul_rows_avx2`, which runs with AVX2, uses
+        // these rows.
+        unsafe { half_mul_rows_avx2_of(a, blocks, below_of, upper_entry, x, y, first) }
+    }
+}
+
+/// The rows `R` on `a`'s blocks, shared or not.
 #[inline(always)]
-fn half_mul_rows(a: &HalfMatrix, x: &[Vec3], y: &mut [Vec3], first: usize) {
+fn half_mul_rows_with<R: HalfRows>(a: &HalfMatrix, x: &[Vec3], y: &mut [Vec3], first: usize) {
     match &a.shared {
-        Some(s) => half_mul_rows_of(
+        Some(s) => R::rows(
             a,
             &s.distinct,
             |i| &s.below[a.pattern.column_range(i)],
@@ -416,32 +507,15 @@ fn half_mul_rows(a: &HalfMatrix, x: &[Vec3], y: &mut [Vec3], first: usize) {
             y,
             first,
         ),
-        None => half_mul_rows_of(a, &a.blocks, |i| a.pattern.column(i), |p| p, x, y, first),
+        None => R::rows(a, &a.blocks, |i| a.pattern.column(i), |p| p, x, y, first),
     }
 }
 
-/// A stored block entry: single precision, or its exact `f64` value.
-trait BlockEntry: Copy {
-    fn widen(self) -> f64;
-}
-impl BlockEntry for f32 {
-    #[inline(always)]
-    fn widen(self) -> f64 {
-        f64::from(self)
-    }
-}
-impl BlockEntry for f64 {
-    #[inline(always)]
-    fn widen(self) -> f64 {
-        self
-    }
-}
-
-/// [`half_mul_rows`] with the blocks in `blocks`: row `i`'s blocks below the
-/// diagonal are `below(i)` (entry in `blocks`, row), block `p` of the upper
-/// half is entry `upper(p)`.
-#[inline(always)]
-fn half_mul_rows_of<'a, B: BlockEntry>(
+/// [`PortableRows`] with each four-lane accumulator one AVX register.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+fn half_mul_rows_avx2_of<'a, B: BlockEntry>(
     a: &HalfMatrix,
     blocks: &[B],
     below_of: impl Fn(usize) -> &'a [(u32, u32)],
@@ -450,22 +524,22 @@ fn half_mul_rows_of<'a, B: BlockEntry>(
     y: &mut [Vec3],
     first: usize,
 ) {
+    use std::arch::x86_64::*;
     let u = &a.pattern.upper;
     for (k, yi) in y.iter_mut().enumerate() {
         let i = first + k;
-        let mut below = [[0.0f64; 4]; 3];
+        let mut below = [_mm256_setzero_pd(); 3];
         for &(p, j) in below_of(i) {
             let v = &x[j as usize];
-            let xv = [v.x, v.y, v.z, 0.0];
+            let xv = _mm256_set_pd(0.0, v.z, v.y, v.x);
             let b = &blocks[9 * p as usize..9 * p as usize + 12];
             for (e, acc) in below.iter_mut().enumerate() {
-                let col = &b[3 * e..3 * e + 4];
-                for l in 0..4 {
-                    acc[l] += col[l].widen() * xv[l];
-                }
+                // SAFETY: this function runs with AVX2.
+                let col = unsafe { B::load4(&b[3 * e..3 * e + 4]) };
+                *acc = _mm256_add_pd(*acc, _mm256_mul_pd(col, xv));
             }
         }
-        let mut acc = [0.0f64; 4];
+        let mut acc = [_mm256_setzero_pd(); 3];
         let lo = u.row_offsets[i] as usize;
         let hi = u.row_offsets[i + 1] as usize;
         for (p, &c) in (lo..hi).zip(&u.col_indices[lo..hi]) {
@@ -473,13 +547,71 @@ fn half_mul_rows_of<'a, B: BlockEntry>(
             let e = upper_entry(p);
             let b = &blocks[9 * e..9 * e + 12];
             for (d, xd) in [v.x, v.y, v.z].into_iter().enumerate() {
-                let col = &b[3 * d..3 * d + 4];
-                for l in 0..4 {
-                    acc[l] += col[l].widen() * xd;
-                }
+                // SAFETY: this function runs with AVX2.
+                let col = unsafe { B::load4(&b[3 * d..3 * d + 4]) };
+                acc[d] = _mm256_add_pd(acc[d], _mm256_mul_pd(col, _mm256_set1_pd(xd)));
             }
         }
-        *yi = Vec3::from_fn(|e, _| acc[e] + ((below[e][0] + below[e][1]) + below[e][2]));
+        let upper = _mm256_add_pd(_mm256_add_pd(acc[0], acc[1]), acc[2]);
+        let mut up = [0.0f64; 4];
+        let mut bl = [[0.0f64; 4]; 3];
+        // SAFETY: each array is 4 f64 long.
+        unsafe {
+            _mm256_storeu_pd(up.as_mut_ptr(), upper);
+            for (out, acc) in bl.iter_mut().zip(&below) {
+                _mm256_storeu_pd(out.as_mut_ptr(), *acc);
+            }
+        }
+        *yi = Vec3::from_fn(|e, _| up[e] + ((bl[e][0] + bl[e][1]) + bl[e][2]));
+    }
+}
+
+/// Rows `first..first + y.len()` of [`HalfMatrix::mul`]; no FMA on any
+/// path, so every path (and either storage of the blocks) gives the same
+/// bits.
+#[inline(always)]
+fn half_mul_rows(a: &HalfMatrix, x: &[Vec3], y: &mut [Vec3], first: usize) {
+    half_mul_rows_with::<PortableRows>(a, x, y, first);
+}
+
+/// A stored block entry: single precision, or its exact `f64` value.
+trait BlockEntry: Copy {
+    fn widen(self) -> f64;
+    /// The first four entries of `four` widened into an AVX register.
+    ///
+    /// # Safety
+    /// The CPU supports AVX2.
+    #[cfg(target_arch = "x86_64")]
+    unsafe fn load4(four: &[Self]) -> std::arch::x86_64::__m256d;
+}
+impl BlockEntry for f32 {
+    #[inline(always)]
+    fn widen(self) -> f64 {
+        f64::from(self)
+    }
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    unsafe fn load4(four: &[f32]) -> std::arch::x86_64::__m256d {
+        use std::arch::x86_64::*;
+        assert!(four.len() >= 4);
+        // SAFETY: four entries are there (checked).
+        _mm256_cvtps_pd(unsafe { _mm_loadu_ps(four.as_ptr()) })
+    }
+}
+impl BlockEntry for f64 {
+    #[inline(always)]
+    fn widen(self) -> f64 {
+        self
+    }
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    unsafe fn load4(four: &[f64]) -> std::arch::x86_64::__m256d {
+        use std::arch::x86_64::*;
+        assert!(four.len() >= 4);
+        // SAFETY: four entries are there (checked).
+        unsafe { _mm256_loadu_pd(four.as_ptr()) }
     }
 }
 

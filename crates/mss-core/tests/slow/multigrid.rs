@@ -318,8 +318,9 @@ fn bending_from_rest_keeps_its_first_tangent_and_agrees_with_the_direct_solver()
 
 /// Above `matrix_free_above` free dofs the Newton solves keep no `f64`
 /// tangent (the hierarchy's single-precision copy only; Krylov products by
-/// the tangent's action) and the stability test holds the symmetric part
-/// once per pair of blocks: the equilibria and the stability verdicts are
+/// the tangent's action, a new tangent solved on the first one's hierarchy)
+/// and the stability test holds the symmetric part once per pair of blocks:
+/// the equilibria and the stability verdicts are
 /// the assembled path's, for symmetric and non-symmetric tangents, small and
 /// large loads (the large one's equilibrium is refused as unstable by both).
 #[test]
@@ -350,6 +351,15 @@ fn matrix_free_solves_agree_with_the_assembled_ones() {
             param.name()
         );
         assert_eq!(a.stability, l.stability, "{} load {load}", param.name());
+        // New tangents are solved on the first one's hierarchy while it
+        // serves (a new one after it goes stale), where the assembled path
+        // builds one per tangent.
+        let (built, lean_built) = (a.linear.hierarchy_builds, l.linear.hierarchy_builds);
+        assert!(
+            lean_built <= 2 && lean_built < built,
+            "{} load {load}: {lean_built} hierarchies matrix-free, {built} assembled",
+            param.name()
+        );
         let expected = if load > 1.0 {
             Stability::Unstable
         } else {
