@@ -1427,10 +1427,8 @@ impl Model {
     /// The tangent's block pattern (row offsets, column indices), built on
     /// first use and kept.
     fn tangent_pattern(&self) -> &(Vec<u32>, Vec<u32>) {
-        self.tangent_pattern.get_or_init(|| {
-            let p = BlockCsr::lattice_pattern(self.num_nodes(), &self.cells);
-            (p.row_offsets, p.col_indices)
-        })
+        self.tangent_pattern
+            .get_or_init(|| BlockCsr::lattice_pattern_indices(self.num_nodes(), &self.cells))
     }
 
     /// Calls `visit` with every cell in the force pass's layer order: the

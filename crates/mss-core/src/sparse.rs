@@ -21,6 +21,22 @@ impl BlockCsr {
     /// over `num_nodes` nodes (the diagonal is always present); a cell is
     /// any fixed number of nodes (8 for a hexahedron).
     pub fn lattice_pattern<const N: usize>(num_nodes: usize, cells: &[[u32; N]]) -> Self {
+        let (row_offsets, col_indices) = Self::lattice_pattern_indices(num_nodes, cells);
+        let blocks = vec![Mat3::zeros(); col_indices.len()];
+        Self {
+            row_offsets,
+            col_indices,
+            blocks,
+        }
+    }
+
+    /// The row offsets and column indices of [`BlockCsr::lattice_pattern`],
+    /// without its blocks (72 bytes per block, which callers that keep only
+    /// the pattern used to allocate and zero).
+    pub fn lattice_pattern_indices<const N: usize>(
+        num_nodes: usize,
+        cells: &[[u32; N]],
+    ) -> (Vec<u32>, Vec<u32>) {
         use rayon::prelude::*;
         // Cells of each node (counting sort), then each row on its own: a
         // few dozen candidates sorted in cache, rather than one sort of
@@ -74,12 +90,7 @@ impl BlockCsr {
             }
             col_indices.extend_from_slice(&cols);
         }
-        let blocks = vec![Mat3::zeros(); col_indices.len()];
-        Self {
-            row_offsets,
-            col_indices,
-            blocks,
-        }
+        (row_offsets, col_indices)
     }
 
     /// Number of block rows (= nodes).

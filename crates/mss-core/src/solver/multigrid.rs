@@ -775,11 +775,9 @@ impl HierarchyShape {
                 let shifted: Vec<[u32; 8]> = cells.iter().map(|c| c.map(|n| n + nc)).collect();
                 cells.extend(shifted);
             }
-            let full = BlockCsr::lattice_pattern(level_size(nc as usize, enrich), &cells);
-            coarse_patterns.push(SymmetricUpper::upper_pattern_only(
-                &full.row_offsets,
-                &full.col_indices,
-            ));
+            let (rows, cols) =
+                BlockCsr::lattice_pattern_indices(level_size(nc as usize, enrich), &cells);
+            coarse_patterns.push(SymmetricUpper::upper_pattern_only(&rows, &cols));
             first_companions.push(if enrich { nc } else { u32::MAX });
             prolongations.push(Prolongation {
                 offsets,
