@@ -5,7 +5,10 @@
 //! `R(x) = f_int(x) + f_ext(t + dt, x) - alpha M v - beta K0 v - M (v - v_n) / dt = 0`
 //! with the exact tangent of the internal forces (non-symmetric at large strain
 //! with correction forces), the loads' Jacobians and the damping terms, a
-//! sparse LU solve and a backtracking line search on `|R|`. If Newton fails or
+//! sparse LU solve (or multigrid Krylov) and a line search on the slope of
+//! the step's incremental energy (`|R|` rises along Newton steps that turn
+//! the body while the energy falls; backtracking on `|R|` is the fallback
+//! where the slope does not descend). If Newton fails or
 //! cells invert, the step is retried as two half steps (recursively, up to
 //! `max_halvings` times) before giving up.
 //!
@@ -160,7 +163,7 @@ impl Implicit {
             NewtonOptions {
                 max_iterations: self.opts.max_newton,
                 rtol: self.opts.rtol,
-                slope_line_search: false,
+                slope_line_search: true,
                 keep_hierarchy: true,
             },
             self.linear.borrow_mut().get_or_insert_with(|| {

@@ -819,3 +819,57 @@ fn matrix_free_tangent_action_is_the_assembled_product() {
         );
     }
 }
+
+/// A soft cantilever swinging down from rest in steps of 0.1 s (each step
+/// turns its tip by tens of degrees): Newton's full steps raise `|R|` while
+/// they lower the step's energy, and the implicit solver's line search on
+/// the energy's slope takes them where backtracking on `|R|` cut them
+/// (measured: 52 and 42 Newton iterations over the ten steps with the slope,
+/// 77 and 60 with `|R|` backtracking).
+#[test]
+fn a_swinging_cantilever_takes_full_newton_steps() {
+    let mat = Material::new(1000.0, 0.3, 3.125).unwrap();
+    let hg = mss_core::HourglassControl::new(Box::new(mss_core::Volumetric), 0.05).unwrap();
+    for (param, most) in [(&PaperModel as &dyn Parameterization, 60), (&hg, 50)] {
+        let p = Problem::from_specs(
+            cantilever_with([16, 4, 4], mat, param),
+            &[ConstraintSpec::fixed(NodeSelector::face(Face::XMin))],
+            &[LoadSpec::Gravity {
+                g: [0.0, 0.0, -9.81],
+            }],
+            Damping::NONE,
+        )
+        .unwrap();
+        let mut im = Implicit::new(
+            &p,
+            ImplicitOptions {
+                dt: 0.1,
+                ..ImplicitOptions::default()
+            },
+        )
+        .unwrap();
+        let mut s = State::at_rest(p.model());
+        let (mut newton, mut substeps) = (0, 0);
+        for _ in 0..10 {
+            let info = im.step(&p, &mut s).unwrap();
+            newton += info.newton_iterations;
+            substeps += info.substeps;
+        }
+        let tip = s
+            .displacements(p.model())
+            .iter()
+            .map(|u| u.norm())
+            .fold(0.0, f64::max);
+        println!(
+            "{}: {newton} Newton iterations, {substeps} steps, tip moved {tip:.3} m",
+            param.name()
+        );
+        assert!(tip > 0.05, "{}: not a large swing ({tip} m)", param.name());
+        assert_eq!(substeps, 10, "{}: steps were halved", param.name());
+        assert!(
+            newton <= most,
+            "{}: {newton} Newton iterations",
+            param.name()
+        );
+    }
+}
