@@ -1040,3 +1040,89 @@ impl LinearSolver {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A new operator far from the one a kept hierarchy was built for: its
+    /// solve stops at the cap (twice the stale count for its accuracy), the
+    /// hierarchy is released, and a new operator close to the first one
+    /// (the same tangent) is solved on it within the stale count.
+    #[test]
+    fn a_stale_hierarchy_stops_its_solve_at_the_cap_and_is_released() {
+        let l = hexmesh::Lattice::block([16, 4, 4], 0.01, [0.0; 3]).unwrap();
+        let model = crate::Model::new(
+            &l,
+            crate::Material::new(1e4, 0.3, 1000.0).unwrap(),
+            &crate::model::HourglassControl::new(Box::new(crate::model::Volumetric), 0.05).unwrap(),
+        )
+        .unwrap();
+        let n = model.num_nodes();
+        let rest = model.rest_positions().to_vec();
+        // The x- face held.
+        let free: Vec<bool> = rest.iter().flat_map(|p| [p.x > 1e-9; 3]).collect();
+        let b: Vec<Vec3> = (0..n)
+            .map(|i| Vec3::new(0.0, 0.0, if rest[i].x > 1e-9 { -1.0 } else { 0.0 }))
+            .collect();
+        let tangent = |v: &[Vec3], out: &mut [Vec3]| model.tangent_mul(&rest, v, out);
+        let first = || {
+            let mut linear = LinearSolver::new(&model, LinearSolverKind::Iterative);
+            linear.set_matrix_free_above(0);
+            let half = model.symmetric_stiffness_upper(&rest);
+            linear
+                .solve_without_matrix(half, &b, &free, 0.16, 1e-3, &tangent)
+                .unwrap();
+            let fresh_rate = linear.last.as_ref().unwrap().fresh_rate;
+            (linear, fresh_rate)
+        };
+        let rtol = 1e-8;
+
+        // The same tangent: the hierarchy serves, and is kept.
+        let (mut linear, fresh_rate) = first();
+        let stale_above = STALE_GROWTH * fresh_rate * decades(rtol) + STALE_SLACK;
+        let before = linear.stats().krylov_iterations;
+        assert!(
+            linear
+                .solve_with_new_action(&b, &free, 0.16, rtol, &tangent)
+                .is_some()
+        );
+        let iterations = linear.stats().krylov_iterations - before;
+        assert!(
+            f64::from(iterations) <= stale_above,
+            "{iterations} > {stale_above}"
+        );
+        assert!(linear.last.is_some(), "a serving hierarchy was released");
+
+        // A far operator: the tangent plus a coupling of every node to a
+        // distant one as strong as the diagonal (non-symmetric).
+        let diagonal = {
+            let mut e = vec![Vec3::zeros(); n];
+            let mut out = vec![Vec3::zeros(); n];
+            e[n / 2] = Vec3::new(1.0, 0.0, 0.0);
+            tangent(&e, &mut out);
+            out[n / 2].x.abs()
+        };
+        let far = |v: &[Vec3], out: &mut [Vec3]| {
+            tangent(v, out);
+            for (i, o) in out.iter_mut().enumerate() {
+                *o += v[(7 * i + n / 3) % n] * diagonal;
+            }
+        };
+        let (mut linear, fresh_rate) = first();
+        let stale_above = STALE_GROWTH * fresh_rate * decades(rtol) + STALE_SLACK;
+        let before = linear.stats().krylov_iterations;
+        let _ = linear.solve_with_new_action(&b, &free, 0.16, rtol, &far);
+        let iterations = linear.stats().krylov_iterations - before;
+        assert!(
+            f64::from(iterations) > stale_above,
+            "the far operator converged in {iterations} iterations"
+        );
+        assert!(
+            f64::from(iterations) <= (STALE_CAP * stale_above).ceil(),
+            "{iterations} iterations past the cap {}",
+            STALE_CAP * stale_above
+        );
+        assert!(linear.last.is_none(), "a stale hierarchy was kept");
+    }
+}
