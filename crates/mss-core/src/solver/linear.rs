@@ -679,10 +679,11 @@ impl LinearSolver {
         // hierarchy took more Krylov iterations than a new set-up cost.
         // (Newton's chord steps reuse a matrix with its own hierarchy:
         // `solve_again`; Newton solves without a matrix keep their
-        // hierarchy for new tangents, `solve_with_new_action`, which with
-        // the staleness measured per decade of residual and the iterations
-        // capped lost nowhere: the 128x32x32 cantilever's static solve with
-        // `paper` went from 6.0 to 4.5 s.)
+        // hierarchy for new tangents, `solve_with_new_action`: there a new
+        // hierarchy also costs the symmetric part's assembly, and with
+        // staleness counted per decade of residual and the iterations
+        // capped, keeping it won everywhere measured: the 128x32x32
+        // cantilever's static solve with `paper` 6.0 -> 4.5 s.)
         let lean = action.is_some() && free_dofs > self.matrix_free_above;
         let mg = super::multigrid::Multigrid::new(op, shape, lean)
             .map_err(|e| LinearFailure::Other(e.0))?;
