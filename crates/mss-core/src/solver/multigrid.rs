@@ -169,13 +169,19 @@ const SHARE_MAX_DISTINCT: usize = 1 << 15;
 impl HalfMatrix {
     /// Single-precision blocks of `blocks`, padded.
     fn single(blocks: &[Mat3]) -> Vec<f32> {
-        let mut out: Vec<f32> = Vec::with_capacity(9 * blocks.len() + 3);
-        out.par_extend(
-            blocks
-                .par_iter()
-                .flat_map_iter(|b| b.as_slice().iter().map(|&v| v as f32)),
-        );
-        out.extend([0.0; 3]);
+        // Written in place by chunks of a known length (collecting a
+        // flattened parallel iterator went through lists of pieces).
+        let mut out = vec![0.0f32; 9 * blocks.len() + 3];
+        out[..9 * blocks.len()]
+            .par_chunks_mut(9 * CHUNK)
+            .zip(blocks.par_chunks(CHUNK))
+            .for_each(|(o, b)| {
+                for (o, b) in o.chunks_exact_mut(9).zip(b) {
+                    for (o, &v) in o.iter_mut().zip(b.as_slice()) {
+                        *o = v as f32;
+                    }
+                }
+            });
         out
     }
 
