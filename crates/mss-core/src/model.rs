@@ -1461,42 +1461,30 @@ impl Model {
         // store each distinct block once.
         // The cell's symmetrized stiffness blocks, and whether its Jacobian
         // was symmetric.
-        let symmetrized = |jac: &[[f64; 24]; 24]| {
-            let (mut largest, mut skew) = (0.0f64, 0.0f64);
-            for (p, row) in jac.iter().enumerate() {
-                for (q, v) in row.iter().enumerate() {
-                    largest = largest.max(v.abs());
-                    skew = skew.max((v - jac[q][p]).abs());
-                }
-            }
-            let blocks: [[Mat3; 8]; 8] = std::array::from_fn(|b| {
-                std::array::from_fn(|a| {
-                    Mat3::from_fn(|e, d| {
-                        -(0.5 * (jac[3 * b + e][3 * a + d] + jac[3 * a + d][3 * b + e]))
-                    })
+        // At rest the symmetrized blocks of each parameter set are computed
+        // once; elsewhere each cell's, from its Jacobian, where they are added.
+        let at_rest = (x == self.rest_positions()).then(|| {
+            let jacs = self.rest_cell_jacobians();
+            let symmetric = jacs.iter().all(jacobian_is_symmetric);
+            let blocks: Vec<[[Mat3; 8]; 8]> = jacs
+                .iter()
+                .map(|jac| {
+                    std::array::from_fn(|b| std::array::from_fn(|a| symmetric_block(jac, b, a)))
                 })
-            });
-            (blocks, skew <= 1e-10 * largest)
-        };
-        // At rest the blocks of each parameter set are computed once.
-        let at_rest: Option<Vec<([[Mat3; 8]; 8], bool)>> = (x == self.rest_positions())
-            .then(|| self.rest_cell_jacobians().iter().map(symmetrized).collect());
+                .collect();
+            (blocks, symmetric)
+        });
         // Any cell's verdict decides: the same for any order of the cells.
-        let skewed = AtomicBool::new(at_rest.as_ref().is_some_and(|m| m.iter().any(|(_, s)| !s)));
+        let skewed = AtomicBool::new(at_rest.as_ref().is_some_and(|(_, sym)| !sym));
         self.each_cell_by_layers(|cell| {
-            let own;
-            let blocks = match &at_rest {
-                Some(mats) => &mats[self.param_index(cell)].0,
+            let cell_blocks = match &at_rest {
+                Some((blocks, _)) => CellBlocks::Rest(&blocks[self.param_index(cell)]),
                 None => {
-                    let (b, symmetric) = symmetrized(&kernel::cell_jacobian(
-                        self.params_of(cell),
-                        &self.corners(x, cell),
-                    ));
-                    if !symmetric {
+                    let jac = kernel::cell_jacobian(self.params_of(cell), &self.corners(x, cell));
+                    if !jacobian_is_symmetric(&jac) {
                         skewed.store(true, Ordering::Relaxed);
                     }
-                    own = b;
-                    &own
+                    CellBlocks::Deformed(jac)
                 }
             };
             let nodes = &self.cells[cell];
@@ -1514,7 +1502,7 @@ impl Model {
                     // is within the pattern, which the blocks have one entry
                     // per.
                     let blk = unsafe { &mut *s.0.add(k) };
-                    *blk += blocks[b][a];
+                    *blk += cell_blocks.block(b, a);
                 }
             }
         });
@@ -2014,6 +2002,41 @@ unsafe fn add_cell_matrix(
                     blk[(e, d)] += jac[3 * b + e][3 * a + d];
                 }
             }
+        }
+    }
+}
+
+/// Block `(b, a)` of a cell's symmetrized stiffness `-(J + J^T) / 2`.
+fn symmetric_block(jac: &[[f64; 24]; 24], b: usize, a: usize) -> Mat3 {
+    Mat3::from_fn(|e, d| -(0.5 * (jac[3 * b + e][3 * a + d] + jac[3 * a + d][3 * b + e])))
+}
+
+/// Whether a cell's Jacobian is symmetric to 1e-10 of its largest entry.
+fn jacobian_is_symmetric(jac: &[[f64; 24]; 24]) -> bool {
+    let (mut largest, mut skew) = (0.0f64, 0.0f64);
+    for (p, row) in jac.iter().enumerate() {
+        for (q, v) in row.iter().enumerate() {
+            largest = largest.max(v.abs());
+            skew = skew.max((v - jac[q][p]).abs());
+        }
+    }
+    skew <= 1e-10 * largest
+}
+
+/// A cell's symmetrized stiffness blocks in [`Model::symmetric_stiffness_upper`]:
+/// its parameter set's at rest, or from its own Jacobian (only the blocks
+/// added are formed).
+#[allow(clippy::large_enum_variant)] // one on the stack per cell visited
+enum CellBlocks<'a> {
+    Rest(&'a [[Mat3; 8]; 8]),
+    Deformed([[f64; 24]; 24]),
+}
+
+impl CellBlocks<'_> {
+    fn block(&self, b: usize, a: usize) -> Mat3 {
+        match self {
+            CellBlocks::Rest(blocks) => blocks[b][a],
+            CellBlocks::Deformed(jac) => symmetric_block(jac, b, a),
         }
     }
 }
