@@ -1809,46 +1809,106 @@ impl Model {
     /// the same pass: the explicit step checks more often as a corner nears
     /// the barrier, whose stiffness rises quickly once it is reached.
     pub fn stiffness_growth_and_lowest_corner(&self, x: &[Vec3]) -> (f64, f64) {
+        let checks = self.cell_checks(x, true);
+        (checks.stiffness_growth, checks.lowest_corner)
+    }
+
+    /// Cells whose Jacobian `J = det F` at the centre is `<= 0` (inverted):
+    /// the solvers refuse such a state (a step that makes one is taken again
+    /// with a shorter sub-step, or fails).
+    pub fn inverted_cells(&self, x: &[Vec3]) -> Vec<u32> {
+        self.cell_checks(x, false).inverted
+    }
+
+    /// The inverted cells ([`Model::inverted_cells`]) and, with `growth`,
+    /// [`Model::stiffness_growth_and_lowest_corner`], from one pass over the
+    /// cells (the explicit step's check asks for all three): several cells
+    /// per SIMD pass where they share their parameters, the same bits
+    /// either way, whatever the thread count.
+    pub fn cell_checks(&self, x: &[Vec3], growth: bool) -> CellChecks {
         assert_eq!(x.len(), self.num_nodes(), "positions: one per node");
-        if self
-            .growth_shares
-            .iter()
-            .all(|w| *w == GrowthShares::default())
-        {
-            return (1.0, f64::INFINITY);
-        }
-        // The cheap estimate over every cell; the worst cells by it are then
-        // measured exactly (their Jacobians' Gershgorin bounds against rest).
-        let (worst, lowest_corner) = (0..self.cells.len())
-            .into_par_iter()
-            .with_min_len(CHUNK)
-            .fold(
-                || (Worst::default(), f64::INFINITY),
-                |(mut worst, mut lowest_corner), c| {
-                    let shares = self.growth_shares[self.param_index(c)];
-                    if shares != GrowthShares::default() {
-                        let (p, xc) = (self.params_of(c), self.corners(x, c));
+        let growth = growth
+            && self
+                .growth_shares
+                .iter()
+                .any(|w| *w != GrowthShares::default());
+        let corners = growth && self.growth_shares.iter().any(|w| w.corner_barrier != 0.0);
+        let xs = crate::as_arrays(x);
+        let one_material = self.cell_material.is_empty();
+        // Per chunk of cells: the worst cells by the cheap estimate, the
+        // lowest corner, the inverted cells in order.
+        let chunk = |first: usize, cells: &[[u32; 8]]| {
+            let mut worst = Worst::default();
+            let mut lowest_corner = f64::INFINITY;
+            let mut inverted = Vec::new();
+            let mut survey = [kernel::CellSurvey {
+                jac: 0.0,
+                volumetric_growth: 0.0,
+                lowest_corner: 0.0,
+            }; SURVEY_BATCH];
+            let mut start = 0;
+            while start < cells.len() {
+                // A run of cells of one parameter set, at most a batch.
+                let param = self.param_index(first + start);
+                let mut end = start + 1;
+                while end < cells.len()
+                    && end - start < SURVEY_BATCH
+                    && (one_material || self.param_index(first + end) == param)
+                {
+                    end += 1;
+                }
+                let (p, shares) = (&self.params[param], self.growth_shares[param]);
+                let out = &mut survey[..end - start];
+                let parts = (
+                    growth && shares.volumetric != 0.0,
+                    corners && shares.corner_barrier != 0.0,
+                );
+                kernel::survey_batch(p, &cells[start..end], xs, parts, out);
+                for (k, s) in out.iter().enumerate() {
+                    let c = (first + start + k) as u32;
+                    if s.jac <= 0.0 {
+                        inverted.push(c);
+                    }
+                    if growth && shares != GrowthShares::default() {
                         let w = shares.volumetric;
                         let mut g = 1.0 - w;
-                        if w != 0.0 {
-                            g += w * kernel::volumetric_growth(p, &xc);
+                        if parts.0 {
+                            g += w * s.volumetric_growth;
                         }
-                        if shares.corner_barrier != 0.0 {
-                            let lowest = Self::lowest_corner(p, &xc);
-                            lowest_corner = lowest_corner.min(lowest);
-                            let (_, slope, curvature) = kernel::corner_barrier_law(lowest);
+                        if parts.1 {
+                            lowest_corner = lowest_corner.min(s.lowest_corner);
+                            let (_, slope, curvature) = kernel::corner_barrier_law(s.lowest_corner);
                             g += 8.0 * shares.corner_barrier * (curvature + slope.abs());
                         }
-                        worst.offer(g, c as u32);
+                        worst.offer(g, c);
                     }
-                    (worst, lowest_corner)
-                },
-            )
-            // The minimum is the same in any order: deterministic.
+                }
+                start = end;
+            }
+            (worst, lowest_corner, inverted)
+        };
+        let (worst, lowest_corner, inverted) = self
+            .cells
+            .par_chunks(CHUNK)
+            .enumerate()
+            .map(|(k, cells)| chunk(k * CHUNK, cells))
+            // The minimum is the same in any order, the worst cells are
+            // ranked with ties to the lower index, and the inverted lists
+            // are joined in cell order: deterministic.
             .reduce(
-                || (Worst::default(), f64::INFINITY),
-                |(a, la), (b, lb)| (Worst::merge(a, b), la.min(lb)),
+                || (Worst::default(), f64::INFINITY, Vec::new()),
+                |(a, la, mut ia), (b, lb, ib)| {
+                    ia.extend(ib);
+                    (Worst::merge(a, b), la.min(lb), ia)
+                },
             );
+        if !growth {
+            return CellChecks {
+                inverted,
+                stiffness_growth: 1.0,
+                lowest_corner: f64::INFINITY,
+            };
+        }
         // Element by element: omega^2 <= max over cells of the cell's
         // stiffness bound over its corner mass (the cell's share of its
         // nodes' lumped masses), here for the cells most likely to set it.
@@ -1865,24 +1925,11 @@ impl Model {
                 kernel::gershgorin(&jac) / corner_mass
             })
             .fold(0.0, f64::max);
-        (
-            (worst_cell_omega_sq / self.omega_max_sq).max(1.0),
+        CellChecks {
+            inverted,
+            stiffness_growth: (worst_cell_omega_sq / self.omega_max_sq).max(1.0),
             lowest_corner,
-        )
-    }
-
-    /// Cells whose Jacobian `J = det F` at the centre is `<= 0` (inverted):
-    /// the solvers refuse such a state (a step that makes one is taken again
-    /// with a shorter sub-step, or fails).
-    pub fn inverted_cells(&self, x: &[Vec3]) -> Vec<u32> {
-        assert_eq!(x.len(), self.num_nodes(), "positions: one per node");
-        (0..self.cells.len())
-            .filter(|&c| {
-                let p = self.params_of(c);
-                kernel::deformation_gradient(&self.corners(x, c), p.grad_scale).1 <= 0.0
-            })
-            .map(|c| c as u32)
-            .collect()
+        }
     }
 
     /// Cells folded at a corner: a corner Jacobian `J_n <= 0` (the trilinear
@@ -1929,6 +1976,21 @@ struct GrowthShares {
     /// barrier is zero at rest).
     corner_barrier: f64,
 }
+
+/// What [`Model::cell_checks`] found.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CellChecks {
+    /// The inverted cells ([`Model::inverted_cells`]), ascending.
+    pub inverted: Vec<u32>,
+    /// [`Model::stiffness_growth`] (1 when not asked for).
+    pub stiffness_growth: f64,
+    /// The lowest corner Jacobian of any cell, for models with the corner
+    /// barrier (infinite without it, or when not asked for).
+    pub lowest_corner: f64,
+}
+
+/// Cells surveyed per call of the batch kernel by [`Model::cell_checks`].
+const SURVEY_BATCH: usize = 64;
 
 /// Cells examined exactly by [`Model::stiffness_growth`].
 const WORST_CELLS: usize = 8;

@@ -543,6 +543,7 @@ pub(crate) fn barrier_energy(j: f64) -> f64 {
 /// rest: `phi''(J) |cof F|^2 / 3 + |phi'(J)| |F| / sqrt(3)` (1 at rest), from
 /// the two parts of its Hessian, `phi'' b b^T` with `b = dJ/dx` (of size
 /// `|cof F| |grad N|`) and `phi' d b/dx` (of size `|F| |grad N|^2`).
+#[cfg(test)]
 pub(crate) fn volumetric_growth(p: &CellParams, x: &[V3<f64>; 8]) -> f64 {
     let (cols, jac) = deformation_gradient(x, p.grad_scale);
     let (slope, curvature) = if p.vol_barrier {
@@ -576,6 +577,78 @@ fn barrier_slope(j: f64) -> (f64, f64) {
         let l = BARRIER_KNEE.ln();
         let c = (1.0 - l) / (BARRIER_KNEE * BARRIER_KNEE);
         (l / BARRIER_KNEE + c * (j - BARRIER_KNEE), c)
+    }
+}
+
+/// [`barrier_slope`] with [`fast_ln`] and without a branch: `(phi'(J),
+/// phi''(J))` from one logarithm (below the knee `max(J, knee)` is the knee,
+/// where `(1 - ln J) / J^2` is the continuation's constant curvature).
+#[inline(always)]
+fn fast_barrier_slope_and_curvature<T: SplitExponent>(j: T) -> (T, T) {
+    let knee = T::cst(BARRIER_KNEE);
+    let above = j.at_least(knee);
+    let l = fast_ln(above);
+    let below_curvature = (1.0 - BARRIER_KNEE.ln()) / (BARRIER_KNEE * BARRIER_KNEE);
+    (
+        l / above + (j - above).scale(below_curvature),
+        (T::cst(1.0) - l) / (above * above),
+    )
+}
+
+/// What the explicit step's checks need of a cell ([`cell_survey`]).
+#[derive(Clone, Copy)]
+pub(crate) struct CellSurvey<T> {
+    /// `J = det F` at the centre (`<= 0`: inverted).
+    pub jac: T,
+    /// [`volumetric_growth`] (with [`fast_ln`]), when asked for.
+    pub volumetric_growth: T,
+    /// The smallest corner Jacobian ([`corner_jacobians`]), when asked for.
+    pub lowest_corner: T,
+}
+
+/// The centre Jacobian of a cell of parameters `p` at `x`, and when asked
+/// for the volumetric term's stiffness growth and the lowest corner
+/// Jacobian: written once over the number type, so that SIMD lanes and the
+/// scalar path give the same bits (no fused operations, [`fast_ln`]).
+#[inline(always)]
+pub(crate) fn cell_survey<T: SplitExponent>(
+    p: &CellParams,
+    x: &[V3<T>; 8],
+    growth: bool,
+    corners: bool,
+) -> CellSurvey<T> {
+    let (cols, jac) = deformation_gradient(x, p.grad_scale);
+    let mut volumetric_growth = T::cst(1.0);
+    if growth {
+        let (slope, curvature) = if p.vol_barrier {
+            fast_barrier_slope_and_curvature(jac)
+        } else {
+            (jac - T::cst(1.0), T::cst(1.0))
+        };
+        let mut cof2 = T::cst(0.0);
+        for j in 0..3 {
+            let c = cross(cols[(j + 1) % 3], cols[(j + 2) % 3]);
+            cof2 += dot(c, c);
+        }
+        let f2 = dot(cols[0], cols[0]) + dot(cols[1], cols[1]) + dot(cols[2], cols[2]);
+        let magnitude = slope.at_least(-slope);
+        volumetric_growth = curvature * cof2 / T::cst(3.0) + magnitude * (f2 / T::cst(3.0)).sqrt();
+    }
+    let mut lowest_corner = T::cst(f64::INFINITY);
+    if corners {
+        let inv_h3 = 1.0 / (p.rest_edge * p.rest_edge * p.rest_edge);
+        let (_, corner) = corner_jacobians(x, inv_h3);
+        // The minimum as a maximum of negatives: `Scalar` has only the one.
+        let mut negated = -corner[0];
+        for &c in &corner[1..] {
+            negated = negated.at_least(-c);
+        }
+        lowest_corner = -negated;
+    }
+    CellSurvey {
+        jac,
+        volumetric_growth,
+        lowest_corner,
     }
 }
 
@@ -2302,6 +2375,83 @@ pub(crate) fn tangent_action_batch(
     );
 }
 
+/// The body of [`survey_batch`]: `P::WIDTH` cells per pass, their corners
+/// gathered by `gather`; the cells after the last whole pack on `f64`.
+#[inline(always)]
+fn survey_body<P: Pack + SplitExponent, G>(
+    p: &CellParams,
+    cells: &[[u32; 8]],
+    x: &[[f64; 3]],
+    (growth, corners): (bool, bool),
+    out: &mut [CellSurvey<f64>],
+    gather: G,
+) where
+    G: Fn(&[[u32; 8]], &[[f64; 3]]) -> [V3<P>; 8],
+{
+    let width = P::WIDTH;
+    let groups = cells.len() / width;
+    for (cg, og) in cells.chunks_exact(width).zip(out.chunks_exact_mut(width)) {
+        let s = cell_survey(p, &gather(cg, x), growth, corners);
+        for (l, o) in og.iter_mut().enumerate() {
+            *o = CellSurvey {
+                jac: s.jac.lane(l),
+                volumetric_growth: s.volumetric_growth.lane(l),
+                lowest_corner: s.lowest_corner.lane(l),
+            };
+        }
+    }
+    for (c, o) in cells[groups * width..]
+        .iter()
+        .zip(&mut out[groups * width..])
+    {
+        let xc: [V3<f64>; 8] = std::array::from_fn(|k| x[c[k] as usize]);
+        *o = cell_survey(p, &xc, growth, corners);
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn survey_avx2(
+    p: &CellParams,
+    cells: &[[u32; 8]],
+    x: &[[f64; 3]],
+    parts: (bool, bool),
+    out: &mut [CellSurvey<f64>],
+) {
+    // SAFETY (the closure): it runs inside this AVX2 function.
+    survey_body(
+        p,
+        cells,
+        x,
+        parts,
+        out,
+        |c: &[[u32; 8]], x: &[[f64; 3]]| unsafe { avx2::gather4(c, x, [0, 1, 2, 3, 4, 5, 6, 7]) },
+    );
+}
+
+/// [`cell_survey`] of consecutive cells sharing the parameters `p` at `x`
+/// (`parts`: the growth, the corners), several cells per SIMD pass (AVX2
+/// when the CPU has it), into `out`, one per cell: the same bits on every
+/// path.
+pub(crate) fn survey_batch(
+    p: &CellParams,
+    cells: &[[u32; 8]],
+    x: &[[f64; 3]],
+    parts: (bool, bool),
+    out: &mut [CellSurvey<f64>],
+) {
+    assert_eq!(cells.len(), out.len(), "one survey per cell");
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU supports AVX2 (checked just above).
+            unsafe { survey_avx2(p, cells, x, parts, out) };
+            return;
+        }
+    }
+    survey_body(p, cells, x, parts, out, gather_corners::<LANES>);
+}
+
 /// Cells evaluated together by [`forces_batch_f32`] (AVX2 holds 8 `f32`).
 pub(crate) const LANES_F32: usize = 8;
 
@@ -2656,6 +2806,93 @@ mod tests {
             let mut out = vec![[0.0; 4]; 8 * cells.len()];
             tangent_action_batch(p, &cells, &x, &v, &mut out);
             check(&out, "dispatched");
+        }
+    }
+
+    /// The explicit step's cell survey, on packs (portable lanes, the
+    /// dispatched path) and on one `f64` at a time, gives the same bits for
+    /// every cell, and agrees with the exact formulas: the centre Jacobian
+    /// of the deformation gradient, the volumetric growth with libm's
+    /// logarithm (to round-off, also past the barrier's knee and inverted),
+    /// the smallest of the 8 corner Jacobians.
+    #[test]
+    fn cell_survey_is_the_same_on_every_path_and_agrees_with_the_formulas() {
+        let h = 0.01;
+        let mut seed = 5;
+        // 11 cells: two packs of 4 and a tail of 3, each with its own nodes,
+        // some squeezed at a corner (J_n 0.4 to -0.5), some inverted whole.
+        let cells: Vec<[u32; 8]> = (0..11u32)
+            .map(|c| std::array::from_fn(|k| 8 * c + k as u32))
+            .collect();
+        let x: Vec<[f64; 3]> = (0..88)
+            .map(|i| {
+                let (cell, n) = (i / 8, i % 8);
+                let push = if n == cell % 8 {
+                    [0.0, 0.2, 0.32, 0.5][cell % 4]
+                } else {
+                    0.0
+                };
+                std::array::from_fn(|d| {
+                    let mut o = CORNER_OFFSETS[n][d] as f64;
+                    if cell == 9 && d == 2 {
+                        // Upside down: J = -1.
+                        o = 1.0 - o;
+                    }
+                    (o + push * (1.0 - 2.0 * o) + 0.05 * noise(&mut seed) + 3.0 * cell as f64) * h
+                })
+            })
+            .collect();
+        let blank = CellSurvey {
+            jac: 0.0,
+            volumetric_growth: 0.0,
+            lowest_corner: 0.0,
+        };
+        let inv_h3 = 1.0 / (h * h * h);
+        for p in [params(0.02, true, 40.0), params(0.02, false, 0.0)] {
+            let p = with_corner_barrier(p);
+            let mut portable = vec![blank; cells.len()];
+            survey_body(
+                &p,
+                &cells,
+                &x,
+                (true, true),
+                &mut portable,
+                gather_corners::<LANES>,
+            );
+            let mut dispatched = vec![blank; cells.len()];
+            survey_batch(&p, &cells, &x, (true, true), &mut dispatched);
+            let mut lowest_seen = f64::INFINITY;
+            for (k, c) in cells.iter().enumerate() {
+                let xc: [V3<f64>; 8] = std::array::from_fn(|n| x[c[n] as usize]);
+                let one = cell_survey(&p, &xc, true, true);
+                for s in [portable[k], dispatched[k]] {
+                    assert_eq!(s.jac.to_bits(), one.jac.to_bits(), "cell {k}");
+                    assert_eq!(
+                        s.volumetric_growth.to_bits(),
+                        one.volumetric_growth.to_bits(),
+                        "cell {k}"
+                    );
+                    assert_eq!(
+                        s.lowest_corner.to_bits(),
+                        one.lowest_corner.to_bits(),
+                        "cell {k}"
+                    );
+                }
+                assert_eq!(one.jac, deformation_gradient(&xc, p.grad_scale).1);
+                let exact = volumetric_growth(&p, &xc);
+                assert!(
+                    (one.volumetric_growth - exact).abs() <= 1e-13 * exact.abs(),
+                    "cell {k}: {} vs {exact}",
+                    one.volumetric_growth
+                );
+                let corner = corner_jacobians(&xc, inv_h3).1;
+                assert_eq!(
+                    one.lowest_corner,
+                    corner.into_iter().fold(f64::INFINITY, f64::min)
+                );
+                lowest_seen = lowest_seen.min(one.lowest_corner);
+            }
+            assert!(lowest_seen < 0.0 && portable[9].jac < 0.0, "{lowest_seen}");
         }
     }
 

@@ -61,7 +61,8 @@
 use rayon::prelude::*;
 
 use super::{
-    Divergence, EXPLICIT_HINT, Integrator, Problem, SolverError, State, StepInfo, check_inverted,
+    Divergence, EXPLICIT_HINT, Integrator, Problem, SolverError, State, StepInfo,
+    inverted_divergence,
 };
 use crate::contact::Contact;
 use crate::model::kernel::CORNER_BARRIER_START;
@@ -432,11 +433,10 @@ impl Explicit {
     /// g times (g >= 2: compressed cells on the barrier's steep side) can
     /// stiffen much further within `check_interval` sub-steps, so it is
     /// checked g times as often.
-    fn substeps_for_growth(&mut self, model: &Model, x: &[Vec3]) -> u32 {
+    fn substeps_for_growth(&mut self, (stiffness_growth, lowest_corner): (f64, f64)) -> u32 {
         if self.opts.unchecked {
             return self.base_substeps;
         }
-        let (stiffness_growth, lowest_corner) = model.stiffness_growth_and_lowest_corner(x);
         self.check_every = if stiffness_growth >= 2.0 {
             ((f64::from(self.opts.check_interval) / stiffness_growth) as u32).max(1)
         } else {
@@ -483,10 +483,11 @@ impl Explicit {
             self.touching = touching;
             let last = s + 1 == self.substeps;
             if self.since_check >= self.check_every || new_touch || (last && self.check_at_end) {
-                if let Some(reason) = self.check(problem.model(), state) {
-                    return Attempt::Failed(reason);
-                }
-                let needed = self.substeps_for_growth(problem.model(), &state.x);
+                let growth = match self.check(problem.model(), state) {
+                    Ok(growth) => growth,
+                    Err(reason) => return Attempt::Failed(reason),
+                };
+                let needed = self.substeps_for_growth(growth);
                 if needed > self.substeps {
                     return Attempt::Stiffer(needed);
                 }
@@ -907,16 +908,33 @@ impl Explicit {
         contact.update_body_anchors(x, v, &mut state.contact);
     }
 
-    fn check(&mut self, model: &Model, state: &State) -> Option<Divergence> {
+    /// The divergence checks of a sub-step; when they pass, the stiffness
+    /// growth and lowest corner Jacobian the step control needs, from the
+    /// same pass over the cells as the inverted ones.
+    fn check(&mut self, model: &Model, state: &State) -> Result<(f64, f64), Divergence> {
         let (cell, strain) = max_cell_velocity_change(model, &state.v, self.dt_sub);
         self.last_strain = strain;
         if strain.is_nan() || strain > 0.25 {
-            return Some(Divergence::Explosion {
+            return Err(Divergence::Explosion {
                 cell,
                 strain_per_step: strain,
             });
         }
-        check_inverted(model, &state.x)
+        let checks = model.cell_checks(&state.x, !self.opts.unchecked);
+        if !checks.inverted.is_empty() {
+            return Err(inverted_divergence(checks.inverted));
+        }
+        Ok((checks.stiffness_growth, checks.lowest_corner))
+    }
+
+    /// The stiffness growth and lowest corner Jacobian at `x` (not measured
+    /// when the step is unchecked).
+    fn growth_at(&self, model: &Model, x: &[Vec3]) -> (f64, f64) {
+        if self.opts.unchecked {
+            (1.0, f64::INFINITY)
+        } else {
+            model.stiffness_growth_and_lowest_corner(x)
+        }
     }
 
     fn save_good(&mut self, state: &State) {
@@ -1114,7 +1132,8 @@ impl Explicit {
             self.save_good(state);
             self.since_check = 0;
             self.last_strain = 0.0;
-            self.growth_substeps = self.substeps_for_growth(problem.model(), &state.x);
+            let growth = self.growth_at(problem.model(), &state.x);
+            self.growth_substeps = self.substeps_for_growth(growth);
             self.update_substep();
         }
         self.steps += 1;
@@ -1276,11 +1295,13 @@ fn max_cell_velocity_change(model: &Model, v: &[Vec3], dt: f64) -> (u32, f64) {
             mean += v[k as usize];
         }
         mean /= 8.0;
-        let mut m = 0.0f64;
+        // The largest squared norm, then one root: the root is monotonic,
+        // so the same value as the largest root.
+        let mut m2 = 0.0f64;
         for &k in cell {
-            m = m.max((v[k as usize] - mean).norm());
+            m2 = m2.max((v[k as usize] - mean).norm_squared());
         }
-        (c as u32, m * dt / model.h())
+        (c as u32, m2.sqrt() * dt / model.h())
     };
     // `later` follows `earlier` in cell order: a NaN wins (the later one),
     // else the larger value (the earlier one on a tie).

@@ -1421,13 +1421,14 @@ fn chord_contraction(
 
 fn check_inverted(model: &Model, x: &[Vec3]) -> Option<Divergence> {
     let inv = model.inverted_cells(x);
-    if inv.is_empty() {
-        None
-    } else {
-        Some(Divergence::InvertedCells {
-            count: inv.len(),
-            first: inv.into_iter().take(8).collect(),
-        })
+    (!inv.is_empty()).then(|| inverted_divergence(inv))
+}
+
+/// The divergence of a state with the inverted cells `inverted` (not empty).
+fn inverted_divergence(inverted: Vec<u32>) -> Divergence {
+    Divergence::InvertedCells {
+        count: inverted.len(),
+        first: inverted.into_iter().take(8).collect(),
     }
 }
 
