@@ -519,9 +519,9 @@ impl Precision {
     }
 
     /// The instruction set the force pass runs on this CPU in this
-    /// precision (`"avx2"`, or `"portable"` where the compiler vectorizes
-    /// plain lane loops) and how many cells it evaluates together, for
-    /// benchmark reports.
+    /// precision (`"avx512"`, `"avx2"`, or `"portable"` where the compiler
+    /// vectorizes plain lane loops) and how many cells it evaluates
+    /// together, for benchmark reports.
     pub fn kernel_vectors(self) -> (&'static str, usize) {
         let lanes = match self {
             Precision::F64 => kernel::LANES,
@@ -529,6 +529,9 @@ impl Precision {
         };
         #[cfg(target_arch = "x86_64")]
         {
+            if self == Precision::F64 && kernel::has_avx512() {
+                return ("avx512", 2 * lanes);
+            }
             if std::arch::is_x86_feature_detected!("avx2") {
                 return ("avx2", lanes);
             }

@@ -1924,6 +1924,127 @@ mod avx2 {
         cmp _mm256_cmp_ps, movemask _mm256_movemask_ps, blend _mm256_blendv_ps
     );
 
+    avx_vector!(
+        /// Eight cells' values in double precision, one AVX-512 register
+        /// (made only inside functions that enable AVX-512F and DQ).
+        F64x8(__m512d, f64, 8),
+        add _mm512_add_pd, sub _mm512_sub_pd, mul _mm512_mul_pd, div _mm512_div_pd,
+        xor _mm512_xor_pd, set1 _mm512_set1_pd, sqrt _mm512_sqrt_pd,
+        load _mm512_loadu_pd, store _mm512_storeu_pd, max _mm512_max_pd, split split_f64x8,
+        cmp cmp_f64x8, movemask mask_bits, blend blend_f64x8
+    );
+
+    /// AVX-512's comparison, into a mask register.
+    #[inline(always)]
+    unsafe fn cmp_f64x8<const P: i32>(a: __m512d, b: __m512d) -> __mmask8 {
+        // SAFETY: the caller runs where AVX-512F is available.
+        unsafe { _mm512_cmp_pd_mask::<P>(a, b) }
+    }
+
+    /// The mask's bits (AVX2's `movemask` of a comparison).
+    #[inline(always)]
+    unsafe fn mask_bits(m: __mmask8) -> i32 {
+        i32::from(m)
+    }
+
+    /// `b` where `m` is set, else `a` (AVX2's `blendv` with a mask
+    /// register).
+    #[inline(always)]
+    unsafe fn blend_f64x8(a: __m512d, b: __m512d, m: __mmask8) -> __m512d {
+        // SAFETY: the caller runs where AVX-512F is available.
+        unsafe { _mm512_mask_blend_pd(m, a, b) }
+    }
+
+    /// [`split_f64x4`] on eight lanes: the same operations, so the same
+    /// bits.
+    #[inline(always)]
+    unsafe fn split_f64x8(x: __m512d) -> (__m512d, __m512d) {
+        const TWO_52: f64 = 4_503_599_627_370_496.0;
+        // SAFETY: the caller runs where AVX-512F is available.
+        unsafe {
+            let bits = _mm512_castpd_si512(x);
+            let biased = _mm512_and_si512(_mm512_srli_epi64::<52>(bits), _mm512_set1_epi64(0x7ff));
+            let with_two_52 = _mm512_or_si512(biased, _mm512_castpd_si512(_mm512_set1_pd(TWO_52)));
+            let k = _mm512_sub_pd(
+                _mm512_castsi512_pd(with_two_52),
+                _mm512_set1_pd(TWO_52 + 1023.0),
+            );
+            let mantissa = _mm512_and_si512(bits, _mm512_set1_epi64((1 << 52) - 1));
+            let m = _mm512_castsi512_pd(_mm512_or_si512(
+                mantissa,
+                _mm512_castpd_si512(_mm512_set1_pd(1.0)),
+            ));
+            let big = _mm512_cmp_pd_mask::<_CMP_GT_OQ>(m, _mm512_set1_pd(std::f64::consts::SQRT_2));
+            let m = _mm512_mask_blend_pd(big, m, _mm512_mul_pd(m, _mm512_set1_pd(0.5)));
+            let one_where_big = _mm512_maskz_mov_pd(big, _mm512_set1_pd(1.0));
+            let k = _mm512_add_pd(k, one_where_big);
+            (m, k)
+        }
+    }
+
+    /// Two halves of four lanes into one register of eight.
+    #[inline(always)]
+    unsafe fn join(lo: F64x4, hi: F64x4) -> F64x8 {
+        // SAFETY: the caller runs where AVX-512F is available.
+        unsafe { F64x8(_mm512_insertf64x4::<1>(_mm512_castpd256_pd512(lo.0), hi.0)) }
+    }
+
+    /// The corners of eight cells: [`gather4`] of each half, joined.
+    #[inline(always)]
+    pub(super) unsafe fn gather8_f64(cells: &[[u32; 8]], x: &[[f64; 3]]) -> [V3<F64x8>; 8] {
+        // SAFETY: the caller runs where AVX-512F is available; `gather4`
+        // checks its own accesses.
+        unsafe {
+            let lo = gather4(&cells[..4], x, [0, 1, 2, 3, 4, 5, 6, 7]);
+            let hi = gather4(&cells[4..], x, [0, 1, 2, 3, 4, 5, 6, 7]);
+            let mut xl = [[F64x8(_mm512_setzero_pd()); 3]; 8];
+            for (k, xk) in xl.iter_mut().enumerate() {
+                for (c, v) in xk.iter_mut().enumerate() {
+                    *v = join(lo[k][c], hi[k][c]);
+                }
+            }
+            xl
+        }
+    }
+
+    /// The 12 edge stretches of eight cells: [`gather_edges4`] of each
+    /// half, joined.
+    #[inline(always)]
+    pub(super) unsafe fn gather_edges8_f64(cells: &[[u32; 8]], edges: &[[f64; 3]]) -> [F64x8; 12] {
+        // SAFETY: the caller runs where AVX-512F is available.
+        unsafe {
+            let lo = gather_edges4(&cells[..4], edges);
+            let hi = gather_edges4(&cells[4..], edges);
+            let mut w = [F64x8(_mm512_setzero_pd()); 12];
+            for ((w, lo), hi) in w.iter_mut().zip(lo).zip(hi) {
+                *w = join(lo, hi);
+            }
+            w
+        }
+    }
+
+    /// Corner forces of eight cells: [`scatter4`] of each half.
+    #[inline(always)]
+    pub(super) unsafe fn scatter8_f64(f: &[V3<F64x8>; 8], out: &mut [[f64; 4]]) {
+        // SAFETY: the caller runs where AVX-512F is available; `scatter4`
+        // checks its own accesses.
+        unsafe {
+            assert!(out.len() >= 64);
+            let zero = F64x4(_mm256_setzero_pd());
+            let (mut lo, mut hi) = ([[zero; 3]; 8], [[zero; 3]; 8]);
+            for k in 0..8 {
+                for c in 0..3 {
+                    let v = f[k][c].0;
+                    lo[k][c] = F64x4(_mm512_castpd512_pd256(v));
+                    hi[k][c] = F64x4(_mm512_extractf64x4_pd::<1>(v));
+                }
+            }
+            let (first, second) = out.split_at_mut(32);
+            scatter4(&lo, first);
+            scatter4(&hi, second);
+        }
+    }
+
     /// [`SplitExponent::split_exponent`] of four `f64`, with the same bits
     /// as the scalar one: the biased exponent is moved into the mantissa of
     /// `2^52` (exact), the mantissa given the exponent of 1.
@@ -2199,6 +2320,63 @@ struct Moves<G, W, S> {
 /// The forces of one cell given the edge stretches by node.
 type CellKernel = fn(&CellParams, &[u32; 8], &[[f64; 3]], &[[f64; 3]]) -> [[f64; 3]; 8];
 
+/// [`forces_batch_avx2`] eight cells per pass in AVX-512 registers (twice
+/// the cells per instruction, and 32 registers instead of 16), the cells
+/// after the last whole eight four per pass: every lane performs the same
+/// operations as on the other paths, so the same bits.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
+fn forces_batch_avx512(
+    p: &CellParams,
+    cells: &[[u32; 8]],
+    x: &[[f64; 3]],
+    edges: &[[f64; 3]],
+    out: &mut [[f64; 4]],
+) {
+    let whole = cells.len() / 8 * 8;
+    let (head, tail) = (&cells[..whole], &cells[whole..]);
+    let (out_head, out_tail) = out.split_at_mut(8 * whole);
+    forces_batch_body(
+        p,
+        head,
+        x,
+        edges,
+        out_head,
+        // SAFETY (each closure): they run inside this AVX-512 function.
+        Moves {
+            gather: |c: &[[u32; 8]], x: &[[f64; 3]]| unsafe { avx2::gather8_f64(c, x) },
+            gather_edges: |c: &[[u32; 8]], e: &[[f64; 3]]| unsafe { avx2::gather_edges8_f64(c, e) },
+            scatter: |f: &[V3<avx2::F64x8>; 8], o: &mut [[f64; 4]]| unsafe {
+                avx2::scatter8_f64(f, o)
+            },
+            tail: cell_forces_from_edges,
+        },
+    );
+    forces_batch_avx2(p, tail, x, edges, out_tail);
+}
+
+/// Whether this CPU runs the AVX-512 force pass ([`forces_batch_avx512`]):
+/// it has AVX-512F, DQ and VL, and executes 512-bit operations whole. AMD's
+/// cores before Zen 5 (family 0x19) split them into two 256-bit halves,
+/// and there an 8-lane variant measured slower than AVX2 (docs/solvers.md);
+/// on an Intel Xeon it is faster. Decided once (a CPUID in a virtual
+/// machine can cost microseconds).
+#[cfg(target_arch = "x86_64")]
+pub(crate) fn has_avx512() -> bool {
+    static WIDE: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *WIDE.get_or_init(|| {
+        use std::arch::x86_64::__cpuid;
+        let features = std::arch::is_x86_feature_detected!("avx512f")
+            && std::arch::is_x86_feature_detected!("avx512dq")
+            && std::arch::is_x86_feature_detected!("avx512vl");
+        // The vendor string's first four letters, "Auth" of "AuthenticAMD".
+        let amd = __cpuid(0).ebx == u32::from_le_bytes(*b"Auth");
+        let eax = __cpuid(1).eax;
+        let family = ((eax >> 8) & 0xf) + ((eax >> 20) & 0xff);
+        features && (!amd || family >= 0x1a)
+    })
+}
+
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 fn forces_batch_avx2(
@@ -2240,6 +2418,12 @@ pub(crate) fn forces_batch(
 ) {
     #[cfg(target_arch = "x86_64")]
     {
+        if has_avx512() {
+            // SAFETY: the CPU supports AVX-512F, DQ and VL (checked just
+            // above), and with them AVX2.
+            unsafe { forces_batch_avx512(p, cells, x, edges, out) };
+            return;
+        }
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU supports AVX2 (checked just above).
             unsafe { forces_batch_avx2(p, cells, x, edges, out) };
@@ -2322,6 +2506,32 @@ fn tangent_action_body<P: Pack + SplitExponent, G, S>(
     }
 }
 
+/// [`tangent_action_avx2`] eight cells per pass in AVX-512 registers, the
+/// cells after the last whole eight four per pass (the same bits).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
+fn tangent_action_avx512(
+    p: &CellParams,
+    cells: &[[u32; 8]],
+    x: &[[f64; 3]],
+    v: &[[f64; 3]],
+    out: &mut [[f64; 4]],
+) {
+    let whole = cells.len() / 8 * 8;
+    let (out_head, out_tail) = out.split_at_mut(8 * whole);
+    tangent_action_body(
+        p,
+        &cells[..whole],
+        x,
+        v,
+        out_head,
+        // SAFETY (both closures): they run inside this AVX-512 function.
+        |c: &[[u32; 8]], x: &[[f64; 3]]| unsafe { avx2::gather8_f64(c, x) },
+        |f: &[V3<avx2::F64x8>; 8], o: &mut [[f64; 4]]| unsafe { avx2::scatter8_f64(f, o) },
+    );
+    tangent_action_avx2(p, &cells[whole..], x, v, out_tail);
+}
+
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 fn tangent_action_avx2(
@@ -2358,6 +2568,12 @@ pub(crate) fn tangent_action_batch(
 ) {
     #[cfg(target_arch = "x86_64")]
     {
+        if has_avx512() {
+            // SAFETY: the CPU supports AVX-512F, DQ and VL (checked just
+            // above), and with them AVX2.
+            unsafe { tangent_action_avx512(p, cells, x, v, out) };
+            return;
+        }
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU supports AVX2 (checked just above).
             unsafe { tangent_action_avx2(p, cells, x, v, out) };
@@ -2409,6 +2625,31 @@ fn survey_body<P: Pack + SplitExponent, G>(
     }
 }
 
+/// [`survey_avx2`] eight cells per pass in AVX-512 registers, the cells
+/// after the last whole eight four per pass (the same bits).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
+fn survey_avx512(
+    p: &CellParams,
+    cells: &[[u32; 8]],
+    x: &[[f64; 3]],
+    parts: (bool, bool),
+    out: &mut [CellSurvey<f64>],
+) {
+    let whole = cells.len() / 8 * 8;
+    let (out_head, out_tail) = out.split_at_mut(whole);
+    // SAFETY (the closure): it runs inside this AVX-512 function.
+    survey_body(
+        p,
+        &cells[..whole],
+        x,
+        parts,
+        out_head,
+        |c: &[[u32; 8]], x: &[[f64; 3]]| unsafe { avx2::gather8_f64(c, x) },
+    );
+    survey_avx2(p, &cells[whole..], x, parts, out_tail);
+}
+
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 fn survey_avx2(
@@ -2443,6 +2684,12 @@ pub(crate) fn survey_batch(
     assert_eq!(cells.len(), out.len(), "one survey per cell");
     #[cfg(target_arch = "x86_64")]
     {
+        if has_avx512() {
+            // SAFETY: the CPU supports AVX-512F, DQ and VL (checked just
+            // above), and with them AVX2.
+            unsafe { survey_avx512(p, cells, x, parts, out) };
+            return;
+        }
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU supports AVX2 (checked just above).
             unsafe { survey_avx2(p, cells, x, parts, out) };
@@ -2806,6 +3053,108 @@ mod tests {
             let mut out = vec![[0.0; 4]; 8 * cells.len()];
             tangent_action_batch(p, &cells, &x, &v, &mut out);
             check(&out, "dispatched");
+        }
+    }
+
+    /// Every instruction set's force pass and tangent action give the
+    /// portable lanes' bits, cell by cell: AVX2 (4 cells per pass) and
+    /// AVX-512 (8 per pass, the rest 4 at a time), where this CPU has them,
+    /// for every term, on 21 cells (two eights, a four and a tail of one)
+    /// distorted into the corner barrier.
+    #[test]
+    fn every_instruction_set_gives_the_portable_bits() {
+        let h = 0.01;
+        let mut seed = 3;
+        let n = 21;
+        let cells: Vec<[u32; 8]> = (0..n as u32)
+            .map(|c| std::array::from_fn(|k| 8 * c + k as u32))
+            .collect();
+        let x: Vec<[f64; 3]> = (0..8 * n)
+            .map(|i| {
+                let (cell, k) = (i / 8, i % 8);
+                let push = if k == cell % 8 {
+                    [0.0, 0.25, 0.32, 0.5][cell % 4]
+                } else {
+                    0.0
+                };
+                std::array::from_fn(|d| {
+                    let o = CORNER_OFFSETS[k][d] as f64;
+                    (o + push * (1.0 - 2.0 * o) + 0.05 * noise(&mut seed) + 3.0 * cell as f64) * h
+                })
+            })
+            .collect();
+        let v: Vec<[f64; 3]> = (0..8 * n)
+            .map(|_| std::array::from_fn(|_| noise(&mut seed)))
+            .collect();
+        // Each cell has nodes of its own: every edge's stretch is stored at
+        // its start node, along its axis.
+        let mut edges = vec![[0.0; 3]; 8 * n];
+        for c in &cells {
+            for &(a, b, ax) in &CELL_EDGES {
+                let (xa, xb) = (x[c[a] as usize], x[c[b] as usize]);
+                edges[c[a] as usize][ax] = stretch(h, sub(xb, xa));
+            }
+        }
+        let sets = [
+            params(0.0, false, 0.0),
+            params(0.02, true, 40.0),
+            with_correction(params(0.02, false, 0.0), 0.4),
+            with_corner_barrier(with_correction(params(0.02, true, 40.0), -0.5)),
+        ];
+        let bits =
+            |o: &[[f64; 4]]| -> Vec<u64> { o.iter().flatten().map(|v| v.to_bits()).collect() };
+        for p in &sets {
+            let mut portable = vec![[0.0; 4]; 8 * n];
+            forces_batch_body(
+                p,
+                &cells,
+                &x,
+                &edges,
+                &mut portable,
+                Moves {
+                    gather: gather_corners::<LANES>,
+                    gather_edges: gather_edges::<f64, LANES>,
+                    scatter: scatter_corners::<f64, LANES>,
+                    tail: cell_forces_from_edges,
+                },
+            );
+            let mut portable_tangent = vec![[0.0; 4]; 8 * n];
+            tangent_action_body(
+                p,
+                &cells,
+                &x,
+                &v,
+                &mut portable_tangent,
+                gather_corners::<LANES>,
+                scatter_corners::<f64, LANES>,
+            );
+            let mut paths = 0;
+            #[cfg(target_arch = "x86_64")]
+            {
+                let mut out = vec![[0.0; 4]; 8 * n];
+                if std::arch::is_x86_feature_detected!("avx2") {
+                    // SAFETY: the CPU supports AVX2 (checked just above).
+                    unsafe { forces_batch_avx2(p, &cells, &x, &edges, &mut out) };
+                    assert_eq!(bits(&out), bits(&portable), "AVX2 forces, {p:?}");
+                    unsafe { tangent_action_avx2(p, &cells, &x, &v, &mut out) };
+                    assert_eq!(bits(&out), bits(&portable_tangent), "AVX2 tangent, {p:?}");
+                    paths += 1;
+                }
+                if has_avx512() {
+                    // SAFETY: the CPU supports AVX-512F, DQ and VL.
+                    unsafe { forces_batch_avx512(p, &cells, &x, &edges, &mut out) };
+                    assert_eq!(bits(&out), bits(&portable), "AVX-512 forces, {p:?}");
+                    unsafe { tangent_action_avx512(p, &cells, &x, &v, &mut out) };
+                    assert_eq!(
+                        bits(&out),
+                        bits(&portable_tangent),
+                        "AVX-512 tangent, {p:?}"
+                    );
+                    paths += 1;
+                }
+            }
+            // The values are forces: the corner barrier pushed.
+            assert!(portable.iter().flatten().any(|f| f.abs() > 0.0), "{paths}");
         }
     }
 
