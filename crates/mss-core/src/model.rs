@@ -529,7 +529,7 @@ impl Precision {
         };
         #[cfg(target_arch = "x86_64")]
         {
-            if self == Precision::F64 && kernel::has_avx512() {
+            if kernel::has_avx512() {
                 return ("avx512", 2 * lanes);
             }
             if std::arch::is_x86_feature_detected!("avx2") {

@@ -1934,6 +1934,119 @@ mod avx2 {
         cmp cmp_f64x8, movemask mask_bits, blend blend_f64x8
     );
 
+    avx_vector!(
+        /// Sixteen cells' values in single precision, one AVX-512 register
+        /// (made only inside functions that enable AVX-512F and DQ).
+        F32x16(__m512, f32, 16),
+        add _mm512_add_ps, sub _mm512_sub_ps, mul _mm512_mul_ps, div _mm512_div_ps,
+        xor _mm512_xor_ps, set1 _mm512_set1_ps, sqrt _mm512_sqrt_ps,
+        load _mm512_loadu_ps, store _mm512_storeu_ps, max _mm512_max_ps, split split_f32x16,
+        cmp cmp_f32x16, movemask mask_bits16, blend blend_f32x16
+    );
+
+    /// AVX-512's comparison of sixteen `f32`, into a mask register.
+    #[inline(always)]
+    unsafe fn cmp_f32x16<const P: i32>(a: __m512, b: __m512) -> __mmask16 {
+        // SAFETY: the caller runs where AVX-512F is available.
+        unsafe { _mm512_cmp_ps_mask::<P>(a, b) }
+    }
+
+    /// The mask's bits (AVX2's `movemask` of a comparison).
+    #[inline(always)]
+    unsafe fn mask_bits16(m: __mmask16) -> i32 {
+        i32::from(m)
+    }
+
+    /// `b` where `m` is set, else `a`.
+    #[inline(always)]
+    unsafe fn blend_f32x16(a: __m512, b: __m512, m: __mmask16) -> __m512 {
+        // SAFETY: the caller runs where AVX-512F is available.
+        unsafe { _mm512_mask_blend_ps(m, a, b) }
+    }
+
+    /// [`split_f32x8`] on sixteen lanes: the same operations, so the same
+    /// bits.
+    #[inline(always)]
+    unsafe fn split_f32x16(x: __m512) -> (__m512, __m512) {
+        // SAFETY: the caller runs where AVX-512F is available.
+        unsafe {
+            let bits = _mm512_castps_si512(x);
+            let biased = _mm512_and_si512(_mm512_srli_epi32::<23>(bits), _mm512_set1_epi32(0xff));
+            let k = _mm512_sub_ps(_mm512_cvtepi32_ps(biased), _mm512_set1_ps(127.0));
+            let mantissa = _mm512_and_si512(bits, _mm512_set1_epi32((1 << 23) - 1));
+            let m = _mm512_castsi512_ps(_mm512_or_si512(
+                mantissa,
+                _mm512_castps_si512(_mm512_set1_ps(1.0)),
+            ));
+            let big = _mm512_cmp_ps_mask::<_CMP_GT_OQ>(m, _mm512_set1_ps(std::f32::consts::SQRT_2));
+            let m = _mm512_mask_blend_ps(big, m, _mm512_mul_ps(m, _mm512_set1_ps(0.5)));
+            let k = _mm512_add_ps(k, _mm512_maskz_mov_ps(big, _mm512_set1_ps(1.0)));
+            (m, k)
+        }
+    }
+
+    /// Two halves of eight `f32` lanes into one register of sixteen.
+    #[inline(always)]
+    unsafe fn join16(lo: F32x8, hi: F32x8) -> F32x16 {
+        // SAFETY: the caller runs where AVX-512F and DQ are available.
+        unsafe { F32x16(_mm512_insertf32x8::<1>(_mm512_castps256_ps512(lo.0), hi.0)) }
+    }
+
+    /// [`gather8_relative`] of sixteen cells: each half, joined.
+    #[inline(always)]
+    pub(super) unsafe fn gather16_relative(cells: &[[u32; 8]], x: &[[f64; 3]]) -> [V3<F32x16>; 8] {
+        // SAFETY: the caller runs where AVX-512F and DQ are available;
+        // `gather8_relative` checks its own accesses.
+        unsafe {
+            let lo = gather8_relative(&cells[..8], x);
+            let hi = gather8_relative(&cells[8..], x);
+            let mut xl = [[F32x16(_mm512_setzero_ps()); 3]; 8];
+            for (k, xk) in xl.iter_mut().enumerate() {
+                for (c, v) in xk.iter_mut().enumerate() {
+                    *v = join16(lo[k][c], hi[k][c]);
+                }
+            }
+            xl
+        }
+    }
+
+    /// [`gather_edges8`] of sixteen cells: each half, joined.
+    #[inline(always)]
+    pub(super) unsafe fn gather_edges16(cells: &[[u32; 8]], edges: &[[f64; 3]]) -> [F32x16; 12] {
+        // SAFETY: the caller runs where AVX-512F and DQ are available.
+        unsafe {
+            let lo = gather_edges8(&cells[..8], edges);
+            let hi = gather_edges8(&cells[8..], edges);
+            let mut w = [F32x16(_mm512_setzero_ps()); 12];
+            for ((w, lo), hi) in w.iter_mut().zip(lo).zip(hi) {
+                *w = join16(lo, hi);
+            }
+            w
+        }
+    }
+
+    /// Corner forces of sixteen cells: [`scatter8`] of each half.
+    #[inline(always)]
+    pub(super) unsafe fn scatter16(f: &[V3<F32x16>; 8], out: &mut [[f64; 4]]) {
+        // SAFETY: the caller runs where AVX-512F and DQ are available;
+        // `scatter8` checks its own accesses.
+        unsafe {
+            assert!(out.len() >= 128);
+            let zero = F32x8(_mm256_setzero_ps());
+            let (mut lo, mut hi) = ([[zero; 3]; 8], [[zero; 3]; 8]);
+            for k in 0..8 {
+                for c in 0..3 {
+                    let v = f[k][c].0;
+                    lo[k][c] = F32x8(_mm512_castps512_ps256(v));
+                    hi[k][c] = F32x8(_mm512_extractf32x8_ps::<1>(v));
+                }
+            }
+            let (first, second) = out.split_at_mut(64);
+            scatter8(&lo, first);
+            scatter8(&hi, second);
+        }
+    }
+
     /// AVX-512's comparison, into a mask register.
     #[inline(always)]
     unsafe fn cmp_f64x8<const P: i32>(a: __m512d, b: __m512d) -> __mmask8 {
@@ -2755,6 +2868,38 @@ fn gather_corners_f32<const L: usize>(
     xl
 }
 
+/// [`forces_batch_f32_avx2`] sixteen cells per pass in AVX-512 registers,
+/// the cells after the last whole sixteen eight at a time (the same bits).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
+fn forces_batch_f32_avx512(
+    p: &CellParams,
+    cells: &[[u32; 8]],
+    x: &[[f64; 3]],
+    edges: &[[f64; 3]],
+    out: &mut [[f64; 4]],
+) {
+    let whole = cells.len() / 16 * 16;
+    let (out_head, out_tail) = out.split_at_mut(8 * whole);
+    forces_batch_body(
+        p,
+        &cells[..whole],
+        x,
+        edges,
+        out_head,
+        // SAFETY (each closure): they run inside this AVX-512 function.
+        Moves {
+            gather: |c: &[[u32; 8]], x: &[[f64; 3]]| unsafe { avx2::gather16_relative(c, x) },
+            gather_edges: |c: &[[u32; 8]], e: &[[f64; 3]]| unsafe { avx2::gather_edges16(c, e) },
+            scatter: |f: &[V3<avx2::F32x16>; 8], o: &mut [[f64; 4]]| unsafe {
+                avx2::scatter16(f, o)
+            },
+            tail: cell_forces_from_edges_f32,
+        },
+    );
+    forces_batch_f32_avx2(p, &cells[whole..], x, edges, out_tail);
+}
+
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 fn forces_batch_f32_avx2(
@@ -2792,6 +2937,12 @@ pub(crate) fn forces_batch_f32(
 ) {
     #[cfg(target_arch = "x86_64")]
     {
+        if has_avx512() {
+            // SAFETY: the CPU supports AVX-512F, DQ and VL (checked just
+            // above), and with them AVX2.
+            unsafe { forces_batch_f32_avx512(p, cells, x, edges, out) };
+            return;
+        }
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU supports AVX2 (checked just above).
             unsafe { forces_batch_f32_avx2(p, cells, x, edges, out) };
@@ -3059,13 +3210,14 @@ mod tests {
     /// Every instruction set's force pass and tangent action give the
     /// portable lanes' bits, cell by cell: AVX2 (4 cells per pass) and
     /// AVX-512 (8 per pass, the rest 4 at a time), where this CPU has them,
-    /// for every term, on 21 cells (two eights, a four and a tail of one)
-    /// distorted into the corner barrier.
+    /// and so does the `f32` force pass (8 and 16 per pass), for every
+    /// term, on 37 cells (two sixteens, a four and a tail of one) distorted
+    /// into the corner barrier.
     #[test]
     fn every_instruction_set_gives_the_portable_bits() {
         let h = 0.01;
         let mut seed = 3;
-        let n = 21;
+        let n = 37;
         let cells: Vec<[u32; 8]> = (0..n as u32)
             .map(|c| std::array::from_fn(|k| 8 * c + k as u32))
             .collect();
@@ -3128,6 +3280,20 @@ mod tests {
                 gather_corners::<LANES>,
                 scatter_corners::<f64, LANES>,
             );
+            let mut portable_f32 = vec![[0.0; 4]; 8 * n];
+            forces_batch_body(
+                p,
+                &cells,
+                &x,
+                &edges,
+                &mut portable_f32,
+                Moves {
+                    gather: gather_corners_f32::<LANES_F32>,
+                    gather_edges: gather_edges::<f32, LANES_F32>,
+                    scatter: scatter_corners::<f32, LANES_F32>,
+                    tail: cell_forces_from_edges_f32,
+                },
+            );
             let mut paths = 0;
             #[cfg(target_arch = "x86_64")]
             {
@@ -3138,6 +3304,8 @@ mod tests {
                     assert_eq!(bits(&out), bits(&portable), "AVX2 forces, {p:?}");
                     unsafe { tangent_action_avx2(p, &cells, &x, &v, &mut out) };
                     assert_eq!(bits(&out), bits(&portable_tangent), "AVX2 tangent, {p:?}");
+                    unsafe { forces_batch_f32_avx2(p, &cells, &x, &edges, &mut out) };
+                    assert_eq!(bits(&out), bits(&portable_f32), "AVX2 f32 forces, {p:?}");
                     paths += 1;
                 }
                 if has_avx512() {
@@ -3150,6 +3318,8 @@ mod tests {
                         bits(&portable_tangent),
                         "AVX-512 tangent, {p:?}"
                     );
+                    unsafe { forces_batch_f32_avx512(p, &cells, &x, &edges, &mut out) };
+                    assert_eq!(bits(&out), bits(&portable_f32), "AVX-512 f32 forces, {p:?}");
                     paths += 1;
                 }
             }
