@@ -93,6 +93,14 @@ pub trait Obstacle: Send + Sync + Debug {
     fn name(&self) -> String;
     /// How deep `p` is inside the obstacle at time `t`, if it is.
     fn penetration(&self, t: f64, p: Vec3) -> Option<Penetration>;
+    /// Whether `p` is inside the obstacle at time `t`: exactly
+    /// `penetration(t, p).is_some()`, which is what the default does. The
+    /// explicit step asks it of every surface node each sub-step, so
+    /// obstacles whose test is cheaper than their penetration (its normal
+    /// and their gradient) override it.
+    fn contains(&self, t: f64, p: Vec3) -> bool {
+        self.penetration(t, p).is_some()
+    }
     /// Velocity of the obstacle at time `t` (m/s).
     fn velocity(&self, t: f64) -> Vec3 {
         let _ = t;
@@ -191,6 +199,12 @@ impl Plane {
             normal: normal / len,
             path: Path::fixed(),
         })
+    }
+
+    /// The signed height of `p` over the plane at time `t` (negative
+    /// inside).
+    fn height(&self, t: f64, p: Vec3) -> f64 {
+        (p - self.point - self.path.offset(t)).dot(&self.normal)
     }
 }
 
@@ -427,12 +441,15 @@ impl Obstacle for Plane {
         )
     }
     fn penetration(&self, t: f64, p: Vec3) -> Option<Penetration> {
-        let s = (p - self.point - self.path.offset(t)).dot(&self.normal);
+        let s = self.height(t, p);
         (s < 0.0).then(|| Penetration {
             depth: -s,
             normal: self.normal,
             normal_gradient: Mat3::zeros(),
         })
+    }
+    fn contains(&self, t: f64, p: Vec3) -> bool {
+        self.height(t, p) < 0.0
     }
     path_motion!();
 }
@@ -443,6 +460,10 @@ impl Obstacle for Sphere {
     }
     fn penetration(&self, t: f64, p: Vec3) -> Option<Penetration> {
         ball(self.centre + self.path.offset(t), self.radius, p, None)
+    }
+    fn contains(&self, t: f64, p: Vec3) -> bool {
+        // `ball`'s test: a NaN distance is not inside.
+        (p - (self.centre + self.path.offset(t))).norm() < self.radius
     }
     path_motion!();
 }
@@ -1345,6 +1366,9 @@ impl Obstacle for Placed {
     fn penetration(&self, t: f64, p: Vec3) -> Option<Penetration> {
         self.inner.penetration(t, p - self.shift())
     }
+    fn contains(&self, t: f64, p: Vec3) -> bool {
+        self.inner.contains(t, p - self.shift())
+    }
     fn velocity(&self, t: f64) -> Vec3 {
         self.inner.velocity(t)
     }
@@ -1416,6 +1440,9 @@ impl Obstacle for Steered {
     }
     fn penetration(&self, t: f64, p: Vec3) -> Option<Penetration> {
         self.inner.penetration(t, p - self.pose().offset)
+    }
+    fn contains(&self, t: f64, p: Vec3) -> bool {
+        self.inner.contains(t, p - self.pose().offset)
     }
     fn velocity(&self, t: f64) -> Vec3 {
         self.inner.velocity(t) + self.pose().velocity

@@ -805,9 +805,7 @@ impl Explicit {
                 continue;
             }
             let n = contact.point_node(i) as usize;
-            let inside = contact
-                .obstacles()
-                .any(|(o, _)| o.penetration(t1, state.x[n]).is_some());
+            let inside = contact.obstacles().any(|(o, _)| o.contains(t1, state.x[n]));
             if inside {
                 self.candidates.push(i);
                 self.g_start.push(Vec3::zeros());

@@ -723,3 +723,51 @@ fn a_static_solve_follows_an_obstacle_pressed_deep_and_keeps_its_friction() {
         assert!(st.contact.iter().any(Option::is_some), "{name}");
     }
 }
+
+/// The cheap inside test of the obstacles that override it (the explicit
+/// step asks it of every surface node each sub-step) says exactly what
+/// their penetration says, on points on both sides and on the surfaces,
+/// moving along a path and steered by hand.
+#[test]
+fn contains_is_exactly_penetration_is_some() {
+    use mss_core::contact::Steered;
+    let path = Path::new(vec![(0.0, Vec3::zeros()), (1.0, Vec3::new(0.1, -0.2, 0.3))]).unwrap();
+    let plane = Plane::new(Vec3::new(0.0, 0.0, 0.1), Vec3::new(0.3, -0.2, 1.0)).unwrap();
+    let sphere = Sphere::new(Vec3::new(0.1, 0.2, 0.3), 0.25).unwrap();
+    let (steered, hand) = Steered::new(Box::new(sphere.clone().moving(path.clone())));
+    hand.move_to(Vec3::new(0.05, 0.0, -0.02), 0.01);
+    let obstacles: Vec<Box<dyn Obstacle>> = vec![
+        Box::new(plane.clone()),
+        Box::new(plane.moving(path.clone())),
+        Box::new(sphere.clone()),
+        Box::new(sphere.moving(path)),
+        Box::new(steered),
+    ];
+    let mut seed = 17u64;
+    let mut next = || {
+        seed = seed
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+    };
+    let (mut inside, mut outside) = (0, 0);
+    for o in &obstacles {
+        for k in 0..2000 {
+            let t = 1.2 * (next() + 0.5);
+            let mut p = Vec3::new(next(), next(), next()) * 1.2;
+            if k % 10 == 0 {
+                // A point on the surface, where the two tests' `<` and `>=` meet.
+                if let Some(pen) = o.penetration(t, p) {
+                    p += pen.normal * pen.depth;
+                }
+            }
+            let expect = o.penetration(t, p).is_some();
+            assert_eq!(o.contains(t, p), expect, "{} at t = {t}, {p:?}", o.name());
+            inside += usize::from(expect);
+            outside += usize::from(!expect);
+        }
+    }
+    assert!(inside > 1000 && outside > 1000, "{inside} {outside}");
+    assert!(!obstacles[0].contains(0.0, Vec3::new(f64::NAN, 0.0, 0.0)));
+    assert!(!obstacles[2].contains(0.0, Vec3::new(f64::NAN, 0.0, 0.0)));
+}
