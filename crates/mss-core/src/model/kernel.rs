@@ -1944,6 +1944,180 @@ mod avx2 {
         cmp cmp_f32x16, movemask mask_bits16, blend blend_f32x16
     );
 
+    /// An AVX-512 register made of two AVX2 ones: the moves of its cells
+    /// in and out are those of each half's cells.
+    trait Doubled: Copy {
+        /// The half register.
+        type Half: Copy;
+        /// The register whose low lanes are `lo`'s, its high lanes `hi`'s.
+        ///
+        /// # Safety
+        /// AVX-512F and DQ are available.
+        unsafe fn join(lo: Self::Half, hi: Self::Half) -> Self;
+        /// The low and the high half.
+        ///
+        /// # Safety
+        /// AVX-512F and DQ are available.
+        unsafe fn halves(self) -> (Self::Half, Self::Half);
+    }
+
+    impl Doubled for F64x8 {
+        type Half = F64x4;
+        #[inline(always)]
+        unsafe fn join(lo: F64x4, hi: F64x4) -> Self {
+            // SAFETY: the caller runs where AVX-512F is available.
+            unsafe { F64x8(_mm512_insertf64x4::<1>(_mm512_castpd256_pd512(lo.0), hi.0)) }
+        }
+        #[inline(always)]
+        unsafe fn halves(self) -> (F64x4, F64x4) {
+            // SAFETY: the caller runs where AVX-512F is available.
+            unsafe {
+                (
+                    F64x4(_mm512_castpd512_pd256(self.0)),
+                    F64x4(_mm512_extractf64x4_pd::<1>(self.0)),
+                )
+            }
+        }
+    }
+
+    impl Doubled for F32x16 {
+        type Half = F32x8;
+        #[inline(always)]
+        unsafe fn join(lo: F32x8, hi: F32x8) -> Self {
+            // SAFETY: the caller runs where AVX-512F and DQ are available.
+            unsafe { F32x16(_mm512_insertf32x8::<1>(_mm512_castps256_ps512(lo.0), hi.0)) }
+        }
+        #[inline(always)]
+        unsafe fn halves(self) -> (F32x8, F32x8) {
+            // SAFETY: the caller runs where AVX-512F and DQ are available.
+            unsafe {
+                (
+                    F32x8(_mm512_castps512_ps256(self.0)),
+                    F32x8(_mm512_extractf32x8_ps::<1>(self.0)),
+                )
+            }
+        }
+    }
+
+    // The moves below take and give halves rather than calling a gather
+    // or scatter passed in: a closure made outside a `target_feature`
+    // function does not inherit its instruction sets, and the intrinsics
+    // in it became calls (three times slower).
+
+    /// The corners of a doubled register's cells from those of each half.
+    #[inline(always)]
+    unsafe fn join_corners<D: Doubled>(lo: [V3<D::Half>; 8], hi: [V3<D::Half>; 8]) -> [V3<D>; 8] {
+        // SAFETY: the caller runs where AVX-512F and DQ are available.
+        unsafe {
+            let mut xl = [[D::join(lo[0][0], hi[0][0]); 3]; 8];
+            for (k, xk) in xl.iter_mut().enumerate() {
+                for (c, v) in xk.iter_mut().enumerate() {
+                    *v = D::join(lo[k][c], hi[k][c]);
+                }
+            }
+            xl
+        }
+    }
+
+    /// The 12 edge stretches of a doubled register's cells from those of
+    /// each half.
+    #[inline(always)]
+    unsafe fn join_edges<D: Doubled>(lo: [D::Half; 12], hi: [D::Half; 12]) -> [D; 12] {
+        // SAFETY: the caller runs where AVX-512F and DQ are available.
+        unsafe {
+            let mut w = [D::join(lo[0], hi[0]); 12];
+            for ((w, lo), hi) in w.iter_mut().zip(lo).zip(hi) {
+                *w = D::join(lo, hi);
+            }
+            w
+        }
+    }
+
+    /// Corner vectors of a doubled register's cells as those of each half.
+    #[inline(always)]
+    unsafe fn split_corners<D: Doubled>(f: &[V3<D>; 8]) -> [[V3<D::Half>; 8]; 2] {
+        // SAFETY: the caller runs where AVX-512F and DQ are available.
+        unsafe {
+            let first = f[0][0].halves().0;
+            let (mut lo, mut hi) = ([[first; 3]; 8], [[first; 3]; 8]);
+            for k in 0..8 {
+                for c in 0..3 {
+                    (lo[k][c], hi[k][c]) = f[k][c].halves();
+                }
+            }
+            [lo, hi]
+        }
+    }
+
+    /// The corners of eight cells in `f64`: [`gather4`] of each half.
+    #[inline(always)]
+    pub(super) unsafe fn gather8_f64(cells: &[[u32; 8]], x: &[[f64; 3]]) -> [V3<F64x8>; 8] {
+        const ALL: [usize; 8] = [0, 1, 2, 3, 4, 5, 6, 7];
+        // SAFETY: the caller runs where AVX-512F is available.
+        unsafe { join_corners::<F64x8>(gather4(&cells[..4], x, ALL), gather4(&cells[4..], x, ALL)) }
+    }
+
+    /// The 12 edge stretches of eight cells in `f64`: [`gather_edges4`] of
+    /// each half.
+    #[inline(always)]
+    pub(super) unsafe fn gather_edges8_f64(cells: &[[u32; 8]], edges: &[[f64; 3]]) -> [F64x8; 12] {
+        // SAFETY: the caller runs where AVX-512F is available.
+        unsafe {
+            join_edges::<F64x8>(
+                gather_edges4(&cells[..4], edges),
+                gather_edges4(&cells[4..], edges),
+            )
+        }
+    }
+
+    /// Corner forces of eight cells in `f64`: [`scatter4`] of each half.
+    #[inline(always)]
+    pub(super) unsafe fn scatter8_f64(f: &[V3<F64x8>; 8], out: &mut [[f64; 4]]) {
+        // SAFETY: the caller runs where AVX-512F is available.
+        unsafe {
+            let [lo, hi] = split_corners(f);
+            let (first, second) = out.split_at_mut(32);
+            scatter4(&lo, first);
+            scatter4(&hi, second);
+        }
+    }
+
+    /// [`gather8_relative`] of sixteen cells: each half.
+    #[inline(always)]
+    pub(super) unsafe fn gather16_relative(cells: &[[u32; 8]], x: &[[f64; 3]]) -> [V3<F32x16>; 8] {
+        // SAFETY: the caller runs where AVX-512F and DQ are available.
+        unsafe {
+            join_corners::<F32x16>(
+                gather8_relative(&cells[..8], x),
+                gather8_relative(&cells[8..], x),
+            )
+        }
+    }
+
+    /// [`gather_edges8`] of sixteen cells: each half.
+    #[inline(always)]
+    pub(super) unsafe fn gather_edges16(cells: &[[u32; 8]], edges: &[[f64; 3]]) -> [F32x16; 12] {
+        // SAFETY: the caller runs where AVX-512F and DQ are available.
+        unsafe {
+            join_edges::<F32x16>(
+                gather_edges8(&cells[..8], edges),
+                gather_edges8(&cells[8..], edges),
+            )
+        }
+    }
+
+    /// Corner forces of sixteen cells: [`scatter8`] of each half.
+    #[inline(always)]
+    pub(super) unsafe fn scatter16(f: &[V3<F32x16>; 8], out: &mut [[f64; 4]]) {
+        // SAFETY: the caller runs where AVX-512F and DQ are available.
+        unsafe {
+            let [lo, hi] = split_corners(f);
+            let (first, second) = out.split_at_mut(64);
+            scatter8(&lo, first);
+            scatter8(&hi, second);
+        }
+    }
+
     /// AVX-512's comparison of sixteen `f32`, into a mask register.
     #[inline(always)]
     unsafe fn cmp_f32x16<const P: i32>(a: __m512, b: __m512) -> __mmask16 {
@@ -1982,68 +2156,6 @@ mod avx2 {
             let m = _mm512_mask_blend_ps(big, m, _mm512_mul_ps(m, _mm512_set1_ps(0.5)));
             let k = _mm512_add_ps(k, _mm512_maskz_mov_ps(big, _mm512_set1_ps(1.0)));
             (m, k)
-        }
-    }
-
-    /// Two halves of eight `f32` lanes into one register of sixteen.
-    #[inline(always)]
-    unsafe fn join16(lo: F32x8, hi: F32x8) -> F32x16 {
-        // SAFETY: the caller runs where AVX-512F and DQ are available.
-        unsafe { F32x16(_mm512_insertf32x8::<1>(_mm512_castps256_ps512(lo.0), hi.0)) }
-    }
-
-    /// [`gather8_relative`] of sixteen cells: each half, joined.
-    #[inline(always)]
-    pub(super) unsafe fn gather16_relative(cells: &[[u32; 8]], x: &[[f64; 3]]) -> [V3<F32x16>; 8] {
-        // SAFETY: the caller runs where AVX-512F and DQ are available;
-        // `gather8_relative` checks its own accesses.
-        unsafe {
-            let lo = gather8_relative(&cells[..8], x);
-            let hi = gather8_relative(&cells[8..], x);
-            let mut xl = [[F32x16(_mm512_setzero_ps()); 3]; 8];
-            for (k, xk) in xl.iter_mut().enumerate() {
-                for (c, v) in xk.iter_mut().enumerate() {
-                    *v = join16(lo[k][c], hi[k][c]);
-                }
-            }
-            xl
-        }
-    }
-
-    /// [`gather_edges8`] of sixteen cells: each half, joined.
-    #[inline(always)]
-    pub(super) unsafe fn gather_edges16(cells: &[[u32; 8]], edges: &[[f64; 3]]) -> [F32x16; 12] {
-        // SAFETY: the caller runs where AVX-512F and DQ are available.
-        unsafe {
-            let lo = gather_edges8(&cells[..8], edges);
-            let hi = gather_edges8(&cells[8..], edges);
-            let mut w = [F32x16(_mm512_setzero_ps()); 12];
-            for ((w, lo), hi) in w.iter_mut().zip(lo).zip(hi) {
-                *w = join16(lo, hi);
-            }
-            w
-        }
-    }
-
-    /// Corner forces of sixteen cells: [`scatter8`] of each half.
-    #[inline(always)]
-    pub(super) unsafe fn scatter16(f: &[V3<F32x16>; 8], out: &mut [[f64; 4]]) {
-        // SAFETY: the caller runs where AVX-512F and DQ are available;
-        // `scatter8` checks its own accesses.
-        unsafe {
-            assert!(out.len() >= 128);
-            let zero = F32x8(_mm256_setzero_ps());
-            let (mut lo, mut hi) = ([[zero; 3]; 8], [[zero; 3]; 8]);
-            for k in 0..8 {
-                for c in 0..3 {
-                    let v = f[k][c].0;
-                    lo[k][c] = F32x8(_mm512_castps512_ps256(v));
-                    hi[k][c] = F32x8(_mm512_extractf32x8_ps::<1>(v));
-                }
-            }
-            let (first, second) = out.split_at_mut(64);
-            scatter8(&lo, first);
-            scatter8(&hi, second);
         }
     }
 
@@ -2092,69 +2204,6 @@ mod avx2 {
             let one_where_big = _mm512_maskz_mov_pd(big, _mm512_set1_pd(1.0));
             let k = _mm512_add_pd(k, one_where_big);
             (m, k)
-        }
-    }
-
-    /// Two halves of four lanes into one register of eight.
-    #[inline(always)]
-    unsafe fn join(lo: F64x4, hi: F64x4) -> F64x8 {
-        // SAFETY: the caller runs where AVX-512F is available.
-        unsafe { F64x8(_mm512_insertf64x4::<1>(_mm512_castpd256_pd512(lo.0), hi.0)) }
-    }
-
-    /// The corners of eight cells: [`gather4`] of each half, joined.
-    #[inline(always)]
-    pub(super) unsafe fn gather8_f64(cells: &[[u32; 8]], x: &[[f64; 3]]) -> [V3<F64x8>; 8] {
-        // SAFETY: the caller runs where AVX-512F is available; `gather4`
-        // checks its own accesses.
-        unsafe {
-            let lo = gather4(&cells[..4], x, [0, 1, 2, 3, 4, 5, 6, 7]);
-            let hi = gather4(&cells[4..], x, [0, 1, 2, 3, 4, 5, 6, 7]);
-            let mut xl = [[F64x8(_mm512_setzero_pd()); 3]; 8];
-            for (k, xk) in xl.iter_mut().enumerate() {
-                for (c, v) in xk.iter_mut().enumerate() {
-                    *v = join(lo[k][c], hi[k][c]);
-                }
-            }
-            xl
-        }
-    }
-
-    /// The 12 edge stretches of eight cells: [`gather_edges4`] of each
-    /// half, joined.
-    #[inline(always)]
-    pub(super) unsafe fn gather_edges8_f64(cells: &[[u32; 8]], edges: &[[f64; 3]]) -> [F64x8; 12] {
-        // SAFETY: the caller runs where AVX-512F is available.
-        unsafe {
-            let lo = gather_edges4(&cells[..4], edges);
-            let hi = gather_edges4(&cells[4..], edges);
-            let mut w = [F64x8(_mm512_setzero_pd()); 12];
-            for ((w, lo), hi) in w.iter_mut().zip(lo).zip(hi) {
-                *w = join(lo, hi);
-            }
-            w
-        }
-    }
-
-    /// Corner forces of eight cells: [`scatter4`] of each half.
-    #[inline(always)]
-    pub(super) unsafe fn scatter8_f64(f: &[V3<F64x8>; 8], out: &mut [[f64; 4]]) {
-        // SAFETY: the caller runs where AVX-512F is available; `scatter4`
-        // checks its own accesses.
-        unsafe {
-            assert!(out.len() >= 64);
-            let zero = F64x4(_mm256_setzero_pd());
-            let (mut lo, mut hi) = ([[zero; 3]; 8], [[zero; 3]; 8]);
-            for k in 0..8 {
-                for c in 0..3 {
-                    let v = f[k][c].0;
-                    lo[k][c] = F64x4(_mm512_castpd512_pd256(v));
-                    hi[k][c] = F64x4(_mm512_extractf64x4_pd::<1>(v));
-                }
-            }
-            let (first, second) = out.split_at_mut(32);
-            scatter4(&lo, first);
-            scatter4(&hi, second);
         }
     }
 
