@@ -1659,6 +1659,20 @@ fn edge_stretches_avx2(rest: f64, cells: &[[u32; 8]], x: &[[f64; 3]], out: &mut 
     });
 }
 
+/// [`edge_stretches_avx2`] eight cells per pass in AVX-512 registers, the
+/// cells after the last whole eight four per pass (the same bits).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
+fn edge_stretches_avx512(rest: f64, cells: &[[u32; 8]], x: &[[f64; 3]], out: &mut [[f64; 3]]) {
+    let whole = cells.len() / 8 * 8;
+    let (out_head, out_tail) = out.split_at_mut(whole);
+    // SAFETY (the closure): it runs inside this AVX-512 function.
+    edge_stretches_body(rest, &cells[..whole], x, out_head, |c, x| unsafe {
+        avx2::gather8_edge_ends(c, x)
+    });
+    edge_stretches_avx2(rest, &cells[whole..], x, out_tail);
+}
+
 /// [`edge_stretches_batch`] one cell at a time, without SIMD: the same
 /// operations per cell, so the same bits.
 pub(crate) fn edge_stretches_scalar(
@@ -1681,6 +1695,12 @@ pub(crate) fn edge_stretches_batch(
 ) {
     #[cfg(target_arch = "x86_64")]
     {
+        if has_avx512() {
+            // SAFETY: the CPU supports AVX-512F, DQ and VL (checked just
+            // above), and with them AVX2.
+            unsafe { edge_stretches_avx512(rest, cells, x, out) };
+            return;
+        }
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU supports AVX2 (checked just above).
             unsafe { edge_stretches_avx2(rest, cells, x, out) };
@@ -2006,10 +2026,13 @@ mod avx2 {
 
     /// The corners of a doubled register's cells from those of each half.
     #[inline(always)]
-    unsafe fn join_corners<D: Doubled>(lo: [V3<D::Half>; 8], hi: [V3<D::Half>; 8]) -> [V3<D>; 8] {
+    unsafe fn join_corners<D: Doubled, const K: usize>(
+        lo: [V3<D::Half>; K],
+        hi: [V3<D::Half>; K],
+    ) -> [V3<D>; K] {
         // SAFETY: the caller runs where AVX-512F and DQ are available.
         unsafe {
-            let mut xl = [[D::join(lo[0][0], hi[0][0]); 3]; 8];
+            let mut xl = [[D::join(lo[0][0], hi[0][0]); 3]; K];
             for (k, xk) in xl.iter_mut().enumerate() {
                 for (c, v) in xk.iter_mut().enumerate() {
                     *v = D::join(lo[k][c], hi[k][c]);
@@ -2054,7 +2077,20 @@ mod avx2 {
     pub(super) unsafe fn gather8_f64(cells: &[[u32; 8]], x: &[[f64; 3]]) -> [V3<F64x8>; 8] {
         const ALL: [usize; 8] = [0, 1, 2, 3, 4, 5, 6, 7];
         // SAFETY: the caller runs where AVX-512F is available.
-        unsafe { join_corners::<F64x8>(gather4(&cells[..4], x, ALL), gather4(&cells[4..], x, ALL)) }
+        unsafe {
+            join_corners::<F64x8, 8>(gather4(&cells[..4], x, ALL), gather4(&cells[4..], x, ALL))
+        }
+    }
+
+    /// Corners 0, 1, 3 and 4 of eight cells in `f64`, the ends of their
+    /// corner-0 edges: [`gather4`] of each half.
+    #[inline(always)]
+    pub(super) unsafe fn gather8_edge_ends(cells: &[[u32; 8]], x: &[[f64; 3]]) -> [V3<F64x8>; 4] {
+        const ENDS: [usize; 4] = [0, 1, 3, 4];
+        // SAFETY: the caller runs where AVX-512F is available.
+        unsafe {
+            join_corners::<F64x8, 4>(gather4(&cells[..4], x, ENDS), gather4(&cells[4..], x, ENDS))
+        }
     }
 
     /// The 12 edge stretches of eight cells in `f64`: [`gather_edges4`] of
@@ -2087,7 +2123,7 @@ mod avx2 {
     pub(super) unsafe fn gather16_relative(cells: &[[u32; 8]], x: &[[f64; 3]]) -> [V3<F32x16>; 8] {
         // SAFETY: the caller runs where AVX-512F and DQ are available.
         unsafe {
-            join_corners::<F32x16>(
+            join_corners::<F32x16, 8>(
                 gather8_relative(&cells[..8], x),
                 gather8_relative(&cells[8..], x),
             )
@@ -3374,6 +3410,38 @@ mod tests {
             }
             // The values are forces: the corner barrier pushed.
             assert!(portable.iter().flatten().any(|f| f.abs() > 0.0), "{paths}");
+        }
+        // The edge pass: the scalar path's bits on every path, and the
+        // stretches the cells' edges above were given to round-off (one
+        // division for three edges there, one per edge in `stretch`).
+        let ebits =
+            |o: &[[f64; 3]]| -> Vec<u64> { o.iter().flatten().map(|v| v.to_bits()).collect() };
+        let mut expected = vec![[0.0; 3]; n];
+        edge_stretches_scalar(h, &cells, &x, &mut expected);
+        for (c, w) in cells.iter().zip(&expected) {
+            for (ax, w) in w.iter().enumerate() {
+                let exact = edges[c[0] as usize][ax];
+                assert!(
+                    (w - exact).abs() <= 1e-14 * (1.0 + exact.abs()),
+                    "{w} {exact}"
+                );
+            }
+        }
+        let mut out = vec![[0.0; 3]; n];
+        edge_stretches_body(h, &cells, &x, &mut out, gather_edge_ends::<LANES>);
+        assert_eq!(ebits(&out), ebits(&expected), "portable edge pass");
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU supports AVX2 (checked just above).
+                unsafe { edge_stretches_avx2(h, &cells, &x, &mut out) };
+                assert_eq!(ebits(&out), ebits(&expected), "AVX2 edge pass");
+            }
+            if has_avx512() {
+                // SAFETY: the CPU supports AVX-512F, DQ and VL.
+                unsafe { edge_stretches_avx512(h, &cells, &x, &mut out) };
+                assert_eq!(ebits(&out), ebits(&expected), "AVX-512 edge pass");
+            }
         }
     }
 

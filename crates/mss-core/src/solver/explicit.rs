@@ -273,6 +273,12 @@ pub struct Explicit {
     cache_valid: bool,
     /// `K0 v` for stiffness-proportional damping.
     kv: Vec<Vec3>,
+    /// `h / m` per node for the kicks' `h`: a division per node and kick
+    /// was a third of a kick's time, and `h` changes only with the
+    /// sub-step.
+    kick_scale: Vec<f64>,
+    /// The `h` (bits) and masses (address) `kick_scale` was computed for.
+    kick_scale_for: (u64, usize),
     good: State,
     good_valid: bool,
     /// Whether the step under way has yet to keep its start's positions
@@ -382,6 +388,8 @@ impl Explicit {
             } else {
                 Vec::new()
             },
+            kick_scale: Vec::new(),
+            kick_scale_for: (0, 0),
             good: State {
                 x: vec![Vec3::zeros(); n],
                 v: vec![Vec3::zeros(); n],
@@ -549,12 +557,46 @@ impl Explicit {
         }
     }
 
+    /// Makes `kick_scale` `h / m` per node (the same division as a kick
+    /// of `h` computed in place, so the same bits).
+    fn prepare_kicks(&mut self, problem: &Problem, h: f64) {
+        let masses = problem.model().masses();
+        let key = (h.to_bits(), masses.as_ptr() as usize);
+        if self.kick_scale_for == key && self.kick_scale.len() == masses.len() {
+            return;
+        }
+        self.kick_scale.resize(masses.len(), 0.0);
+        self.kick_scale
+            .par_chunks_mut(CHUNK)
+            .zip(masses.par_chunks(CHUNK))
+            .for_each(|(s, m)| {
+                for (s, m) in s.iter_mut().zip(m) {
+                    *s = h / m;
+                }
+            });
+        self.kick_scale_for = key;
+    }
+
     /// One velocity kick of `h` with the cached conservative force, the
-    /// contact forces and damping, on free components only; the velocities
-    /// before it are copied into `save` when given (chunk by chunk, from
-    /// the cache, instead of a pass of their own). Returns false on
-    /// non-finite values.
-    fn kick(&self, problem: &Problem, v: &mut [Vec3], h: f64, save: Option<&mut [Vec3]>) -> bool {
+    /// contact forces and damping, on free components only. Returns false
+    /// on non-finite values.
+    fn kick(&self, problem: &Problem, v: &mut [Vec3], h: f64) -> bool {
+        let kick_chunk = self.chunk_kick(problem, h);
+        v.par_chunks_mut(CHUNK)
+            .enumerate()
+            .map(|(ci, vc)| kick_chunk(ci, vc))
+            .reduce(|| true, |a, b| a && b)
+    }
+
+    /// The kick of `h` of chunk `ci` of the velocities ([`ChunkKick::apply`]
+    /// with the terms the problem has); `kick_scale` holds `h / m`
+    /// ([`Explicit::prepare_kicks`]).
+    fn chunk_kick<'a>(
+        &'a self,
+        problem: &'a Problem,
+        h: f64,
+    ) -> impl Fn(usize, &mut [Vec3]) -> bool + Sync + 'a {
+        debug_assert_eq!(self.kick_scale_for.0, h.to_bits(), "kicks prepared for h");
         let masses = problem.model().masses();
         let held = problem.constraints().mask_bits();
         let d = problem.damping();
@@ -566,17 +608,14 @@ impl Explicit {
             (false, true) => Extra::Contact,
             _ => Extra::All,
         };
-        let kick_chunk = |ci: usize, vc: &mut [Vec3], saved: Option<&mut [Vec3]>| {
-            if let Some(saved) = saved {
-                saved.copy_from_slice(vc);
-            }
+        move |ci: usize, vc: &mut [Vec3]| {
             let range = ci * CHUNK..ci * CHUNK + vc.len();
             let kick = ChunkKick {
                 f: &self.f_cons[range.clone()],
                 masses: &masses[range.clone()],
+                scale: &self.kick_scale[range.clone()],
                 held: &held[range.clone()],
                 alpha: d.alpha,
-                h,
             };
             match extra {
                 Extra::None => kick.apply(vc, |_, force| force),
@@ -598,63 +637,15 @@ impl Explicit {
                     })
                 }
             }
-        };
-        match save {
-            Some(save) => v
-                .par_chunks_mut(CHUNK)
-                .zip(save.par_chunks_mut(CHUNK))
-                .enumerate()
-                .map(|(ci, (vc, sc))| kick_chunk(ci, vc, Some(sc)))
-                .reduce(|| true, |a, b| a && b),
-            None => v
-                .par_chunks_mut(CHUNK)
-                .enumerate()
-                .map(|(ci, vc)| kick_chunk(ci, vc, None))
-                .reduce(|| true, |a, b| a && b),
         }
     }
 
-    /// `x += dt v`, then held components prescribed at `t1`; the positions
-    /// before it are copied into `save` when given.
-    fn drift(
-        problem: &Problem,
-        state: &mut State,
-        dt: f64,
-        t1: f64,
-        save: Option<&mut [Vec3]>,
-    ) -> bool {
-        let drift_chunk = |xc: &mut [Vec3], vc: &[Vec3], saved: Option<&mut [Vec3]>| {
-            if let Some(saved) = saved {
-                saved.copy_from_slice(xc);
-            }
-            let mut ok = true;
-            for (xi, vi) in xc.iter_mut().zip(vc) {
-                *xi += *vi * dt;
-                ok &= all_finite(xi);
-            }
-            ok
-        };
-        let pairs = state.x.par_chunks_mut(CHUNK).zip(state.v.par_chunks(CHUNK));
-        let ok = match save {
-            Some(save) => pairs
-                .zip(save.par_chunks_mut(CHUNK))
-                .map(|((xc, vc), sc)| drift_chunk(xc, vc, Some(sc)))
-                .reduce(|| true, |a, b| a && b),
-            None => pairs
-                .map(|(xc, vc)| drift_chunk(xc, vc, None))
-                .reduce(|| true, |a, b| a && b),
-        };
-        let rest = problem.model().rest_positions();
-        problem
-            .constraints()
-            .prescribe_all(t1, dt, rest, &mut state.x, &mut state.v);
-        ok
-    }
-
-    /// A sub-step's kick of `h` and drift of `dt`; in a step's first
-    /// sub-step they also keep the state the step started from (the
-    /// retry's), each copying what it reads before changing it: that saves
-    /// a pass over the positions and velocities per step.
+    /// A sub-step's kick of `h` and drift `x += dt v` in one pass over the
+    /// nodes (each chunk kicked, then drifted, while it is in cache), then
+    /// held components prescribed at `t1`. In a step's first sub-step it
+    /// also keeps the state the step started from (the retry's), copying
+    /// each chunk before changing it: that saves a pass over the positions
+    /// and velocities per step. Returns false on non-finite values.
     fn first_kick_and_drift(
         &mut self,
         problem: &Problem,
@@ -663,17 +654,60 @@ impl Explicit {
         dt: f64,
         t1: f64,
     ) -> bool {
-        if !std::mem::take(&mut self.start_pending) {
-            let ok = self.kick(problem, &mut state.v, h, None);
-            return ok & Self::drift(problem, state, dt, t1, None);
+        let keep_start = std::mem::take(&mut self.start_pending);
+        let (mut start_x, mut start_v) = if keep_start {
+            (
+                std::mem::take(&mut self.start.x),
+                std::mem::take(&mut self.start.v),
+            )
+        } else {
+            (Vec::new(), Vec::new())
+        };
+        let ok = {
+            let kick_chunk = self.chunk_kick(problem, h);
+            let kick_and_drift =
+                |ci: usize,
+                 xc: &mut [Vec3],
+                 vc: &mut [Vec3],
+                 saved: Option<(&mut [Vec3], &mut [Vec3])>| {
+                    if let Some((sx, sv)) = saved {
+                        sx.copy_from_slice(xc);
+                        sv.copy_from_slice(vc);
+                    }
+                    let mut ok = kick_chunk(ci, vc);
+                    for (xi, vi) in xc.iter_mut().zip(vc.iter()) {
+                        *xi += *vi * dt;
+                        ok &= all_finite(xi);
+                    }
+                    ok
+                };
+            let chunks = state
+                .x
+                .par_chunks_mut(CHUNK)
+                .zip(state.v.par_chunks_mut(CHUNK))
+                .enumerate();
+            if keep_start {
+                chunks
+                    .zip(
+                        start_x
+                            .par_chunks_mut(CHUNK)
+                            .zip(start_v.par_chunks_mut(CHUNK)),
+                    )
+                    .map(|((ci, (xc, vc)), (sx, sv))| kick_and_drift(ci, xc, vc, Some((sx, sv))))
+                    .reduce(|| true, |a, b| a && b)
+            } else {
+                chunks
+                    .map(|(ci, (xc, vc))| kick_and_drift(ci, xc, vc, None))
+                    .reduce(|| true, |a, b| a && b)
+            }
+        };
+        if keep_start {
+            (self.start.x, self.start.v) = (start_x, start_v);
         }
-        let (mut start_x, mut start_v) = (
-            std::mem::take(&mut self.start.x),
-            std::mem::take(&mut self.start.v),
-        );
-        let ok = self.kick(problem, &mut state.v, h, Some(&mut start_v))
-            & Self::drift(problem, state, dt, t1, Some(&mut start_x));
-        (self.start.x, self.start.v) = (start_x, start_v);
+        let rest = problem.model().rest_positions();
+        problem
+            .constraints()
+            .prescribe_all(t1, dt, rest, &mut state.x, &mut state.v);
         ok
     }
 
@@ -686,6 +720,7 @@ impl Explicit {
         let cached = self.cache_valid && self.cache_time == t0;
         match self.opts.scheme {
             ExplicitScheme::VelocityVerlet => {
+                self.prepare_kicks(problem, 0.5 * dt);
                 if !cached {
                     self.conservative_forces(problem, state);
                 }
@@ -696,13 +731,14 @@ impl Explicit {
                 state.time = t1;
                 self.conservative_forces(problem, state);
                 self.damping_product(problem, &state.v);
-                ok &= self.kick(problem, &mut state.v, 0.5 * dt, None);
+                ok &= self.kick(problem, &mut state.v, 0.5 * dt);
                 self.cache_time = t1;
                 self.cache_valid = ok;
                 self.update_anchors(problem, state);
                 ok
             }
             ExplicitScheme::SymplecticEuler => {
+                self.prepare_kicks(problem, dt);
                 if !cached {
                     self.conservative_forces(problem, state);
                 }
@@ -1228,22 +1264,23 @@ enum Extra {
 struct ChunkKick<'a> {
     f: &'a [Vec3],
     masses: &'a [f64],
+    /// `h / m` per node.
+    scale: &'a [f64],
     held: &'a [u8],
     alpha: f64,
-    h: f64,
 }
 
 impl ChunkKick<'_> {
-    /// `v += h F / m` on the free components of the chunk's nodes, with
+    /// `v += F (h / m)` on the free components of the chunk's nodes, with
     /// `F = complete(k, f - alpha m v)` (`k`: index in the chunk). Returns
     /// false on non-finite values.
     #[inline(always)]
     fn apply(&self, v: &mut [Vec3], complete: impl Fn(usize, Vec3) -> Vec3) -> bool {
         let mut ok = true;
         let nodes = v.iter_mut().zip(self.f).zip(self.masses).zip(self.held);
-        for (k, (((vi, &f), &m), &held)) in nodes.enumerate() {
+        for (k, ((((vi, &f), &m), &held), &scale)) in nodes.zip(self.scale).enumerate() {
             let force = complete(k, f - *vi * (self.alpha * m));
-            let dv = force * (self.h / m);
+            let dv = force * scale;
             if held == 0 {
                 *vi += dv;
             } else {
