@@ -388,6 +388,8 @@ struct Touch {
     sliding: bool,
     stiffness: f64,
     damping: f64,
+    /// The point's normal velocity relative to the triangle.
+    v_n: f64,
 }
 
 /// Contact between the bodies of a model, and self-contact where asked.
@@ -1326,7 +1328,8 @@ impl BodyContact {
             .map(|j| v[tri.nodes[j] as usize] * pair.beta[j])
             .sum();
         let v_rel = v[node] - v_face;
-        let f_n = (k * pair.depth - c * v_rel.dot(&n)).max(0.0);
+        let v_n = v_rel.dot(&n);
+        let (f_n, _, _) = super::normal_force(k, c, pair.depth, v_n);
         let p = x[node];
         let anchored = Self::anchor_of(anchors, i).and_then(|a| self.anchor_position(x, a));
         let d = anchored.map_or(Vec3::zeros(), |a| p - a);
@@ -1339,6 +1342,7 @@ impl BodyContact {
             sliding,
             stiffness: k,
             damping: c,
+            v_n,
         }
     }
 
@@ -1438,17 +1442,34 @@ impl BodyContact {
             let n = pair.normal;
             let nn = n * n.transpose();
             let tangent = Mat3::identity() - nn;
-            let mut block = -nn * (touch.stiffness + touch.damping * dv_dx);
-            if touch.sliding {
-                let len = touch.delta.norm();
-                if len > 0.0 {
-                    let dir = touch.delta / len;
-                    let mu = self.settings.friction_kinetic;
-                    block -= (tangent - dir * dir.transpose()) * (mu * touch.f_n / len);
-                    block += dir * n.transpose() * (mu * (touch.stiffness + touch.damping * dv_dx));
-                }
-            } else if Self::anchor_of(anchors, pair.point as usize).is_some() {
+            let (_, df_ddepth, df_dvn) = super::normal_force(
+                touch.stiffness,
+                touch.damping,
+                pair.depth.max(0.0),
+                touch.v_n,
+            );
+            // A point just outside (a static solve's margin) has the
+            // contact's stiffness in the tangent.
+            let df_ddepth = if pair.depth <= 0.0 {
+                touch.stiffness
+            } else {
+                df_ddepth
+            };
+            let d_fn = -n * (df_ddepth - df_dvn * dv_dx);
+            let mut block = -nn * (df_ddepth - df_dvn * dv_dx);
+            if pair.depth <= 0.0 && Self::anchor_of(anchors, pair.point as usize).is_some() {
+                // A point just outside (a static solve's margin) holds on
+                // with its stick spring.
                 block -= tangent * touch.stiffness;
+            } else if Self::anchor_of(anchors, pair.point as usize).is_some() {
+                block += super::coulomb_jacobian(
+                    touch.delta,
+                    touch.stiffness,
+                    touch.f_n,
+                    &self.settings,
+                    &tangent,
+                    d_fn,
+                );
             }
             // The force F(p - sum beta_j x_j) on the point, minus beta_i F on
             // the triangle's nodes (each through its nodes' weights).
@@ -1542,8 +1563,11 @@ impl BodyContact {
                         let len = touch.delta.norm();
                         let back = if len > 0.0 {
                             touch.delta
-                                * ((self.settings.friction_kinetic * touch.f_n / touch.stiffness)
-                                    / len)
+                                * (super::kinetic_offset(
+                                    touch.stiffness,
+                                    touch.f_n,
+                                    &self.settings,
+                                ) / len)
                         } else {
                             Vec3::zeros()
                         };

@@ -5,3 +5,4 @@
 mod equilibrium;
 mod model_slow;
 mod multigrid;
+mod sliding;
