@@ -654,6 +654,9 @@ fn coulomb_jacobian(
 /// its damping asks for is damped as before.
 fn normal_force(k: f64, c: f64, depth: f64, v_n: f64) -> (f64, f64, f64) {
     let elastic = k * depth;
+    if elastic <= 0.0 {
+        return (0.0, 0.0, 0.0);
+    }
     if v_n < 0.0 && -c * v_n > elastic {
         return (2.0 * elastic, 2.0 * k, 0.0);
     }
@@ -1193,8 +1196,10 @@ impl Contact {
         let stiffness = s.stiffness * point.stiffness_ratio;
         let nn = touch.normal * touch.normal.transpose();
         let c = 2.0 * s.damping_ratio * (stiffness * point.mass).sqrt();
+        // The normal force n f_n: f_n changes with the depth (whose
+        // gradient is -n) and with v_n (which follows x as dv/dx), and n
+        // turns on a curved obstacle.
         let (_, df_ddepth, df_dvn) = normal_force(stiffness, c, pen.depth, touch.v_n);
-        // Normal force: -k n n^T + k d dn/dx, damping -(c dv/dx) n n^T.
         let block =
             -nn * (df_ddepth - df_dvn * dv_dx) + pen.normal_gradient * (stiffness * pen.depth);
         // d(delta)/dx for delta = d - n (n . d): the tangent
@@ -1203,8 +1208,6 @@ impl Contact {
         let g = pen.normal_gradient;
         let d_delta = Mat3::identity() - nn - g * n.dot(&d) - n * (d.transpose() * g);
         let f_n = touch.force.dot(&n);
-        // f_n = k depth - c v.n, its derivative -(k + c dv/dx) n (where it
-        // is positive; without a normal force there is no friction).
         let d_fn = -n * (df_ddepth - df_dvn * dv_dx);
         block + coulomb_jacobian(touch.delta, stiffness, f_n, s, &d_delta, d_fn)
     }
@@ -1514,6 +1517,7 @@ mod tests {
     fn the_normal_force_is_continuous_and_its_derivatives_are_exact() {
         let (k, c) = (2.0e4, 30.0);
         for v_n in [-5.0, -0.01, 0.0, 0.2] {
+            assert_eq!(normal_force(k, c, -1e-6, v_n), (0.0, 0.0, 0.0));
             let (f, _, _) = normal_force(k, c, 1e-12, v_n);
             assert!(
                 (0.0..=2.0 * k * 1e-12 * (1.0 + 1e-9)).contains(&f),
