@@ -1080,7 +1080,8 @@ impl Contact {
         let k = s.stiffness * point.stiffness_ratio;
         let c = 2.0 * s.damping_ratio * (k * point.mass).sqrt();
         let v_rel = v - obstacle.velocity(t);
-        let (f_n, _, _) = normal_force(k, c, pen.depth, v_rel.dot(&n));
+        let v_n = v_rel.dot(&n);
+        let (f_n, _, _) = normal_force(k, c, pen.depth, v_n);
         // The anchor lives in the obstacle's frame; a new contact starts at x.
         let a = anchor.map_or(x, |a| a + obstacle.offset(t));
         let d = x - a;
@@ -1093,7 +1094,7 @@ impl Contact {
                 offset: d,
                 delta,
                 sliding,
-                v_n: v_rel.dot(&n),
+                v_n,
             },
             pen,
         ))

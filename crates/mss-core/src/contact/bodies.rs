@@ -1434,43 +1434,35 @@ impl BodyContact {
         }
         jac.extend_pattern(&extra);
         for (pair, weights) in pairs.iter().zip(&weights) {
-            let mut touch = self.touch(pair, x, v, anchors);
-            if pair.depth <= 0.0 {
-                touch.f_n = 0.0;
-                touch.sliding = false;
-            }
+            let touch = self.touch(pair, x, v, anchors);
             let n = pair.normal;
             let nn = n * n.transpose();
             let tangent = Mat3::identity() - nn;
-            let (_, df_ddepth, df_dvn) = super::normal_force(
-                touch.stiffness,
-                touch.damping,
-                pair.depth.max(0.0),
-                touch.v_n,
-            );
-            // A point just outside (a static solve's margin) has the
-            // contact's stiffness in the tangent.
-            let df_ddepth = if pair.depth <= 0.0 {
-                touch.stiffness
+            let anchored = Self::anchor_of(anchors, pair.point as usize).is_some();
+            let block = if pair.depth <= 0.0 {
+                // A point just outside (a static solve's margin) has the
+                // contact's stiffness in the tangent, and holds on with its
+                // stick spring where anchored.
+                let stick = if anchored { tangent } else { Mat3::zeros() };
+                -(nn + stick) * touch.stiffness
             } else {
-                df_ddepth
+                let (_, df_ddepth, df_dvn) =
+                    super::normal_force(touch.stiffness, touch.damping, pair.depth, touch.v_n);
+                let d_fn = -n * (df_ddepth - df_dvn * dv_dx);
+                let friction = if anchored {
+                    super::coulomb_jacobian(
+                        touch.delta,
+                        touch.stiffness,
+                        touch.f_n,
+                        &self.settings,
+                        &tangent,
+                        d_fn,
+                    )
+                } else {
+                    Mat3::zeros()
+                };
+                n * d_fn.transpose() + friction
             };
-            let d_fn = -n * (df_ddepth - df_dvn * dv_dx);
-            let mut block = -nn * (df_ddepth - df_dvn * dv_dx);
-            if pair.depth <= 0.0 && Self::anchor_of(anchors, pair.point as usize).is_some() {
-                // A point just outside (a static solve's margin) holds on
-                // with its stick spring.
-                block -= tangent * touch.stiffness;
-            } else if Self::anchor_of(anchors, pair.point as usize).is_some() {
-                block += super::coulomb_jacobian(
-                    touch.delta,
-                    touch.stiffness,
-                    touch.f_n,
-                    &self.settings,
-                    &tangent,
-                    d_fn,
-                );
-            }
             // The force F(p - sum beta_j x_j) on the point, minus beta_i F on
             // the triangle's nodes (each through its nodes' weights).
             for &(a, wa) in weights {

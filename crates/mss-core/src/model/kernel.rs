@@ -1633,11 +1633,17 @@ fn corner_stretches<T: Scalar>(rest: f64, origin: V3<T>, ends: [V3<T>; 3]) -> [T
     w
 }
 
+/// A cell's 8 corners, in order.
+const ALL_CORNERS: [usize; 8] = [0, 1, 2, 3, 4, 5, 6, 7];
+
+/// Corner 0 of a cell and the ends of its edges along x, y and z.
+const EDGE_ENDS: [usize; 4] = [0, 1, 3, 4];
+
 /// Corners 0, 1, 3 and 4 of `L` cells: the ends of their corner-0 edges.
 #[inline(always)]
 fn gather_edge_ends<const L: usize>(cells: &[[u32; 8]], x: &[[f64; 3]]) -> [V3<Lanes<f64, L>>; 4] {
     let mut xl: [V3<Lanes<f64, L>>; 4] = [[Lanes::cst(0.0); 3]; 4];
-    for (&k, xk) in [0, 1, 3, 4].iter().zip(xl.iter_mut()) {
+    for (&k, xk) in EDGE_ENDS.iter().zip(xl.iter_mut()) {
         for (l, cell) in cells.iter().enumerate() {
             let p = x[cell[k] as usize];
             xk[0].0[l] = p[0];
@@ -1655,7 +1661,7 @@ fn edge_stretches_avx2(rest: f64, cells: &[[u32; 8]], x: &[[f64; 3]], out: &mut 
     // helpers safely.
     edge_stretches_body(rest, cells, x, out, |c, x| {
         // SAFETY: this closure runs inside an AVX2 function.
-        unsafe { avx2::gather4(c, x, [0, 1, 3, 4]) }
+        unsafe { avx2::gather4(c, x, EDGE_ENDS) }
     });
 }
 
@@ -1668,7 +1674,7 @@ fn edge_stretches_avx512(rest: f64, cells: &[[u32; 8]], x: &[[f64; 3]], out: &mu
     let (out_head, out_tail) = out.split_at_mut(whole);
     // SAFETY (the closure): it runs inside this AVX-512 function.
     edge_stretches_body(rest, &cells[..whole], x, out_head, |c, x| unsafe {
-        avx2::gather8_edge_ends(c, x)
+        avx2::gather8_f64(c, x, EDGE_ENDS)
     });
     edge_stretches_avx2(rest, &cells[whole..], x, out_tail);
 }
@@ -2072,24 +2078,19 @@ mod avx2 {
         }
     }
 
-    /// The corners of eight cells in `f64`: [`gather4`] of each half.
+    /// Corners `corners` of eight cells in `f64`: [`gather4`] of each half.
     #[inline(always)]
-    pub(super) unsafe fn gather8_f64(cells: &[[u32; 8]], x: &[[f64; 3]]) -> [V3<F64x8>; 8] {
-        const ALL: [usize; 8] = [0, 1, 2, 3, 4, 5, 6, 7];
+    pub(super) unsafe fn gather8_f64<const K: usize>(
+        cells: &[[u32; 8]],
+        x: &[[f64; 3]],
+        corners: [usize; K],
+    ) -> [V3<F64x8>; K] {
         // SAFETY: the caller runs where AVX-512F is available.
         unsafe {
-            join_corners::<F64x8, 8>(gather4(&cells[..4], x, ALL), gather4(&cells[4..], x, ALL))
-        }
-    }
-
-    /// Corners 0, 1, 3 and 4 of eight cells in `f64`, the ends of their
-    /// corner-0 edges: [`gather4`] of each half.
-    #[inline(always)]
-    pub(super) unsafe fn gather8_edge_ends(cells: &[[u32; 8]], x: &[[f64; 3]]) -> [V3<F64x8>; 4] {
-        const ENDS: [usize; 4] = [0, 1, 3, 4];
-        // SAFETY: the caller runs where AVX-512F is available.
-        unsafe {
-            join_corners::<F64x8, 4>(gather4(&cells[..4], x, ENDS), gather4(&cells[4..], x, ENDS))
+            join_corners::<F64x8, K>(
+                gather4(&cells[..4], x, corners),
+                gather4(&cells[4..], x, corners),
+            )
         }
     }
 
@@ -2306,8 +2307,8 @@ mod avx2 {
         // SAFETY: the caller runs where AVX2 is available (this function's
         // contract); memory accesses are justified where they are made.
         unsafe {
-            let lo = gather4(&cells[..4], x, [0, 1, 2, 3, 4, 5, 6, 7]);
-            let hi = gather4(&cells[4..], x, [0, 1, 2, 3, 4, 5, 6, 7]);
+            let lo = gather4(&cells[..4], x, super::ALL_CORNERS);
+            let hi = gather4(&cells[4..], x, super::ALL_CORNERS);
             let zero = F32x8(_mm256_setzero_ps());
             let mut xl = [[zero; 3]; 8];
             for (k, xk) in xl.iter_mut().enumerate() {
@@ -2542,7 +2543,9 @@ fn forces_batch_avx512(
         out_head,
         // SAFETY (each closure): they run inside this AVX-512 function.
         Moves {
-            gather: |c: &[[u32; 8]], x: &[[f64; 3]]| unsafe { avx2::gather8_f64(c, x) },
+            gather: |c: &[[u32; 8]], x: &[[f64; 3]]| unsafe {
+                avx2::gather8_f64(c, x, ALL_CORNERS)
+            },
             gather_edges: |c: &[[u32; 8]], e: &[[f64; 3]]| unsafe { avx2::gather_edges8_f64(c, e) },
             scatter: |f: &[V3<avx2::F64x8>; 8], o: &mut [[f64; 4]]| unsafe {
                 avx2::scatter8_f64(f, o)
@@ -2592,9 +2595,7 @@ fn forces_batch_avx2(
         out,
         // SAFETY (each closure): they run inside this AVX2 function.
         Moves {
-            gather: |c: &[[u32; 8]], x: &[[f64; 3]]| unsafe {
-                avx2::gather4(c, x, [0, 1, 2, 3, 4, 5, 6, 7])
-            },
+            gather: |c: &[[u32; 8]], x: &[[f64; 3]]| unsafe { avx2::gather4(c, x, ALL_CORNERS) },
             gather_edges: |c: &[[u32; 8]], e: &[[f64; 3]]| unsafe { avx2::gather_edges4(c, e) },
             scatter: |f: &[V3<avx2::F64x4>; 8], o: &mut [[f64; 4]]| unsafe { avx2::scatter4(f, o) },
             tail: cell_forces_from_edges,
@@ -2724,7 +2725,7 @@ fn tangent_action_avx512(
         v,
         out_head,
         // SAFETY (both closures): they run inside this AVX-512 function.
-        |c: &[[u32; 8]], x: &[[f64; 3]]| unsafe { avx2::gather8_f64(c, x) },
+        |c: &[[u32; 8]], x: &[[f64; 3]]| unsafe { avx2::gather8_f64(c, x, ALL_CORNERS) },
         |f: &[V3<avx2::F64x8>; 8], o: &mut [[f64; 4]]| unsafe { avx2::scatter8_f64(f, o) },
     );
     tangent_action_avx2(p, &cells[whole..], x, v, out_tail);
@@ -2746,7 +2747,7 @@ fn tangent_action_avx2(
         v,
         out,
         // SAFETY (both closures): they run inside this AVX2 function.
-        |c: &[[u32; 8]], x: &[[f64; 3]]| unsafe { avx2::gather4(c, x, [0, 1, 2, 3, 4, 5, 6, 7]) },
+        |c: &[[u32; 8]], x: &[[f64; 3]]| unsafe { avx2::gather4(c, x, ALL_CORNERS) },
         |f: &[V3<avx2::F64x4>; 8], o: &mut [[f64; 4]]| unsafe { avx2::scatter4(f, o) },
     );
 }
@@ -2843,7 +2844,7 @@ fn survey_avx512(
         x,
         parts,
         out_head,
-        |c: &[[u32; 8]], x: &[[f64; 3]]| unsafe { avx2::gather8_f64(c, x) },
+        |c: &[[u32; 8]], x: &[[f64; 3]]| unsafe { avx2::gather8_f64(c, x, ALL_CORNERS) },
     );
     survey_avx2(p, &cells[whole..], x, parts, out_tail);
 }
@@ -2864,7 +2865,7 @@ fn survey_avx2(
         x,
         parts,
         out,
-        |c: &[[u32; 8]], x: &[[f64; 3]]| unsafe { avx2::gather4(c, x, [0, 1, 2, 3, 4, 5, 6, 7]) },
+        |c: &[[u32; 8]], x: &[[f64; 3]]| unsafe { avx2::gather4(c, x, ALL_CORNERS) },
     );
 }
 

@@ -646,7 +646,7 @@ impl Explicit {
     /// also keeps the state the step started from (the retry's), copying
     /// each chunk before changing it: that saves a pass over the positions
     /// and velocities per step. Returns false on non-finite values.
-    fn first_kick_and_drift(
+    fn kick_and_drift(
         &mut self,
         problem: &Problem,
         state: &mut State,
@@ -726,7 +726,7 @@ impl Explicit {
                 }
                 self.contact_start(problem, state, true);
                 self.damping_product(problem, &state.v);
-                let mut ok = self.first_kick_and_drift(problem, state, 0.5 * dt, dt, t1);
+                let mut ok = self.kick_and_drift(problem, state, 0.5 * dt, dt, t1);
                 ok &= self.contact_end(problem, state, dt, t0, true);
                 state.time = t1;
                 self.conservative_forces(problem, state);
@@ -744,7 +744,7 @@ impl Explicit {
                 }
                 self.contact_start(problem, state, false);
                 self.damping_product(problem, &state.v);
-                let mut ok = self.first_kick_and_drift(problem, state, dt, dt, t1);
+                let mut ok = self.kick_and_drift(problem, state, dt, dt, t1);
                 ok &= self.contact_end(problem, state, dt, t0, false);
                 state.time = t1;
                 self.cache_valid = false;
