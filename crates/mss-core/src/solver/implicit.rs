@@ -79,6 +79,8 @@ pub struct Implicit {
     /// The linear solver (symbolic LU analysis or multigrid structure),
     /// reused over steps; made at the first step.
     linear: std::cell::RefCell<Option<super::linear::LinearSolver>>,
+    /// Kept factors from a checkpoint, for the linear solver once made.
+    restored_factors: std::cell::RefCell<Option<(u64, Vec<f64>)>>,
 }
 
 impl Implicit {
@@ -98,6 +100,7 @@ impl Implicit {
             free: problem.free_mask(),
             steps: 0,
             linear: std::cell::RefCell::new(None),
+            restored_factors: std::cell::RefCell::new(None),
         })
     }
 
@@ -169,6 +172,9 @@ impl Implicit {
             self.linear.borrow_mut().get_or_insert_with(|| {
                 let mut linear = LinearSolver::new(model, self.opts.linear_solver);
                 linear.set_matrix_free_above(self.opts.matrix_free_above);
+                if let Some((key, values)) = self.restored_factors.take() {
+                    linear.restore_kept_factors(key, values);
+                }
                 linear
             }),
         )
@@ -235,12 +241,28 @@ impl Integrator for Implicit {
     }
 
     fn memory(&self) -> super::IntegratorMemory {
-        // Only the step count (in messages): every step starts from the
-        // state alone, and the linear solver's reused structure does not
-        // change its results.
-        super::IntegratorMemory {
-            counters: vec![self.steps],
-            ..Default::default()
+        // The step count (in messages), and the direct solver's kept
+        // factors: they precondition the next steps' solves, whose results
+        // then differ from fresh factors' in the last bits. (The symbolic
+        // analysis is the same for the same pattern.)
+        let linear = self.linear.borrow();
+        let restored = self.restored_factors.borrow();
+        let kept = match linear.as_ref() {
+            Some(linear) => linear.kept_factors(),
+            None => restored
+                .as_ref()
+                .map(|(key, values)| (*key, values.as_slice())),
+        };
+        match kept {
+            Some((key, values)) => super::IntegratorMemory {
+                counters: vec![self.steps, key],
+                values: values.to_vec(),
+                ..Default::default()
+            },
+            None => super::IntegratorMemory {
+                counters: vec![self.steps],
+                ..Default::default()
+            },
         }
     }
 
@@ -248,6 +270,21 @@ impl Integrator for Implicit {
         match memory.counters.as_slice() {
             [steps] if memory.values.is_empty() && memory.states.is_empty() => {
                 self.steps = *steps;
+                self.restored_factors.replace(None);
+                if let Some(linear) = self.linear.get_mut() {
+                    linear.drop_kept_factors();
+                }
+                Ok(())
+            }
+            [steps, key] if memory.states.is_empty() => {
+                self.steps = *steps;
+                let factors = (*key, memory.values.clone());
+                match self.linear.get_mut() {
+                    Some(linear) => linear.restore_kept_factors(factors.0, factors.1),
+                    None => {
+                        self.restored_factors.replace(Some(factors));
+                    }
+                }
                 Ok(())
             }
             _ => Err(SolverError::BadOption(

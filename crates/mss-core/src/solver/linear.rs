@@ -47,6 +47,18 @@ pub(crate) struct LuCache {
     lu_symbolic: Option<SymbolicLu<usize>>,
     /// Symbolic analyses done (shown by `Debug`).
     analyses: u32,
+    /// The last numeric factorization (of the cached pattern), kept to
+    /// precondition later matrices of the same pattern, and the values of
+    /// the matrix it factors (for [`LinearSolver::kept_factors`]).
+    kept: Option<(Lu<usize, f64>, Vec<f64>)>,
+    /// [`pattern_key`] of the cached pattern.
+    key: u64,
+    /// A matrix to factor as the kept one when the next solve's pattern
+    /// has this key ([`LinearSolver::restore_kept_factors`]).
+    pending: Option<(u64, Vec<f64>)>,
+    /// Numeric factorizations done, and solves the kept one served.
+    factorizations: u32,
+    kept_solves: u32,
 }
 
 impl std::fmt::Debug for LuCache {
@@ -54,6 +66,8 @@ impl std::fmt::Debug for LuCache {
         f.debug_struct("LuCache")
             .field("free_dofs", &self.m)
             .field("analyses", &self.analyses)
+            .field("factorizations", &self.factorizations)
+            .field("kept_solves", &self.kept_solves)
             .finish()
     }
 }
@@ -72,6 +86,11 @@ impl LuCache {
             source: Vec::new(),
             lu_symbolic: None,
             analyses: 0,
+            kept: None,
+            key: 0,
+            pending: None,
+            factorizations: 0,
+            kept_solves: 0,
         }
     }
 
@@ -136,10 +155,20 @@ impl LuCache {
         self.row_idx = row_idx;
         self.source = source;
         self.lu_symbolic = lu_symbolic;
+        self.kept = None;
+        self.key = pattern_key(a, free);
         self.analyses += 1;
         Ok(())
     }
 }
+
+/// Relative residual to which a solve on kept factors iterates.
+const KEPT_RTOL: f64 = 1e-10;
+/// Most corrections of a solve on kept factors.
+const KEPT_MAX_CORRECTIONS: usize = 8;
+/// Largest residual contraction per correction for which a solve goes on with
+/// kept factors rather than factoring its own matrix.
+const KEPT_MAX_CONTRACTION: f64 = 0.25;
 
 /// Solves `A y = b` on the free dofs (`free[3 n + d]`); held components of
 /// `y` are zero. `size` is a length scale of the body (m): a solution larger
@@ -154,6 +183,19 @@ pub(crate) fn solve_free(
 ) -> Result<Vec<Vec3>, LinearFailure> {
     let n = a.num_rows();
     cache.prepare(a, free)?;
+    let mut kept = cache.kept.take();
+    if let Some((key, values)) = cache.pending.take()
+        && key == cache.key
+        && values.len() == cache.source.len()
+        && let Some(symbolic) = &cache.symbolic
+        && let Some(lu_symbolic) = &cache.lu_symbolic
+    {
+        crate::sparse::sequential_factorizations();
+        let mat = SparseColMatRef::new(symbolic.as_ref(), &values);
+        kept = Lu::try_new_with_symbolic(lu_symbolic.clone(), mat)
+            .ok()
+            .map(|lu| (lu, values));
+    }
     let m = cache.m;
     let dofs = &cache.dofs;
     let mut y = vec![Vec3::zeros(); n];
@@ -178,34 +220,65 @@ pub(crate) fn solve_free(
     for (i, k) in dofs.free_dofs() {
         rhs[(k, 0)] = b[i / 3][i % 3];
     }
-    crate::sparse::sequential_factorizations();
-    let lu = match Lu::try_new_with_symbolic(lu_symbolic.clone(), mat) {
-        Ok(lu) => lu,
-        Err(faer::sparse::linalg::LuError::SymbolicSingular { .. }) => {
-            return Err(LinearFailure::Singular { nodes: Vec::new() });
-        }
-        Err(e) => return Err(LinearFailure::Other(format!("{e:?}"))),
-    };
-    let mut sol = lu.solve(&rhs);
-    // Iterative refinement: a few residual corrections with the same factors
-    // recover the accuracy that pivoting on ill-conditioned lattices loses.
-    let mut best = f64::INFINITY;
-    for _ in 0..3 {
+    let residual = |x: &Mat<f64>| {
         let mut r = rhs.clone();
         for j in 0..m {
-            let xj = sol[(j, 0)];
+            let xj = x[(j, 0)];
             for p in cache.col_ptr[j]..cache.col_ptr[j + 1] {
                 r[(cache.row_idx[p], 0)] -= values[p] * xj;
             }
         }
-        let rn = r.norm_l2();
-        if !(rn.is_finite() && rn < 0.5 * best) {
-            break;
+        r
+    };
+    let kept_sol = kept.as_ref().and_then(|(lu, _)| {
+        // Richardson iteration preconditioned by the kept factors: worth
+        // it while it contracts fast, since a factorization costs some
+        // twenty of its iterations.
+        let tol = KEPT_RTOL * rhs.norm_l2();
+        let mut x = lu.solve(&rhs);
+        let mut previous = rhs.norm_l2();
+        for _ in 0..KEPT_MAX_CORRECTIONS {
+            let r = residual(&x);
+            let rn = r.norm_l2();
+            if !rn.is_finite() || rn > KEPT_MAX_CONTRACTION * previous {
+                return None;
+            }
+            if rn <= tol {
+                return Some(x);
+            }
+            previous = rn;
+            x += lu.solve(&r);
         }
-        best = rn;
-        let corr = lu.solve(&r);
-        sol += &corr;
-    }
+        None
+    });
+    let (sol, kept, factored) = match (kept_sol, kept) {
+        (Some(sol), Some(kept)) => (sol, kept, false),
+        _ => {
+            crate::sparse::sequential_factorizations();
+            let lu = match Lu::try_new_with_symbolic(lu_symbolic.clone(), mat) {
+                Ok(lu) => lu,
+                Err(faer::sparse::linalg::LuError::SymbolicSingular { .. }) => {
+                    return Err(LinearFailure::Singular { nodes: Vec::new() });
+                }
+                Err(e) => return Err(LinearFailure::Other(format!("{e:?}"))),
+            };
+            let mut sol = lu.solve(&rhs);
+            // Iterative refinement: a few residual corrections with the same factors
+            // recover the accuracy that pivoting on ill-conditioned lattices loses.
+            let mut best = f64::INFINITY;
+            for _ in 0..3 {
+                let r = residual(&sol);
+                let rn = r.norm_l2();
+                if !(rn.is_finite() && rn < 0.5 * best) {
+                    break;
+                }
+                best = rn;
+                let corr = lu.solve(&r);
+                sol += &corr;
+            }
+            (sol, (lu, values), true)
+        }
+    };
     let mut worst = 0.0f64;
     for (i, k) in dofs.free_dofs() {
         let v = sol[(k, 0)];
@@ -241,7 +314,32 @@ pub(crate) fn solve_free(
         order.truncate(8);
         return Err(LinearFailure::Singular { nodes: order });
     }
+    if factored {
+        cache.factorizations += 1;
+    } else {
+        cache.kept_solves += 1;
+    }
+    cache.kept = Some(kept);
     Ok(y)
+}
+
+/// A fingerprint (FNV-1a) of a block pattern and free mask, stable across
+/// builds: a checkpoint's kept factors are put back only for their pattern.
+fn pattern_key(a: &BlockCsr, free: &[bool]) -> u64 {
+    let words = a
+        .row_offsets
+        .iter()
+        .chain(&a.col_indices)
+        .copied()
+        .chain(free.iter().map(|&f| u32::from(f)));
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for w in words {
+        for b in w.to_le_bytes() {
+            h ^= u64::from(b);
+            h = h.wrapping_mul(0x0100_0000_01b3);
+        }
+    }
+    h
 }
 
 /// Which linear solver the Newton steps use.
@@ -530,6 +628,32 @@ impl LinearSolver {
     pub(crate) fn newton_scale(&self) -> Option<f64> {
         self.newton_scale
             .filter(|_| self.last.as_ref().is_some_and(|l| l.lean))
+    }
+
+    /// The direct solver's kept factorization, as the key of its pattern
+    /// and the values of the matrix it factors: what a checkpoint stores so
+    /// that a resumed run's solves are bitwise those of the run that was not
+    /// interrupted ([`LinearSolver::restore_kept_factors`]).
+    pub(crate) fn kept_factors(&self) -> Option<(u64, &[f64])> {
+        match (&self.lu.kept, &self.lu.pending) {
+            (Some((_, values)), _) => Some((self.lu.key, values.as_slice())),
+            (None, Some((key, values))) => Some((*key, values.as_slice())),
+            (None, None) => None,
+        }
+    }
+
+    /// Forgets the kept factors (a checkpoint without them was restored).
+    pub(crate) fn drop_kept_factors(&mut self) {
+        self.lu.kept = None;
+        self.lu.pending = None;
+    }
+
+    /// Puts back what [`LinearSolver::kept_factors`] gave: the next direct
+    /// solve factors `values` first if its pattern has `key` (else, as an
+    /// uninterrupted run would, it drops them).
+    pub(crate) fn restore_kept_factors(&mut self, key: u64, values: Vec<f64>) {
+        self.lu.kept = None;
+        self.lu.pending = Some((key, values));
     }
 
     /// What the solver did so far.

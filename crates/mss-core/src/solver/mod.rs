@@ -1132,7 +1132,9 @@ fn newton_iterations(
     let free_dofs = free.iter().filter(|f| **f).count();
     let mut x_lin: Vec<Vec3> = Vec::new();
     for it in 0..opts.max_iterations {
-        if norm == 0.0 || (it > 0 && norm <= target.max(floor)) {
+        // The floor needs a tangent: a state already within the target
+        // needs none.
+        if norm == 0.0 || norm <= target || (it > 0 && norm <= floor) {
             return Ok(it);
         }
         if sys.cancelled() {

@@ -365,6 +365,52 @@ fn implicit_steps_rest_on_the_ground_too() {
 }
 
 #[test]
+fn an_implicit_run_restored_from_its_memory_continues_bitwise() {
+    // The direct solver keeps its last factors and preconditions the next
+    // steps' matrices with them: their solutions differ from fresh factors'
+    // in the last bits, so the memory carries the kept factors' matrix and a
+    // restored integrator factors it again.
+    let down = Vec3::new(0.0, 0.0, -G);
+    let friction = |s: ContactSettings| ContactSettings {
+        friction_static: 0.5,
+        friction_kinetic: 0.5,
+        ..s
+    };
+    let p = problem(block(0.001), down, ground(), friction, Damping::NONE, &[]);
+    let opts = ImplicitOptions {
+        dt: 0.005,
+        ..ImplicitOptions::default()
+    };
+    let mut first = Implicit::new(&p, opts).unwrap();
+    let mut s = State::at_rest(p.model());
+    for _ in 0..12 {
+        first.step(&p, &mut s).unwrap();
+    }
+    let memory = first.memory();
+    assert_eq!(memory.counters.len(), 2, "factors are kept");
+    assert!(!memory.values.is_empty());
+    let mut second = Implicit::new(&p, opts).unwrap();
+    second.restore(&memory).unwrap();
+    let mut forgetful = Implicit::new(&p, opts).unwrap();
+    let (mut s2, mut s3) = (s.clone(), s.clone());
+    for _ in 0..12 {
+        first.step(&p, &mut s).unwrap();
+        second.step(&p, &mut s2).unwrap();
+        forgetful.step(&p, &mut s3).unwrap();
+    }
+    assert_eq!(s.x, s2.x);
+    assert_eq!(s.v, s2.v);
+    assert_eq!(first.memory(), second.memory());
+    // Without the memory the bits differ: the test can tell.
+    assert_ne!(s.x, s3.x);
+    assert!(first.linear_stats().solves > 12);
+    // A memory that is not the implicit integrator's is refused.
+    let mut bad = memory.clone();
+    bad.counters.push(0);
+    assert!(Implicit::new(&p, opts).unwrap().restore(&bad).is_err());
+}
+
+#[test]
 fn an_implicit_landing_takes_contact_without_halving_its_steps() {
     // A 512-cell cube dropped 1 mm onto the ground at dt = 0.01 s, no
     // material damping: Newton meets the contact at once (its friction

@@ -655,31 +655,70 @@ fn an_interrupted_run_resumed_is_bitwise_the_uninterrupted_one() {
     // Interrupted between two frames, then resumed: early, at the landing
     // (where the step control halves the sub-step) and late.
     for fifth in 1..5 {
-        let cut = tempfile::tempdir().unwrap();
-        let cancel = Cancel::new();
-        let stop_at = job.plan.steps * fifth / 5 + 3;
-        let progress = |p: Progress| {
-            if let Progress::Stepping { done, .. } = p
-                && done == stop_at
-            {
-                cancel.cancel();
-            }
-        };
-        let first = job.run(cut.path(), &progress, &cancel).unwrap();
-        assert!(first.interrupted && first.steps == stop_at);
-        assert!(cut.path().join("checkpoint.mss").exists());
-        let resumed = job
-            .resume(cut.path(), &no_progress, &Cancel::new())
-            .unwrap();
-        mss_scene::write_summary(cut.path(), &resumed).unwrap();
-        assert!(!resumed.interrupted);
-        assert_eq!(
-            folder_contents(cut.path()),
-            folder_contents(whole.path()),
-            "stopped at step {stop_at}"
-        );
+        let resumed = interrupted_and_resumed(&job, job.plan.steps * fifth / 5 + 3, whole.path());
         assert_eq!(resumed.frames, reference.frames);
         assert_eq!(resumed.bytes_written, reference.bytes_written);
+    }
+}
+
+/// Runs `job` in a new folder, interrupted after `stop_at` steps, resumes
+/// it there, and checks that the folder holds what the uninterrupted run
+/// wrote in `whole`.
+fn interrupted_and_resumed(
+    job: &Job,
+    stop_at: u64,
+    whole: &std::path::Path,
+) -> mss_scene::RunSummary {
+    let cut = tempfile::tempdir().unwrap();
+    let cancel = Cancel::new();
+    let progress = |p: Progress| {
+        if let Progress::Stepping { done, .. } = p
+            && done == stop_at
+        {
+            cancel.cancel();
+        }
+    };
+    let first = job.run(cut.path(), &progress, &cancel).unwrap();
+    assert!(first.interrupted && first.steps == stop_at);
+    assert!(cut.path().join("checkpoint.mss").exists());
+    let resumed = job
+        .resume(cut.path(), &no_progress, &Cancel::new())
+        .unwrap();
+    mss_scene::write_summary(cut.path(), &resumed).unwrap();
+    assert!(!resumed.interrupted);
+    assert_eq!(
+        folder_contents(cut.path()),
+        folder_contents(whole),
+        "stopped at step {stop_at}"
+    );
+    resumed
+}
+
+/// An implicit landing: the direct solver keeps its factors from step to
+/// step and preconditions the next matrices with them.
+fn resumable_implicit_scene() -> SceneInput {
+    let text = scene(
+        "[[obstacles]]\nshape = { kind = \"ground\", gap = 0.002 }\nfriction = 0.5\n\
+         [solver]\nkind = \"implicit\"\ndt = 0.005\nduration = 0.1\n\
+         [output]\nevery_time = 0.01\npc2 = true\n",
+    )
+    .replace("[[fixed]]\nkind = \"lowest_layer\"\n", "");
+    SceneInput::from_toml(&text, "test.toml").unwrap()
+}
+
+#[test]
+fn an_interrupted_implicit_run_resumed_is_bitwise_the_uninterrupted_one() {
+    let job = Job::prepare(
+        resumable_implicit_scene(),
+        Registry::default(),
+        &no_progress,
+    )
+    .unwrap();
+    let whole = tempfile::tempdir().unwrap();
+    let reference = run_whole(&job, whole.path());
+    assert!(reference.newton_iterations > job.plan.steps as u64 / 2);
+    for stop_at in [4, job.plan.steps / 2 + 1] {
+        interrupted_and_resumed(&job, stop_at, whole.path());
     }
 }
 
