@@ -31,8 +31,9 @@ pub const CHECKPOINT_FILE: &str = "checkpoint.mss";
 
 const MAGIC: &[u8; 8] = b"MSSCKPT\0";
 /// Version 2 added the peak displacement; version 1 files are read with
-/// none recorded.
-const VERSION: u32 = 3;
+/// none recorded. Version 3 added the Newton iterations, version 4 the load
+/// check's verdict (earlier files are read with none).
+const VERSION: u32 = 4;
 
 /// Everything a resumed run needs.
 #[derive(Debug, Clone, PartialEq)]
@@ -57,6 +58,9 @@ pub struct Checkpoint {
     pub peak_time: f64,
     /// Newton iterations so far (0 for explicit runs).
     pub newton_iterations: u64,
+    /// The verdict of the load check before the run, if it ran
+    /// ([`RunSummary::load_check`](crate::RunSummary::load_check)).
+    pub load_check: Option<String>,
 }
 
 /// Why a checkpoint cannot be used.
@@ -244,6 +248,14 @@ impl Checkpoint {
         o.f64(self.peak_displacement);
         o.f64(self.peak_time);
         o.u64(self.newton_iterations);
+        match &self.load_check {
+            None => o.0.push(0),
+            Some(text) => {
+                o.0.push(1);
+                o.u64(text.len() as u64);
+                o.0.extend_from_slice(text.as_bytes());
+            }
+        }
         let sum = fnv1a(&o.0);
         o.u64(sum);
         o.0
@@ -329,6 +341,16 @@ impl Checkpoint {
             (0.0, 0.0)
         };
         let newton_iterations = if version >= 3 { r.u64()? } else { 0 };
+        let load_check = if version >= 4 && r.take(1)?[0] == 1 {
+            let n = r.count(1, "load check verdict")?;
+            let text = r.take(n)?.to_vec();
+            Some(
+                String::from_utf8(text)
+                    .map_err(|_| r.corrupt("its load check verdict is not UTF-8"))?,
+            )
+        } else {
+            None
+        };
         if !(peak_displacement.is_finite() && peak_displacement >= 0.0 && peak_time.is_finite()) {
             return Err(r.corrupt("its peak displacement is not a finite length"));
         }
@@ -355,6 +377,7 @@ impl Checkpoint {
             peak_displacement,
             peak_time,
             newton_iterations,
+            load_check,
         })
     }
 }
@@ -389,6 +412,7 @@ mod tests {
             peak_displacement: 0.25,
             peak_time: 0.5,
             newton_iterations: 77,
+            load_check: Some("stable static equilibrium: 1 % µ".to_owned()),
         }
     }
 

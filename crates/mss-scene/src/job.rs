@@ -699,7 +699,8 @@ impl Job {
         let plan = self.plan;
         let s = &scene.solver;
         let integrator = self.input.integrator(&self.registry, problem, &plan)?;
-        let load_check = if integrator.is_some() && resume.is_none() {
+        // A resumed run reports the verdict its first part found.
+        let mut load_check = if integrator.is_some() && resume.is_none() {
             self.refuse_if_it_would_fold(&progress, cancel)?
         } else {
             None
@@ -781,6 +782,7 @@ impl Job {
                             newton_iterations: c.newton_iterations,
                             most_folded: (0, 0.0),
                         };
+                        load_check.clone_from(&c.load_check);
                         steps_done = c.step;
                         log::info!(
                             "{name}: resumed at step {} (t = {:.3e} s) from {}",
@@ -806,6 +808,7 @@ impl Job {
                         peak_displacement: totals.peak.0,
                         peak_time: totals.peak.1,
                         newton_iterations: totals.newton_iterations,
+                        load_check: load_check.clone(),
                         fingerprint,
                         step,
                         state: state.clone(),

@@ -16,7 +16,7 @@
 //! frequencies, so use it for large steps and settling, not for energy studies.
 #![allow(clippy::needless_range_loop)] // loops over several per-node arrays at once
 
-use super::linear::LinearSolver;
+use super::linear::{KeptHierarchy, LinearSolver, StiffnessOrigin};
 use super::{
     Divergence, IMPLICIT_HINT, Integrator, NewtonFailure, NewtonOptions, NonlinearSystem, Problem,
     SolverError, State, StepInfo, check_inverted, newton,
@@ -79,8 +79,84 @@ pub struct Implicit {
     /// The linear solver (symbolic LU analysis or multigrid structure),
     /// reused over steps; made at the first step.
     linear: std::cell::RefCell<Option<super::linear::LinearSolver>>,
-    /// Kept factors from a checkpoint, for the linear solver once made.
-    restored_factors: std::cell::RefCell<Option<(u64, Vec<f64>)>>,
+    /// What a checkpoint gave of the linear solver's kept state, put back
+    /// at the next step (the hierarchy needs the model to be built).
+    restored: std::cell::RefCell<KeptSolver>,
+}
+
+/// The linear solver's state that its next solves depend on beyond the
+/// step's state: the direct solver's kept factors (as their pattern's key and
+/// their matrix), or a matrix-free hierarchy (as what built it).
+#[derive(Debug, Clone, Default, PartialEq)]
+struct KeptSolver {
+    factors: Option<(u64, Vec<f64>)>,
+    hierarchy: Option<KeptHierarchy>,
+}
+
+/// Tags of [`KeptSolver`]'s records in an [`IntegratorMemory`](super::IntegratorMemory)'s counters.
+const FACTORS_RECORD: u64 = 1;
+const HIERARCHY_RECORD: u64 = 2;
+
+impl KeptSolver {
+    /// Appends the records to a memory's counters and values.
+    fn write(&self, counters: &mut Vec<u64>, values: &mut Vec<f64>) {
+        if let Some((key, matrix)) = &self.factors {
+            counters.extend([FACTORS_RECORD, *key, matrix.len() as u64]);
+            values.extend_from_slice(matrix);
+        }
+        if let Some(h) = &self.hierarchy {
+            counters.extend([
+                HIERARCHY_RECORD,
+                h.origin.shift.to_bits(),
+                h.fresh_rate.to_bits(),
+                h.newton_scale.to_bits(),
+                u64::from(h.symmetric),
+                h.origin.x.len() as u64,
+            ]);
+            values.extend(h.origin.x.iter().flat_map(|p| [p.x, p.y, p.z]));
+        }
+    }
+
+    /// Reads what [`KeptSolver::write`] wrote; `None` if it is not that.
+    fn read(mut counters: &[u64], values: &[f64]) -> Option<Self> {
+        let mut kept = Self::default();
+        let mut used = 0usize;
+        let mut take = |len: u64| -> Option<&[f64]> {
+            let len = usize::try_from(len).ok()?;
+            let end = used.checked_add(len)?;
+            let part = values.get(used..end)?;
+            used = end;
+            Some(part)
+        };
+        while let Some((&tag, rest)) = counters.split_first() {
+            match (tag, rest) {
+                (FACTORS_RECORD, [key, len, rest @ ..]) if kept.factors.is_none() => {
+                    kept.factors = Some((*key, take(*len)?.to_vec()));
+                    counters = rest;
+                }
+                (HIERARCHY_RECORD, [shift, rate, scale, symmetric @ (0 | 1), nodes, rest @ ..])
+                    if kept.hierarchy.is_none() =>
+                {
+                    let x = take(nodes.checked_mul(3)?)?
+                        .chunks_exact(3)
+                        .map(|c| Vec3::new(c[0], c[1], c[2]))
+                        .collect();
+                    kept.hierarchy = Some(KeptHierarchy {
+                        origin: StiffnessOrigin {
+                            x,
+                            shift: f64::from_bits(*shift),
+                        },
+                        fresh_rate: f64::from_bits(*rate),
+                        symmetric: *symmetric == 1,
+                        newton_scale: f64::from_bits(*scale),
+                    });
+                    counters = rest;
+                }
+                _ => return None,
+            }
+        }
+        (used == values.len()).then_some(kept)
+    }
 }
 
 impl Implicit {
@@ -100,7 +176,7 @@ impl Implicit {
             free: problem.free_mask(),
             steps: 0,
             linear: std::cell::RefCell::new(None),
-            restored_factors: std::cell::RefCell::new(None),
+            restored: std::cell::RefCell::new(KeptSolver::default()),
         })
     }
 
@@ -172,8 +248,19 @@ impl Implicit {
             self.linear.borrow_mut().get_or_insert_with(|| {
                 let mut linear = LinearSolver::new(model, self.opts.linear_solver);
                 linear.set_matrix_free_above(self.opts.matrix_free_above);
-                if let Some((key, values)) = self.restored_factors.take() {
+                let restored = self.restored.take();
+                if let Some((key, values)) = restored.factors {
                     linear.restore_kept_factors(key, values);
+                }
+                if let Some(kept) = restored.hierarchy {
+                    let k = shifted_symmetric_stiffness(model, &kept.origin.x, kept.origin.shift);
+                    // A hierarchy that cannot be built again is not kept:
+                    // the step builds its own.
+                    if let Err(e) = linear.restore_kept_hierarchy(k, &self.free, kept) {
+                        log::warn!(
+                            "the checkpoint's multigrid hierarchy was not built again: {e:?}"
+                        );
+                    }
                 }
                 linear
             }),
@@ -241,56 +328,44 @@ impl Integrator for Implicit {
     }
 
     fn memory(&self) -> super::IntegratorMemory {
-        // The step count (in messages), and the direct solver's kept
-        // factors: they precondition the next steps' solves, whose results
-        // then differ from fresh factors' in the last bits. (The symbolic
-        // analysis is the same for the same pattern.)
-        let linear = self.linear.borrow();
-        let restored = self.restored_factors.borrow();
-        let kept = match linear.as_ref() {
-            Some(linear) => linear.kept_factors(),
-            None => restored
-                .as_ref()
-                .map(|(key, values)| (*key, values.as_slice())),
+        // The step count (in messages), and what the linear solver keeps
+        // from one step to the next: the next solves are preconditioned by
+        // it, and their results differ from a fresh solver's in the last
+        // bits.
+        let kept = match self.linear.borrow().as_ref() {
+            Some(linear) => KeptSolver {
+                factors: linear
+                    .kept_factors()
+                    .map(|(key, values)| (key, values.to_vec())),
+                hierarchy: linear.kept_hierarchy(),
+            },
+            None => self.restored.borrow().clone(),
         };
-        match kept {
-            Some((key, values)) => super::IntegratorMemory {
-                counters: vec![self.steps, key],
-                values: values.to_vec(),
-                ..Default::default()
-            },
-            None => super::IntegratorMemory {
-                counters: vec![self.steps],
-                ..Default::default()
-            },
-        }
+        let mut memory = super::IntegratorMemory {
+            counters: vec![self.steps],
+            ..Default::default()
+        };
+        kept.write(&mut memory.counters, &mut memory.values);
+        memory
     }
 
     fn restore(&mut self, memory: &super::IntegratorMemory) -> Result<(), SolverError> {
-        match memory.counters.as_slice() {
-            [steps] if memory.values.is_empty() && memory.states.is_empty() => {
-                self.steps = *steps;
-                self.restored_factors.replace(None);
-                if let Some(linear) = self.linear.get_mut() {
-                    linear.drop_kept_factors();
-                }
-                Ok(())
+        let kept = match memory.counters.split_first() {
+            Some((steps, records)) if memory.states.is_empty() => {
+                KeptSolver::read(records, &memory.values).map(|kept| (*steps, kept))
             }
-            [steps, key] if memory.states.is_empty() => {
-                self.steps = *steps;
-                let factors = (*key, memory.values.clone());
-                match self.linear.get_mut() {
-                    Some(linear) => linear.restore_kept_factors(factors.0, factors.1),
-                    None => {
-                        self.restored_factors.replace(Some(factors));
-                    }
-                }
-                Ok(())
-            }
-            _ => Err(SolverError::BadOption(
+            _ => None,
+        };
+        let Some((steps, kept)) = kept else {
+            return Err(SolverError::BadOption(
                 "the checkpoint's integrator memory is not the implicit integrator's".into(),
-            )),
-        }
+            ));
+        };
+        self.steps = steps;
+        // The next step makes its linear solver with what was kept.
+        *self.linear.get_mut() = None;
+        *self.restored.get_mut() = kept;
+        Ok(())
     }
 
     fn step(&mut self, problem: &Problem, state: &mut State) -> Result<StepInfo, SolverError> {
@@ -334,6 +409,21 @@ impl BackwardEuler<'_> {
         let dt = self.dt;
         (1.0 + self.problem.damping().alpha * dt) / (dt * dt)
     }
+}
+
+/// The model's symmetric stiffness at `x` with `shift` times the masses on
+/// its diagonal.
+fn shifted_symmetric_stiffness(
+    model: &crate::Model,
+    x: &[Vec3],
+    shift: f64,
+) -> crate::sparse::SymmetricUpper {
+    let mut k = model.symmetric_stiffness_upper(x);
+    for (i, m) in model.masses().iter().enumerate() {
+        let d = k.upper.find(i, i).expect("diagonal in the lattice pattern");
+        k.upper.blocks[d] += Mat3::identity() * (m * shift);
+    }
+    k
 }
 
 struct BackwardEuler<'a> {
@@ -413,14 +503,15 @@ impl NonlinearSystem for BackwardEuler<'_> {
         if !self.has_jacobian_mul() {
             return None;
         }
-        let model = self.problem.model();
-        let mut k = model.symmetric_stiffness_upper(x);
-        let inertia = self.inertia_factor();
-        for (i, m) in model.masses().iter().enumerate() {
-            let d = k.upper.find(i, i).expect("diagonal in the lattice pattern");
-            k.upper.blocks[d] += Mat3::identity() * (m * inertia);
-        }
-        Some(k)
+        Some(shifted_symmetric_stiffness(
+            self.problem.model(),
+            x,
+            self.inertia_factor(),
+        ))
+    }
+
+    fn stiffness_shift(&self) -> f64 {
+        self.inertia_factor()
     }
 
     fn jacobian(&mut self, x: &[Vec3]) -> BlockCsr {

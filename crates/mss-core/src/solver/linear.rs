@@ -485,6 +485,29 @@ struct LastSolve {
     /// Whether the matrix was dropped: products go through the Jacobian's
     /// action.
     lean: bool,
+    /// Where the stiffness a matrix-free hierarchy was built from was
+    /// taken, and its mass shift ([`StiffnessOrigin`]).
+    origin: Option<StiffnessOrigin>,
+}
+
+/// Where the symmetric stiffness of a matrix-free solve was taken: the
+/// positions, and the factor of the masses added to its diagonal
+/// ([`NonlinearSystem::stiffness_shift`](super::NonlinearSystem::stiffness_shift)).
+/// Enough to build its hierarchy again, bit for bit.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct StiffnessOrigin {
+    pub x: Vec<Vec3>,
+    pub shift: f64,
+}
+
+/// A kept matrix-free hierarchy as a checkpoint stores it
+/// ([`LinearSolver::kept_hierarchy`]).
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct KeptHierarchy {
+    pub origin: StiffnessOrigin,
+    pub fresh_rate: f64,
+    pub symmetric: bool,
+    pub newton_scale: f64,
 }
 
 /// The 8 nodes where the unusable solution `y` of a singular solve is
@@ -640,12 +663,6 @@ impl LinearSolver {
             (None, Some((key, values))) => Some((*key, values.as_slice())),
             (None, None) => None,
         }
-    }
-
-    /// Forgets the kept factors (a checkpoint without them was restored).
-    pub(crate) fn drop_kept_factors(&mut self) {
-        self.lu.kept = None;
-        self.lu.pending = None;
     }
 
     /// Puts back what [`LinearSolver::kept_factors`] gave: the next direct
@@ -837,6 +854,7 @@ impl LinearSolver {
             symmetric,
             keep: keep && symmetric,
             lean,
+            origin: None,
         };
         self.finish(y, usable, last)
     }
@@ -871,13 +889,14 @@ impl LinearSolver {
     /// Solves `J y = b` on the free dofs to a relative residual `rtol`, for
     /// a Jacobian `J = -K` known by its product `action` and the symmetric
     /// part of the stiffness `K`, `stiffness` (positive definite where the
-    /// solve is well posed), from which the hierarchy is built: no `f64`
+    /// solve is well posed), from which the hierarchy is built, with where it
+    /// was taken (kept for [`LinearSolver::kept_hierarchy`]): no `f64`
     /// matrix is ever held. A solve that fails is not retried directly (it
     /// reports as a large solve does). Later [`LinearSolver::solve_again`]
     /// and [`LinearSolver::last_product`] calls need the action again.
     pub(crate) fn solve_without_matrix(
         &mut self,
-        stiffness: crate::sparse::SymmetricUpper,
+        (stiffness, origin): (crate::sparse::SymmetricUpper, StiffnessOrigin),
         b: &[Vec3],
         free: &[bool],
         size: f64,
@@ -914,8 +933,51 @@ impl LinearSolver {
             symmetric,
             keep: keep && symmetric,
             lean: true,
+            origin: Some(origin),
         };
         self.finish(y, usable, last)
+    }
+
+    /// The kept matrix-free hierarchy and what built it, for a checkpoint:
+    /// [`LinearSolver::restore_kept_hierarchy`] builds the same again.
+    pub(crate) fn kept_hierarchy(&self) -> Option<KeptHierarchy> {
+        let last = self.last.as_ref().filter(|l| l.lean)?;
+        Some(KeptHierarchy {
+            origin: last.origin.clone()?,
+            fresh_rate: last.fresh_rate,
+            symmetric: last.symmetric,
+            newton_scale: self.newton_scale?,
+        })
+    }
+
+    /// Builds again the hierarchy [`LinearSolver::kept_hierarchy`] gave,
+    /// from `stiffness`, the symmetric stiffness at its origin, for the free
+    /// dofs `free`: the next Newton solve starts on it as the run that kept
+    /// it did.
+    pub(crate) fn restore_kept_hierarchy(
+        &mut self,
+        stiffness: crate::sparse::SymmetricUpper,
+        free: &[bool],
+        kept: KeptHierarchy,
+    ) -> Result<(), LinearFailure> {
+        self.release_last();
+        self.fit_shape(free);
+        let Some(shape) = self.shape.as_ref() else {
+            return Err(LinearFailure::Other("no multigrid hierarchy".into()));
+        };
+        let mg = super::multigrid::Multigrid::of_symmetric(stiffness, free, shape)
+            .map_err(|e| LinearFailure::Other(e.0))?;
+        self.last = Some(LastSolve {
+            mg,
+            fresh_rate: kept.fresh_rate,
+            sign: -1.0,
+            symmetric: kept.symmetric,
+            keep: false,
+            lean: true,
+            origin: Some(kept.origin),
+        });
+        self.newton_scale = Some(kept.newton_scale);
+        Ok(())
     }
 
     /// The first solve on the new hierarchy `mg` (counted as built), of
@@ -1196,7 +1258,20 @@ mod tests {
             linear.set_matrix_free_above(0);
             let half = model.symmetric_stiffness_upper(&rest);
             linear
-                .solve_without_matrix(half, &b, &free, 0.16, 1e-3, &tangent)
+                .solve_without_matrix(
+                    (
+                        half,
+                        StiffnessOrigin {
+                            x: rest.clone(),
+                            shift: 0.0,
+                        },
+                    ),
+                    &b,
+                    &free,
+                    0.16,
+                    1e-3,
+                    &tangent,
+                )
                 .unwrap();
             let fresh_rate = linear.last.as_ref().unwrap().fresh_rate;
             (linear, fresh_rate)

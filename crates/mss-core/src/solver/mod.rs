@@ -996,6 +996,13 @@ pub trait NonlinearSystem {
         let _ = x;
         None
     }
+    /// The factor of the masses that [`NonlinearSystem::symmetric_stiffness`]
+    /// adds to the model's symmetric stiffness on its diagonal (an implicit
+    /// step's inertia, `(1 + alpha dt) / dt^2`): with the positions, what
+    /// builds the same preconditioner again after a checkpoint.
+    fn stiffness_shift(&self) -> f64 {
+        0.0
+    }
     /// Whether the caller asked to stop (checked before every Newton
     /// iteration, so that a stop takes one iteration, not a whole solve).
     fn cancelled(&self) -> bool {
@@ -1226,7 +1233,18 @@ fn newton_iterations(
                 let solved = match tangent {
                     Tangent::Assembled(jac) => linear.solve(jac, &neg_r, free, size, eta, action),
                     Tangent::SymmetricHalf(half) => {
-                        linear.solve_without_matrix(half, &neg_r, free, size, eta, &product)
+                        let origin = linear::StiffnessOrigin {
+                            x: x_lin.clone(),
+                            shift: sys.stiffness_shift(),
+                        };
+                        linear.solve_without_matrix(
+                            (half, origin),
+                            &neg_r,
+                            free,
+                            size,
+                            eta,
+                            &product,
+                        )
                     }
                 };
                 match solved {

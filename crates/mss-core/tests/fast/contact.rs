@@ -381,33 +381,13 @@ fn an_implicit_run_restored_from_its_memory_continues_bitwise() {
         dt: 0.005,
         ..ImplicitOptions::default()
     };
-    let mut first = Implicit::new(&p, opts).unwrap();
-    let mut s = State::at_rest(p.model());
-    for _ in 0..12 {
-        first.step(&p, &mut s).unwrap();
-    }
-    let memory = first.memory();
-    assert_eq!(memory.counters.len(), 2, "factors are kept");
+    let memory = crate::assert_restored_implicit_continues_bitwise(&p, opts, 12, 12);
+    assert_eq!(
+        memory.counters[1], 1,
+        "the factors are kept: {:?}",
+        memory.counters
+    );
     assert!(!memory.values.is_empty());
-    let mut second = Implicit::new(&p, opts).unwrap();
-    second.restore(&memory).unwrap();
-    let mut forgetful = Implicit::new(&p, opts).unwrap();
-    let (mut s2, mut s3) = (s.clone(), s.clone());
-    for _ in 0..12 {
-        first.step(&p, &mut s).unwrap();
-        second.step(&p, &mut s2).unwrap();
-        forgetful.step(&p, &mut s3).unwrap();
-    }
-    assert_eq!(s.x, s2.x);
-    assert_eq!(s.v, s2.v);
-    assert_eq!(first.memory(), second.memory());
-    // Without the memory the bits differ: the test can tell.
-    assert_ne!(s.x, s3.x);
-    assert!(first.linear_stats().solves > 12);
-    // A memory that is not the implicit integrator's is refused.
-    let mut bad = memory.clone();
-    bad.counters.push(0);
-    assert!(Implicit::new(&p, opts).unwrap().restore(&bad).is_err());
 }
 
 #[test]

@@ -22,3 +22,45 @@ pub fn on_threads<R: Send>(threads: usize, f: impl FnOnce() -> R + Send) -> R {
         .unwrap()
         .install(f)
 }
+
+/// Steps `p` implicitly `before` times, then an integrator made afresh and
+/// given the first one's memory, the first one, and one made afresh without
+/// it, `after` times each from there: the restored one is bitwise the first
+/// (what checkpoints rely on), the forgetful one is not (so the memory
+/// carries what the steps depend on, and the test can tell). Returns the
+/// memory.
+pub fn assert_restored_implicit_continues_bitwise(
+    p: &mss_core::solver::Problem,
+    opts: mss_core::solver::ImplicitOptions,
+    before: usize,
+    after: usize,
+) -> mss_core::solver::IntegratorMemory {
+    use mss_core::solver::{Implicit, Integrator, State};
+    let mut first = Implicit::new(p, opts).unwrap();
+    let mut s = State::at_rest(p.model());
+    for _ in 0..before {
+        first.step(p, &mut s).unwrap();
+    }
+    let memory = first.memory();
+    let mut restored = Implicit::new(p, opts).unwrap();
+    restored.restore(&memory).unwrap();
+    let mut forgetful = Implicit::new(p, opts).unwrap();
+    let (mut s2, mut s3) = (s.clone(), s.clone());
+    for _ in 0..after {
+        first.step(p, &mut s).unwrap();
+        restored.step(p, &mut s2).unwrap();
+        forgetful.step(p, &mut s3).unwrap();
+    }
+    assert_eq!(s.x, s2.x);
+    assert_eq!(s.v, s2.v);
+    assert_eq!(first.memory(), restored.memory());
+    assert_ne!(s.x, s3.x, "a fresh linear solver gives the same bits");
+    // A memory that is not the implicit integrator's is refused.
+    let mut bad = memory.clone();
+    bad.counters.push(0);
+    assert!(Implicit::new(p, opts).unwrap().restore(&bad).is_err());
+    let mut bad = memory.clone();
+    bad.values.push(0.0);
+    assert!(Implicit::new(p, opts).unwrap().restore(&bad).is_err());
+    memory
+}

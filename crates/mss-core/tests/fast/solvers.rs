@@ -873,3 +873,32 @@ fn a_swinging_cantilever_takes_full_newton_steps() {
         );
     }
 }
+
+#[test]
+fn an_implicit_run_without_matrices_restored_from_its_memory_continues_bitwise() {
+    // Solves that keep no matrix precondition the next steps' tangents with
+    // the hierarchy of an earlier one: the memory carries where its
+    // stiffness was taken, and a restored integrator builds it again.
+    let model = free_block(&PaperModel);
+    let p = Problem::from_specs(
+        model,
+        &[ConstraintSpec::fixed(NodeSelector::face(Face::XMin))],
+        &[LoadSpec::Gravity {
+            g: [0.0, 0.0, -2.0],
+        }],
+        Damping::NONE,
+    )
+    .unwrap();
+    let opts = ImplicitOptions {
+        dt: 0.05,
+        linear_solver: mss_core::solver::LinearSolverKind::Iterative,
+        matrix_free_above: 0,
+        ..ImplicitOptions::default()
+    };
+    let memory = crate::assert_restored_implicit_continues_bitwise(&p, opts, 5, 5);
+    assert_eq!(
+        memory.counters[1], 2,
+        "a hierarchy is kept: {:?}",
+        memory.counters
+    );
+}

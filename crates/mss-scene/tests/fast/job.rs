@@ -723,6 +723,27 @@ fn an_interrupted_implicit_run_resumed_is_bitwise_the_uninterrupted_one() {
 }
 
 #[test]
+fn an_interrupted_matrix_free_implicit_run_resumes_bitwise_with_its_load_check() {
+    // Above 4,000 free dofs the implicit solves keep no matrix and
+    // precondition the next steps with a kept hierarchy, which the
+    // checkpoint carries; the summary keeps the verdict of the load check
+    // that only the first part ran.
+    let text = scene(
+        "[solver]\nkind = \"implicit\"\ndt = 0.005\nduration = 0.03\n\
+         [output]\nevery_time = 0.01\n",
+    )
+    .replace("builtin:critter", "builtin:cube")
+    .replace("cells = 8", "cells = 12");
+    let input = SceneInput::from_toml(&text, "test.toml").unwrap();
+    let job = Job::prepare(input, Registry::default(), &no_progress).unwrap();
+    let whole = tempfile::tempdir().unwrap();
+    let reference = run_whole(&job, whole.path());
+    assert!(reference.load_check.is_some());
+    let resumed = interrupted_and_resumed(&job, 3, whole.path());
+    assert_eq!(resumed.load_check, reference.load_check);
+}
+
+#[test]
 fn a_periodic_checkpoint_resumes_bitwise_after_a_crash() {
     let job = Job::prepare(resumable_scene(), Registry::default(), &no_progress).unwrap();
     let whole = tempfile::tempdir().unwrap();
