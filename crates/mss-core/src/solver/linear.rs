@@ -230,10 +230,11 @@ pub(crate) fn solve_free(
         }
         r
     };
-    let kept_sol = kept.as_ref().and_then(|(lu, _)| {
-        // Richardson iteration preconditioned by the kept factors: worth
-        // it while it contracts fast, since a factorization costs some
-        // twenty of its iterations.
+    // Richardson iteration preconditioned by the kept factors: worth it
+    // while it contracts fast, since a factorization costs some twenty of
+    // its iterations. Factors that do not serve are dropped before new ones
+    // are made: never two alive at once.
+    let on_kept = |lu: &Lu<usize, f64>| {
         let tol = KEPT_RTOL * rhs.norm_l2();
         let mut x = lu.solve(&rhs);
         let mut previous = rhs.norm_l2();
@@ -250,10 +251,11 @@ pub(crate) fn solve_free(
             x += lu.solve(&r);
         }
         None
-    });
-    let (sol, kept, factored) = match (kept_sol, kept) {
-        (Some(sol), Some(kept)) => (sol, kept, false),
-        _ => {
+    };
+    let served = kept.and_then(|kept| on_kept(&kept.0).map(|sol| (sol, kept)));
+    let (sol, kept, factored) = match served {
+        Some((sol, kept)) => (sol, kept, false),
+        None => {
             crate::sparse::sequential_factorizations();
             let lu = match Lu::try_new_with_symbolic(lu_symbolic.clone(), mat) {
                 Ok(lu) => lu,
