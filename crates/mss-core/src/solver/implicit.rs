@@ -252,7 +252,14 @@ impl Implicit {
                 if let Some((key, values)) = restored.factors {
                     linear.restore_kept_factors(key, values);
                 }
-                if let Some(kept) = restored.hierarchy {
+                // (A memory for another lattice or with non-finite values
+                // is not used: a checkpoint's checksum does not vouch for
+                // the program that wrote it.)
+                if let Some(kept) = restored.hierarchy.filter(|k| {
+                    k.origin.x.len() == model.num_nodes()
+                        && k.origin.x.iter().all(|p| p.iter().all(|c| c.is_finite()))
+                        && k.origin.shift.is_finite()
+                }) {
                     let k = shifted_symmetric_stiffness(model, &kept.origin.x, kept.origin.shift);
                     // A hierarchy that cannot be built again is not kept:
                     // the step builds its own.
