@@ -71,6 +71,20 @@ pub use solver::{
 pub use sparse::{BlockCsr, Factorization, LinearSolveError};
 pub use springs::{SpringError, SpringSet};
 
+/// The 64-bit FNV-1a hash of `bytes`: a fingerprint that stays the same
+/// across builds and platforms (checkpoints store it; the standard
+/// library's hasher may change between releases).
+///
+/// ```
+/// assert_eq!(mss_core::fnv1a(*b""), 0xcbf2_9ce4_8422_2325);
+/// assert_ne!(mss_core::fnv1a(*b"a"), mss_core::fnv1a(*b"b"));
+/// ```
+pub fn fnv1a(bytes: impl IntoIterator<Item = u8>) -> u64 {
+    bytes.into_iter().fold(0xcbf2_9ce4_8422_2325, |h, b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+    })
+}
+
 /// 3-vectors of the simulation (`f64`).
 pub type Vec3 = nalgebra::Vector3<f64>;
 /// 3x3 matrices of the simulation (`f64`).

@@ -105,12 +105,7 @@ pub fn fingerprint(scene: &Scene) -> u64 {
 }
 
 fn fnv1a(bytes: &[u8]) -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for &b in bytes {
-        h ^= u64::from(b);
-        h = h.wrapping_mul(0x0100_0000_01b3);
-    }
-    h
+    mss_core::fnv1a(bytes.iter().copied())
 }
 
 struct Out(Vec<u8>);

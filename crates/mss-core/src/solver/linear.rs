@@ -184,18 +184,7 @@ pub(crate) fn solve_free(
     let n = a.num_rows();
     cache.prepare(a, free)?;
     let mut kept = cache.kept.take();
-    if let Some((key, values)) = cache.pending.take()
-        && key == cache.key
-        && values.len() == cache.source.len()
-        && let Some(symbolic) = &cache.symbolic
-        && let Some(lu_symbolic) = &cache.lu_symbolic
-    {
-        crate::sparse::sequential_factorizations();
-        let mat = SparseColMatRef::new(symbolic.as_ref(), &values);
-        kept = Lu::try_new_with_symbolic(lu_symbolic.clone(), mat)
-            .ok()
-            .map(|lu| (lu, values));
-    }
+    let pending = cache.pending.take();
     let m = cache.m;
     let dofs = &cache.dofs;
     let mut y = vec![Vec3::zeros(); n];
@@ -215,7 +204,21 @@ pub(crate) fn solve_free(
             "missing symbolic factorization".into(),
         ));
     };
-    let mat = SparseColMatRef::new(pattern.as_ref(), &values);
+    let factor = |values: &[f64]| {
+        crate::sparse::sequential_factorizations();
+        Lu::try_new_with_symbolic(
+            lu_symbolic.clone(),
+            SparseColMatRef::new(pattern.as_ref(), values),
+        )
+    };
+    // A checkpoint's kept factors, made again for the pattern they were
+    // kept for.
+    if let Some((key, values)) = pending
+        && key == cache.key
+        && values.len() == cache.source.len()
+    {
+        kept = factor(&values).ok().map(|lu| (lu, values));
+    }
     let mut rhs = Mat::<f64>::zeros(m, 1);
     for (i, k) in dofs.free_dofs() {
         rhs[(k, 0)] = b[i / 3][i % 3];
@@ -256,8 +259,7 @@ pub(crate) fn solve_free(
     let (sol, kept, factored) = match served {
         Some((sol, kept)) => (sol, kept, false),
         None => {
-            crate::sparse::sequential_factorizations();
-            let lu = match Lu::try_new_with_symbolic(lu_symbolic.clone(), mat) {
+            let lu = match factor(&values) {
                 Ok(lu) => lu,
                 Err(faer::sparse::linalg::LuError::SymbolicSingular { .. }) => {
                     return Err(LinearFailure::Singular { nodes: Vec::new() });
@@ -334,14 +336,7 @@ fn pattern_key(a: &BlockCsr, free: &[bool]) -> u64 {
         .chain(&a.col_indices)
         .copied()
         .chain(free.iter().map(|&f| u32::from(f)));
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for w in words {
-        for b in w.to_le_bytes() {
-            h ^= u64::from(b);
-            h = h.wrapping_mul(0x0100_0000_01b3);
-        }
-    }
-    h
+    crate::fnv1a(words.flat_map(u32::to_le_bytes))
 }
 
 /// Which linear solver the Newton steps use.
