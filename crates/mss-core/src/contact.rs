@@ -24,9 +24,10 @@
 //! else.
 //!
 //! Derivatives (for Newton) are exact for the normal force (`-k n n^T` plus
-//! `k d dn/dx` on curved obstacles) and for friction, sticking or sliding,
-//! including the turning of the normal; damping adds `-(c / dt) n n^T` in
-//! implicit steps (its dependence on the normal's turning is left out).
+//! `f_n dn/dx` on curved obstacles), for its damping (`-(c / dt) n n^T` in
+//! implicit steps, and the normal velocity's change as the normal turns)
+//! and for friction, sticking or sliding, including the turning of the
+//! normal.
 //! The explicit integrator uses them too: it updates each touching node
 //! implicitly ([`Contact::node_point_force`], [`crate::solver::Explicit`]),
 //! so that contact, however stiff, does not limit its step.
@@ -52,9 +53,10 @@ use std::fmt::Debug;
 use crate::{BlockCsr, Mat3, Model, Vec3};
 
 mod bodies;
+mod pair_tangent;
 pub use bodies::{
     BodyContact, BodyContactError, DEFAULT_BODY_FREQUENCY_FRACTION, DEPTH_LIMIT, PERSIST_LIMIT,
-    SELF_EXCLUSION,
+    SELF_EXCLUSION, TRIANGLE_PREFERENCE,
 };
 
 /// The `velocity` and `offset` of an obstacle that follows its `path`.
@@ -739,7 +741,8 @@ struct Touch {
     /// Its tangential part.
     delta: Vec3,
     sliding: bool,
-    /// The point's normal velocity relative to the obstacle.
+    /// The point's velocity relative to the obstacle, and its normal part.
+    v_rel: Vec3,
     v_n: f64,
 }
 
@@ -1094,6 +1097,7 @@ impl Contact {
                 offset: d,
                 delta,
                 sliding,
+                v_rel,
                 v_n,
             },
             pen,
@@ -1198,18 +1202,17 @@ impl Contact {
         let nn = touch.normal * touch.normal.transpose();
         let c = 2.0 * s.damping_ratio * (stiffness * point.mass).sqrt();
         // The normal force n f_n: f_n changes with the depth (whose
-        // gradient is -n) and with v_n (which follows x as dv/dx), and n
-        // turns on a curved obstacle.
-        let (_, df_ddepth, df_dvn) = normal_force(stiffness, c, pen.depth, touch.v_n);
-        let block =
-            -nn * (df_ddepth - df_dvn * dv_dx) + pen.normal_gradient * (stiffness * pen.depth);
-        // d(delta)/dx for delta = d - n (n . d): the tangent
-        // projector, and the turning of n on a curved obstacle.
+        // gradient is -n) and with v_n = v_rel . n (v follows x as dv/dx,
+        // and n turns on a curved obstacle), and n turns.
         let (n, d) = (touch.normal, touch.offset);
         let g = pen.normal_gradient;
-        let d_delta = Mat3::identity() - nn - g * n.dot(&d) - n * (d.transpose() * g);
+        let (_, df_ddepth, df_dvn) = normal_force(stiffness, c, pen.depth, touch.v_n);
+        let d_fn = -n * df_ddepth + (n * dv_dx + g.transpose() * touch.v_rel) * df_dvn;
         let f_n = touch.force.dot(&n);
-        let d_fn = -n * (df_ddepth - df_dvn * dv_dx);
+        let block = n * d_fn.transpose() + g * f_n;
+        // d(delta)/dx for delta = d - n (n . d): the tangent
+        // projector, and the turning of n on a curved obstacle.
+        let d_delta = Mat3::identity() - nn - g * n.dot(&d) - n * (d.transpose() * g);
         block + coulomb_jacobian(touch.delta, stiffness, f_n, s, &d_delta, d_fn)
     }
 

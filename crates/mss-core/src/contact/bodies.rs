@@ -38,22 +38,25 @@
 //! triangles; a contact made during an explicit step is anchored where its
 //! point was at the step's start ([`BodyContact::anchor_at_step_start`]).
 //!
-//! **Derivatives.** With `J = -k n n^T` (and the friction and damping
-//! terms, as for obstacles) the derivative of the force on the point, the
-//! blocks between the point and node `i` are `-beta_i J`, between nodes `i`
-//! and `j` `beta_i beta_j J`: the matrix's pattern grows by the pairs in
-//! contact ([`BlockCsr::extend_pattern`]). Left out is the turning of the
-//! normal and the sliding of the projection (`k d` times the gap's second
-//! derivative: small while the depth is). A static solve counts points
-//! within [`STATIC_MARGIN`] of a cell outside a surface as touching in its
-//! tangent (not in its forces): a body held by contact alone would
+//! **Derivatives.** The tangent is the exact derivative of these forces
+//! ([`super::pair_tangent`], forward-mode dual numbers over the point, the
+//! touched triangle's corners and the anchor triangle's): the normal
+//! turning with the triangle, the weights sliding with the closest point
+//! (on the face, or on an edge at a rim), the normal force following the
+//! depth and the damping the velocity, stick or slip as the force found
+//! them. A touch couples the point with the corners of its triangle and of
+//! its anchor's: the matrix's pattern grows by those pairs
+//! ([`BlockCsr::extend_pattern`]). A static solve counts points within
+//! [`STATIC_MARGIN`] of a cell outside a surface as touching in its tangent
+//! (`-k n n^T`, not in its forces): a body held by contact alone would
 //! otherwise have a singular tangent wherever an iterate lifts it off.
 //!
-//! Also left out: a point just outside a body, beside the rim of a face
-//! whose plane it is below and within reach of (half a cell), is taken as
-//! touching at the rim (its depth is the plane's, its weights the rim's),
-//! and the tangent is approximate there. The depth is that of the body's
-//! tilt at its rim, so the force is small.
+//! A point just outside a body, beside the rim of a face whose plane it is
+//! below and within reach of (half a cell), is taken as touching at that
+//! rim (its depth is the plane's, its weights the rim's closest point's).
+//! The depth is that of the body's tilt at its rim, so the force is small;
+//! it is not the gradient of an energy there (the torque of the pair is not
+//! zero), but the tangent is its derivative all the same.
 //!
 //! **Embedded surfaces** ([`BodyContact::on_surface`]): the points and the
 //! triangles are the embedded input surfaces' vertices and triangles
@@ -107,6 +110,24 @@ pub const STATIC_MARGIN: f64 = 0.1;
 /// through it, they hold the edge back like a ridge, and a block sliding on
 /// another slowed as if friction were 10 % higher.
 pub const FACING_COSINE: f64 = 0.25;
+
+/// A point keeps the triangle it is anchored to (the one it touched at the
+/// end of the last step, or its nearest at the start of an implicit step)
+/// while its projection on that triangle's plane lies within this fraction
+/// of the triangle beyond its edges (the smallest barycentric coordinate at
+/// least minus this), so that its anchor too stays there. Where two
+/// triangles meet at an angle (the two halves of a bent face, neighbouring
+/// faces of a dented surface) the nearest one changes as a point crosses
+/// their edge, and with it the force's direction: the Newton iterates of
+/// an implicit step, moving points back and forth across such edges,
+/// found a different force at every iteration and stalled (a ball landing
+/// on a block: 4 of its 34 touching points switching triangles at every
+/// iteration, the residual stuck at 5e-4 N, the step halved down to
+/// 1.25 ms and the run stopped). Narrower bands, or anchors moved to the
+/// nearest triangle after each step, left the switches at the band's edge
+/// (the bundled squeeze run implicitly at 10 ms: 4 to 13 halved steps, and
+/// runs that stopped); at half a triangle, none.
+pub const TRIANGLE_PREFERENCE: f64 = 0.5;
 
 /// Grid cells a lattice face's box may cover in the broad phase (see
 /// [`BodyContact`]'s `span_limit`).
@@ -387,9 +408,6 @@ struct Touch {
     f_n: f64,
     sliding: bool,
     stiffness: f64,
-    damping: f64,
-    /// The point's normal velocity relative to the triangle.
-    v_n: f64,
 }
 
 /// Contact between the bodies of a model, and self-contact where asked.
@@ -968,7 +986,7 @@ impl BodyContact {
     /// The points inside a body at `x`, in point order, the points anchored
     /// in `anchors` (this contact's part of the state's) kept on their side.
     fn pairs(&self, x: &[Vec3], anchors: &[Option<Vec3>]) -> std::sync::Arc<Vec<Pair>> {
-        self.with_persisting(self.searched(x), x, anchors)
+        self.with_persisting(self.searched(x), x, anchors, 0.0)
     }
 
     /// The points the search finds inside a body at `x` (cached: a step
@@ -986,14 +1004,28 @@ impl BodyContact {
         pairs
     }
 
-    /// `found` (in point order) with the anchored points it lacks that are
-    /// still behind their anchor's triangle ([`BodyContact::persisting`]).
+    /// `found` (in point order, deeper than `-margin` cells) with each
+    /// anchored point kept on its anchor's triangle while it projects
+    /// nearly onto it ([`TRIANGLE_PREFERENCE`]), and with the
+    /// anchored points it lacks that are still behind their anchor's
+    /// triangle ([`BodyContact::persisting`]).
     fn with_persisting(
         &self,
         found: std::sync::Arc<Vec<Pair>>,
         x: &[Vec3],
         anchors: &[Option<Vec3>],
+        margin: f64,
     ) -> std::sync::Arc<Vec<Pair>> {
+        let mut preferred: Option<Vec<Pair>> = None;
+        for (k, pair) in found.iter().enumerate() {
+            if let Some(keep) = self.preferred(pair, x, anchors, margin) {
+                let list = preferred.get_or_insert_with(|| found[..k].to_vec());
+                list.extend(keep);
+            } else if let Some(list) = &mut preferred {
+                list.push(*pair);
+            }
+        }
+        let found = preferred.map_or(found, std::sync::Arc::new);
         // Both in point order: one walk finds the anchored points missing.
         let mut next = found.iter().map(|p| p.point as usize).peekable();
         let mut kept = Vec::new();
@@ -1021,6 +1053,42 @@ impl BodyContact {
         all.extend(a.copied());
         all.extend(b);
         std::sync::Arc::new(all)
+    }
+
+    /// `None` when `pair` stands; else what replaces it: its point against
+    /// the triangle it is anchored to, when that is another one it projects
+    /// onto within [`TRIANGLE_PREFERENCE`] (dropped when it is not deeper
+    /// than `-margin` cells there).
+    fn preferred(
+        &self,
+        pair: &Pair,
+        x: &[Vec3],
+        anchors: &[Option<Vec3>],
+        margin: f64,
+    ) -> Option<Option<Pair>> {
+        let i = pair.point as usize;
+        let (t, _, _) = Self::anchor_of(anchors, i)?;
+        let tri = self.triangles.get(t as usize)?;
+        if t == pair.triangle
+            || tri.body == self.point_body[i] && !self.self_contact[tri.body as usize]
+        {
+            return None;
+        }
+        let g = Geometry::new(t, tri.nodes.map(|n| x[n as usize]), 0.0)?;
+        let p = x[self.points[i] as usize];
+        let beyond = g.barycentric(p).into_iter().fold(f64::INFINITY, f64::min);
+        if beyond.is_nan() || beyond < -TRIANGLE_PREFERENCE {
+            return None;
+        }
+        let near = g.closest(p, f64::INFINITY)?;
+        let h = self.body_h[tri.body as usize];
+        Some((-near.gap > -margin * h).then_some(Pair {
+            point: pair.point,
+            triangle: t,
+            beta: near.beta,
+            normal: near.normal,
+            depth: -near.gap,
+        }))
     }
 
     /// Point `i` at `p` against the plane of the triangle it is anchored to
@@ -1341,8 +1409,6 @@ impl BodyContact {
             f_n,
             sliding,
             stiffness: k,
-            damping: c,
-            v_n,
         }
     }
 
@@ -1403,8 +1469,8 @@ impl BodyContact {
         out
     }
 
-    /// Adds the contact's `d(force)/dx` to `jac` (see the module docs for
-    /// what is left out); `dv_dx` as in [`super::Contact::add_jacobian`].
+    /// Adds the contact's exact `d(force)/dx` to `jac` (see the module
+    /// docs); `dv_dx` as in [`super::Contact::add_jacobian`].
     pub fn add_jacobian(
         &self,
         x: &[Vec3],
@@ -1423,56 +1489,102 @@ impl BodyContact {
             std::sync::Arc::new(self.pairs_within(x, margin)),
             x,
             anchors,
+            margin,
         );
-        // The point and its triangle's nodes are coupled: grow the pattern.
-        let weights: Vec<Vec<(u32, f64)>> = pairs.iter().map(|p| self.pair_weights(p)).collect();
+        let tangents: Vec<(Vec<u32>, Vec<Mat3>)> = pairs
+            .par_iter()
+            .with_min_len(64)
+            .map(|pair| self.pair_blocks(pair, x, v, anchors, dv_dx))
+            .collect();
+        // The point, its triangle's corners and its anchor's are coupled:
+        // grow the pattern (both ways, so that it stays symmetric).
         let mut extra = Vec::new();
-        for w in &weights {
-            for &(a, _) in w {
-                extra.extend(w.iter().map(|&(b, _)| (a, b)));
-            }
-        }
-        jac.extend_pattern(&extra);
-        for (pair, weights) in pairs.iter().zip(&weights) {
-            let touch = self.touch(pair, x, v, anchors);
-            let n = pair.normal;
-            let nn = n * n.transpose();
-            let tangent = Mat3::identity() - nn;
-            let anchored = Self::anchor_of(anchors, pair.point as usize).is_some();
-            let block = if pair.depth <= 0.0 {
-                // A point just outside (a static solve's margin) has the
-                // contact's stiffness in the tangent, and holds on with its
-                // stick spring where anchored.
-                let stick = if anchored { tangent } else { Mat3::zeros() };
-                -(nn + stick) * touch.stiffness
-            } else {
-                let (_, df_ddepth, df_dvn) =
-                    super::normal_force(touch.stiffness, touch.damping, pair.depth, touch.v_n);
-                let d_fn = -n * (df_ddepth - df_dvn * dv_dx);
-                let friction = if anchored {
-                    super::coulomb_jacobian(
-                        touch.delta,
-                        touch.stiffness,
-                        touch.f_n,
-                        &self.settings,
-                        &tangent,
-                        d_fn,
-                    )
-                } else {
-                    Mat3::zeros()
-                };
-                n * d_fn.transpose() + friction
-            };
-            // The force F(p - sum beta_j x_j) on the point, minus beta_i F on
-            // the triangle's nodes (each through its nodes' weights).
-            for &(a, wa) in weights {
-                for &(b, wb) in weights {
-                    if let Some(idx) = jac.find(a as usize, b as usize) {
-                        jac.blocks[idx] += block * (wa * wb);
+        for (vertices, _) in &tangents {
+            for &a in &vertices[..4] {
+                for &b in vertices {
+                    for (na, _) in self.nodes_of(a) {
+                        for (nb, _) in self.nodes_of(b) {
+                            extra.push((na, nb));
+                            extra.push((nb, na));
+                        }
                     }
                 }
             }
         }
+        jac.extend_pattern(&extra);
+        for (vertices, blocks) in &tangents {
+            let slots = vertices.len();
+            for (r, &a) in vertices[..4].iter().enumerate() {
+                for (s, &b) in vertices.iter().enumerate() {
+                    let block = blocks[r * slots + s];
+                    for (na, wa) in self.nodes_of(a) {
+                        for (nb, wb) in self.nodes_of(b) {
+                            if let Some(idx) = jac.find(na as usize, nb as usize) {
+                                jac.blocks[idx] += block * (wa * wb);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// The derivative of `pair`'s forces: the points and corners they
+    /// depend on (the point, its triangle's corners, then its anchor
+    /// triangle's other corners) and the blocks `d(force r)/d(x_s)`, row
+    /// `r` one of the first four, row-major. Exact where the point is
+    /// behind the triangle's plane ([`super::pair_tangent`]); a point just
+    /// outside (a static solve's margin) has the contact's stiffness along
+    /// the normal, and its stick spring where anchored.
+    fn pair_blocks(
+        &self,
+        pair: &Pair,
+        x: &[Vec3],
+        v: &[Vec3],
+        anchors: &[Option<Vec3>],
+        dv_dx: f64,
+    ) -> (Vec<u32>, Vec<Mat3>) {
+        let i = pair.point as usize;
+        let tri = &self.triangles[pair.triangle as usize];
+        let mut vertices = vec![self.points[i]];
+        vertices.extend(tri.nodes);
+        let anchor = Self::anchor_of(anchors, i)
+            .and_then(|(t, b, c)| Some((self.triangles.get(t as usize)?, b, c)));
+        let k = self.settings.stiffness * self.stiffness_ratio[i];
+        if pair.depth <= 0.0 {
+            let n = pair.normal;
+            let nn = n * n.transpose();
+            let stick = if anchor.is_some() {
+                Mat3::identity() - nn
+            } else {
+                Mat3::zeros()
+            };
+            let block = -(nn + stick) * k;
+            let w = [1.0, -pair.beta[0], -pair.beta[1], -pair.beta[2]];
+            let blocks = (0..16).map(|rs| block * (w[rs / 4] * w[rs % 4])).collect();
+            return (vertices, blocks);
+        }
+        let anchor_slots = anchor.map(|(t, b, c)| {
+            let slots = t.nodes.map(|n| {
+                vertices.iter().position(|&m| m == n).unwrap_or_else(|| {
+                    vertices.push(n);
+                    vertices.len() - 1
+                })
+            });
+            (slots, b, c)
+        });
+        let xs: Vec<Vec3> = vertices.iter().map(|&m| x[m as usize]).collect();
+        let vs: Vec<Vec3> = vertices.iter().map(|&m| v[m as usize]).collect();
+        let tangent = super::pair_tangent::pair_tangent(&super::pair_tangent::PairInput {
+            x: &xs,
+            v: &vs,
+            anchor: anchor_slots,
+            stiffness: k,
+            damping: 2.0 * self.settings.damping_ratio * (k * self.point_mass[i]).sqrt(),
+            dv_dx,
+            settings: &self.settings,
+        });
+        (vertices, tangent.blocks)
     }
 
     /// Anchors every point that touches at `x` and has no anchor where it
@@ -1740,5 +1852,142 @@ mod tests {
             assert!(touching > 60, "{touching}");
             assert!(kept > 10 && rebuilt > 2, "kept {kept}, made {rebuilt}");
         }
+    }
+    /// The tangent of body contact is the exact derivative of its forces:
+    /// with friction (points sticking and sliding, anchored on the
+    /// triangle they touch or on its neighbour), with damping (velocities
+    /// following positions by `dv_dx`), the normal turning with the
+    /// triangles and the weights sliding with the points, against central
+    /// differences of the forces. The forces the derivatives are taken of
+    /// are the force pass's.
+    #[test]
+    fn the_contact_tangent_is_the_derivative_of_the_forces() {
+        let lower = cube(4, 0.025, [0.0, 0.0, 0.0]);
+        let upper = cube(5, 0.016, [0.012, 0.007, 0.1 - 2e-5]);
+        let model = Model::union(&[lower, upper]).unwrap();
+        let settings = ContactSettings {
+            friction_static: 0.5,
+            friction_kinetic: 0.4,
+            damping_ratio: 0.3,
+            ..ContactSettings::for_bodies(&model)
+        };
+        let contact = BodyContact::new(&model, settings, &[false, false]).unwrap();
+        let wobble = |i: usize, scale: f64| {
+            let t = i as f64;
+            Vec3::new((1.3 * t).sin(), (0.7 * t).cos(), (2.1 * t).sin()) * scale
+        };
+        let x0: Vec<Vec3> = (model.rest_positions().iter().enumerate())
+            .map(|(i, r)| r + wobble(i, 1e-6))
+            .collect();
+        // Anchored where they touch at x0; every other anchor expressed on
+        // the other triangle of its face (the same material point).
+        let mut anchors = contact.static_anchors(&x0);
+        let mut moved = 0;
+        for a in anchors.iter_mut().step_by(2).flatten() {
+            let t = a.x as u32;
+            let corners = |t: u32| contact.triangles[t as usize].nodes.map(|n| x0[n as usize]);
+            let [p, q, r] = corners(t);
+            let at = p + (q - p) * a.y + (r - p) * a.z;
+            let other = Geometry::new(t ^ 1, corners(t ^ 1), 0.0).unwrap();
+            let beta = other.barycentric(at);
+            *a = Vec3::new(f64::from(t ^ 1), beta[1], beta[2]);
+            moved += 1;
+        }
+        assert!(moved > 5, "{moved}");
+        // The upper body slid by up to three times the stick limit.
+        let upper_nodes = model.bodies()[1].nodes.clone();
+        let mut x = x0.clone();
+        for n in upper_nodes {
+            let f = |k: f64| (n as f64 * k).fract();
+            x[n] += Vec3::new(3e-5 * f(0.618), 1e-5 * f(0.377), 0.0);
+        }
+        let v: Vec<Vec3> = (0..x.len()).map(|i| wobble(i + 7, 1e-3)).collect();
+        let dv_dx = 100.0;
+        let pairs = contact.pairs_within(&x, 0.0);
+        let (mut sliding, mut sticking, mut elsewhere) = (0, 0, 0);
+        let mut columns: Vec<usize> = Vec::new();
+        for pair in &pairs {
+            let touch = contact.touch(pair, &x, &v, &anchors);
+            if touch.f_n > 0.0 && touch.delta.norm() > 0.0 {
+                if touch.sliding {
+                    sliding += 1;
+                } else {
+                    sticking += 1;
+                }
+            }
+            let (vertices, _) = contact.pair_blocks(pair, &x, &v, &anchors, dv_dx);
+            elsewhere += usize::from(vertices.len() > 4);
+            columns.extend(vertices.iter().map(|&m| m as usize));
+            // The derivatives are of the force pass's forces.
+            let xs: Vec<Vec3> = vertices.iter().map(|&m| x[m as usize]).collect();
+            let vs: Vec<Vec3> = vertices.iter().map(|&m| v[m as usize]).collect();
+            let anchor = BodyContact::anchor_of(&anchors, pair.point as usize).map(|(t, b, c)| {
+                let nodes = contact.triangles[t as usize].nodes;
+                (
+                    nodes.map(|n| vertices.iter().position(|&m| m == n).unwrap()),
+                    b,
+                    c,
+                )
+            });
+            let k = contact.settings.stiffness * contact.stiffness_ratio[pair.point as usize];
+            let tangent = crate::contact::pair_tangent::pair_tangent(
+                &crate::contact::pair_tangent::PairInput {
+                    x: &xs,
+                    v: &vs,
+                    anchor,
+                    stiffness: k,
+                    damping: 2.0
+                        * settings.damping_ratio
+                        * (k * contact.point_mass[pair.point as usize]).sqrt(),
+                    dv_dx,
+                    settings: &settings,
+                },
+            );
+            assert!(
+                (tangent.forces[0] - touch.force).norm() <= 1e-12 * touch.force.norm(),
+                "{:?} vs {:?}",
+                tangent.forces[0],
+                touch.force
+            );
+        }
+        assert!(
+            sliding > 3 && sticking > 3 && elsewhere > 3,
+            "{sliding} {sticking} {elsewhere}"
+        );
+        columns.sort_unstable();
+        columns.dedup();
+        let mut jac = model.tangent(&x);
+        jac.blocks.iter_mut().for_each(|b| *b = Mat3::zeros());
+        contact.add_jacobian(&x, &v, &anchors, dv_dx, &mut jac);
+        let force = |x: &[Vec3], v: &[Vec3]| {
+            let mut f = vec![Vec3::zeros(); x.len()];
+            contact.add_forces(x, v, &anchors, &mut f);
+            f
+        };
+        let rows: Vec<usize> = (0..x.len())
+            .filter(|&i| force(&x, &v)[i].norm() > 0.0)
+            .collect();
+        let scale = jac.blocks.iter().map(|b| b.norm()).fold(0.0, f64::max);
+        let eps = 1e-9;
+        let mut worst = 0.0f64;
+        for &j in &columns {
+            for d in 0..3 {
+                let shifted = |sign: f64| {
+                    let (mut xs, mut vs) = (x.clone(), v.clone());
+                    xs[j][d] += sign * eps;
+                    vs[j][d] += sign * eps * dv_dx;
+                    force(&xs, &vs)
+                };
+                let (fp, fm) = (shifted(1.0), shifted(-1.0));
+                for &i in &rows {
+                    let fd = (fp[i] - fm[i]) / (2.0 * eps);
+                    let exact = jac
+                        .find(i, j)
+                        .map_or(Vec3::zeros(), |k| jac.blocks[k].column(d).into());
+                    worst = worst.max((fd - exact).norm());
+                }
+            }
+        }
+        assert!(worst < 1e-7 * scale, "worst {worst} of {scale}");
     }
 }
