@@ -1903,10 +1903,16 @@ mod tests {
         }
         let v: Vec<Vec3> = (0..x.len()).map(|i| wobble(i + 7, 1e-3)).collect();
         let dv_dx = 100.0;
-        let pairs = contact.pairs_within(&x, 0.0);
+        // The pairs the forces and the tangent take.
+        let pairs = contact.with_persisting(
+            std::sync::Arc::new(contact.pairs_within(&x, 0.0)),
+            &x,
+            &anchors,
+            0.0,
+        );
         let (mut sliding, mut sticking, mut elsewhere) = (0, 0, 0);
         let mut columns: Vec<usize> = Vec::new();
-        for pair in &pairs {
+        for pair in pairs.iter() {
             let touch = contact.touch(pair, &x, &v, &anchors);
             if touch.f_n > 0.0 && touch.delta.norm() > 0.0 {
                 if touch.sliding {

@@ -24,6 +24,31 @@ use std::sync::atomic::{AtomicBool, Ordering};
 /// The error text of a static problem that is singular at rest.
 const MECHANISM_MESSAGE: &str = "the stiffness matrix is singular: the boundary conditions leave a mechanism free (a rigid motion, or one of the 3 hourglass modes of the lattice); fix a whole face, or more nodes spread over the body";
 
+/// The error text of a static problem singular at rest whose free nodes
+/// `nodes` show: a body of several that nothing holds but contact, and that
+/// touches nothing firmly enough at rest (a ball a little above the block it
+/// is to be pressed into), is a different remedy from a body held too little.
+fn mechanism_message(problem: &Problem, nodes: &[u32]) -> String {
+    let model = problem.model();
+    let free_body = (model.bodies().len() > 1 && problem.contact().is_some())
+        .then(|| nodes.first().map(|&n| model.body_of_node(n as usize)))
+        .flatten()
+        .filter(|&b| {
+            let held = |n: usize| problem.constraints().mask(n).iter().any(|&h| h);
+            !model.bodies()[b].nodes.clone().any(held)
+        });
+    match free_body {
+        Some(b) => format!(
+            "body {} (counted from 1) has no fixed node and only contact holds it, but at rest it \
+             touches nothing firmly enough to stop its rigid motions: a static solve cannot \
+             settle it onto the others; run the scene in time (kind = \"explicit\" or \
+             \"implicit\") with damping until it rests, start it touching, or fix a region of it",
+            b + 1
+        ),
+        None => MECHANISM_MESSAGE.into(),
+    }
+}
+
 /// Options of [`solve_static`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StaticOptions {
@@ -607,7 +632,7 @@ fn solve_static_here(
                         if singular_at_rest(&mut sys, &x_init, &free, &mut linear) =>
                     {
                         return Err(SolverError::Mechanism {
-                            message: MECHANISM_MESSAGE.into(),
+                            message: mechanism_message(problem, &nodes),
                             nodes,
                         });
                     }
@@ -911,7 +936,7 @@ fn solve_small_strain(
         Ok(d) => d,
         Err(super::linear::LinearFailure::Singular { nodes }) => {
             return Err(SolverError::Mechanism {
-                message: MECHANISM_MESSAGE.into(),
+                message: mechanism_message(problem, &nodes),
                 nodes,
             });
         }

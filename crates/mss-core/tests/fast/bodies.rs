@@ -187,6 +187,32 @@ fn a_cube_pressed_on_a_held_one_settles_statically_with_equal_and_opposite_force
     assert!(bodies.max_depth(&s.x) < 0.05 * p.model().h());
 }
 
+/// A static solve cannot settle a body that only contact holds and that
+/// touches nothing at rest (here 5 mm above the held one): the error says
+/// which body and what to do, not "fix a whole face".
+#[test]
+fn a_static_solve_names_the_body_only_contact_would_hold() {
+    let base = ConstraintSpec::fixed(NodeSelector::Box {
+        min: [-1.0, -1.0, -1.0],
+        max: [1.0, 1.0, 1e-6],
+        relative: false,
+    });
+    let p = stack_held(0.005, 0.0, &[base]);
+    let mut s = State::at_rest(p.model());
+    match solve_static(&p, &mut s, &StaticOptions::default()) {
+        Err(mss_core::solver::SolverError::Mechanism { message, nodes }) => {
+            assert!(message.contains("body 2 (counted from 1)"), "{message}");
+            assert!(message.contains("only contact holds it"), "{message}");
+            assert!(
+                nodes
+                    .iter()
+                    .all(|&n| p.model().body_of_node(n as usize) == 1)
+            );
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
 #[test]
 fn contact_between_bodies_keeps_momentum_and_does_not_depend_on_threads() {
     // The upper cube starts 1 mm inside the lower one, sideways offset.
