@@ -42,7 +42,7 @@ pub(super) struct PairInput<'a> {
     /// The anchor's triangle (three slots) and its coordinates
     /// `(beta_b, beta_c)` on it.
     pub anchor: Option<([usize; 3], f64, f64)>,
-    /// The point's contact stiffness (N/m) and damping (N s/m).
+    /// The point's contact stiffness (N/m).
     pub stiffness: f64,
     /// The point's contact damping (N s/m).
     pub damping: f64,
