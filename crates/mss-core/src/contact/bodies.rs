@@ -142,6 +142,9 @@ const POINT_CHUNK: usize = 256;
 /// than half of it (a Verlet list).
 pub const CANDIDATE_SKIN: f64 = 0.2;
 
+/// The nodes that carry a point or corner, with their weights.
+type WeightedNodes = Vec<(u32, f64)>;
+
 #[derive(Debug, Clone, Copy)]
 struct Triangle {
     nodes: [u32; 3],
@@ -1491,19 +1494,24 @@ impl BodyContact {
             anchors,
             margin,
         );
-        let tangents: Vec<(Vec<u32>, Vec<Mat3>)> = pairs
+        // Per pair, the nodes (with their weights) of each point or corner
+        // its forces depend on, found once for the pattern and the blocks.
+        let tangents: Vec<(Vec<WeightedNodes>, Vec<Mat3>)> = pairs
             .par_iter()
             .with_min_len(64)
-            .map(|pair| self.pair_blocks(pair, x, v, anchors, dv_dx))
+            .map(|pair| {
+                let (vertices, blocks) = self.pair_blocks(pair, x, v, anchors, dv_dx);
+                (vertices.iter().map(|&m| self.nodes_of(m)).collect(), blocks)
+            })
             .collect();
         // The point, its triangle's corners and its anchor's are coupled:
         // grow the pattern (both ways, so that it stays symmetric).
         let mut extra = Vec::new();
-        for (vertices, _) in &tangents {
-            for &a in &vertices[..4] {
-                for &b in vertices {
-                    for (na, _) in self.nodes_of(a) {
-                        for (nb, _) in self.nodes_of(b) {
+        for (nodes, _) in &tangents {
+            for a in &nodes[..4] {
+                for b in nodes {
+                    for &(na, _) in a {
+                        for &(nb, _) in b {
                             extra.push((na, nb));
                             extra.push((nb, na));
                         }
@@ -1512,13 +1520,13 @@ impl BodyContact {
             }
         }
         jac.extend_pattern(&extra);
-        for (vertices, blocks) in &tangents {
-            let slots = vertices.len();
-            for (r, &a) in vertices[..4].iter().enumerate() {
-                for (s, &b) in vertices.iter().enumerate() {
+        for (nodes, blocks) in &tangents {
+            let slots = nodes.len();
+            for (r, a) in nodes[..4].iter().enumerate() {
+                for (s, b) in nodes.iter().enumerate() {
                     let block = blocks[r * slots + s];
-                    for (na, wa) in self.nodes_of(a) {
-                        for (nb, wb) in self.nodes_of(b) {
+                    for &(na, wa) in a {
+                        for &(nb, wb) in b {
                             if let Some(idx) = jac.find(na as usize, nb as usize) {
                                 jac.blocks[idx] += block * (wa * wb);
                             }
