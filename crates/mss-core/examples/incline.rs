@@ -2,7 +2,7 @@
 //! the rigid answer, stepped explicitly and implicitly: on the ground (an
 //! obstacle) or, with `--slab`, on a held slab (contact between bodies).
 //!
-//!     cargo run --release -p mss-core --example incline [-- [--slab] [E] [SAFETY] [IMPLICIT_DT]]
+//!     cargo run --release -p mss-core --example incline [-- [--slab] [--settled] [E] [SAFETY] [IMPLICIT_DT]]
 //!
 //! The 4 x 4 x 2 block (0.1 x 0.1 x 0.05 m, nu 0.3, 1000 kg/m^3, default
 //! E = 1e5 Pa) starts at rest on the surface, gravity turned by the slope,
@@ -10,14 +10,17 @@
 //! acceleration along the slope from 0.1 s to 0.4 s over g (sin - mu cos);
 //! below it, how far the block moved in 0.6 s (it should stick); the
 //! normal force's range over the weight, its mean, and the mean friction
-//! over mu times the mean normal force.
+//! over mu times the mean normal force. With `--settled`, a block that
+//! should stick is first settled under its weight (`solver::settle`) and
+//! its motion measured from there.
 
 use hexmesh::Lattice;
 use mss_core::contact::{BodyContact, Contact, ContactSettings, Plane};
 use mss_core::loads::{Damping, LoadSpec};
 use mss_core::model::{HourglassControl, VolumetricBarrier};
 use mss_core::solver::{
-    Explicit, ExplicitOptions, Implicit, ImplicitOptions, Integrator, Problem, State,
+    Explicit, ExplicitOptions, Implicit, ImplicitOptions, Integrator, Problem, SettleOptions,
+    State, settle,
 };
 use mss_core::{ConstraintSpec, Material, Model, NodeSelector, Vec3};
 
@@ -91,7 +94,7 @@ struct Measured {
     friction_ratio: f64,
 }
 
-fn measure(p: &Problem, it: &mut dyn Integrator, tan: f64) -> Measured {
+fn measure(p: &Problem, it: &mut dyn Integrator, tan: f64, settled: bool) -> Measured {
     let free: Vec<usize> = (0..p.model().num_nodes())
         .filter(|&i| !p.constraints().mask(i)[2])
         .collect();
@@ -103,6 +106,13 @@ fn measure(p: &Problem, it: &mut dyn Integrator, tan: f64) -> Measured {
     let mean_y = |s: &State| free.iter().map(|&i| s.x[i].y).sum::<f64>() / free.len() as f64;
     let speed = |s: &State| free.iter().map(|&i| masses[i] * s.v[i].y).sum::<f64>() / mass;
     let mut s = State::at_rest(p.model());
+    if settled && expected <= 0.0 {
+        let info = settle(p, it, &mut s, &SettleOptions::default()).expect("settle");
+        println!(
+            "     settled in {} steps ({:.3} s, residual {:.1e})",
+            info.steps, info.settle_time, info.relative_residual
+        );
+    }
     let y0 = mean_y(&s);
     let (mut n_min, mut n_max, mut n_sum, mut t_sum, mut count) =
         (f64::INFINITY, 0.0f64, 0.0, 0.0, 0usize);
@@ -139,10 +149,12 @@ fn measure(p: &Problem, it: &mut dyn Integrator, tan: f64) -> Measured {
 
 fn main() {
     let mut args: Vec<String> = std::env::args().skip(1).collect();
-    let slab = args.first().is_some_and(|a| a == "--slab");
-    if slab {
-        args.remove(0);
-    }
+    let mut flag = |name: &str| {
+        let found = args.iter().position(|a| a == name);
+        found.map(|k| args.remove(k)).is_some()
+    };
+    let slab = flag("--slab");
+    let settled = flag("--settled");
     let number = |k: usize, default: f64| {
         args.get(k)
             .map_or(default, |a| a.parse().expect("a number"))
@@ -176,7 +188,7 @@ fn main() {
             ("implicit", &mut implicit),
         ] {
             let dt = it.dt();
-            let m = measure(&p, it, tan);
+            let m = measure(&p, it, tan, settled);
             println!(
                 "{tan:.1}  {name}  {dt:.2e}  {:>10.4}                {:.2}..{:.2}    {:.3} {:.4}",
                 m.value, m.n_min, m.n_max, m.n_mean, m.friction_ratio

@@ -455,6 +455,43 @@ impl SceneInput {
             .map_err(|e| self.setting("[solver]", e))
     }
 
+    /// The integrator that settles the scene for `start = "settled"`
+    /// ([`mss_core::solver::settle`]): an explicit scheme (and a static
+    /// solve, which settles with the default explicit scheme) at its stable
+    /// step, one sub-step per step, so that the settling sees each peak of
+    /// the kinetic energy; any other scheme as the run has it.
+    pub fn settle_integrator(
+        &self,
+        registry: &Registry,
+        problem: &Problem,
+        plan: &TimePlan,
+    ) -> Result<Box<dyn Integrator>, JobError> {
+        let s = &self.scene.solver;
+        let kind = if s.is_static() {
+            crate::scene::DEFAULT_KIND
+        } else if s.is_explicit(&registry.integrators) {
+            s.kind.as_str()
+        } else {
+            return self
+                .integrator(registry, problem, plan)?
+                .ok_or_else(|| self.setting("[solver] kind", "no integrator to settle with"));
+        };
+        let settings = IntegratorSettings {
+            dt: None,
+            safety: s.safety,
+            precision: if s.is_static() {
+                mss_core::Precision::F64
+            } else {
+                s.precision
+            },
+            ..IntegratorSettings::default()
+        };
+        registry
+            .integrators
+            .build(kind, problem, &settings)
+            .map_err(|e| self.setting("[solver]", e))
+    }
+
     /// Where the mesh is: `"builtin:NAME"` names a bundled mesh; a relative
     /// path is relative to the scene file's folder.
     pub fn mesh_source(&self) -> MeshSource {

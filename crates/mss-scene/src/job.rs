@@ -10,7 +10,9 @@ use std::time::{Duration, Instant};
 
 use hexmesh::image::ImageLattice;
 use mss_core::Model;
-use mss_core::solver::{Integrator, Problem, State, solve_static_cancellable};
+use mss_core::solver::{
+    Integrator, Problem, SettleInfo, State, settle_cancellable, solve_static_cancellable,
+};
 use serde::Serialize;
 
 use crate::build::{SceneInput, TimePlan, prepare_output_folder};
@@ -20,7 +22,7 @@ use crate::limits::Limits;
 use crate::load_check::LoadCheck;
 use crate::output::{FrameWriter, remove_previous_run};
 use crate::registry::Registry;
-use crate::scene::{BodySource, BodyView, Scene};
+use crate::scene::{BodySource, BodyView, Scene, Start};
 use crate::stages::{PlacedMesh, RunNeeds, StageError, lattice_within, load_placed};
 
 /// What a running job reports, through the callback given to
@@ -275,6 +277,37 @@ pub struct RunSummary {
     /// `None` when no check ran (a static run, a resumed or free body, or
     /// `accept_unstable`).
     pub load_check: Option<String>,
+    /// What the settling of `[solver] start = "settled"` did (`None`: the
+    /// run started at rest, or was resumed).
+    pub settled: Option<SettleReport>,
+}
+
+/// What the settling of a run's start did ([`mss_core::solver::SettleInfo`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct SettleReport {
+    /// Steps of the settling integrator.
+    pub steps: u64,
+    /// The frequency of the last motion damped (rad/s).
+    pub omega: f64,
+    /// Simulated time the settling took (s; the run then starts at its
+    /// start time).
+    pub settle_time: f64,
+    /// Residual force over the loads' at the end.
+    pub relative_residual: f64,
+    /// Newton iterations (an implicit settling).
+    pub newton_iterations: u64,
+}
+
+impl From<SettleInfo> for SettleReport {
+    fn from(i: SettleInfo) -> Self {
+        Self {
+            steps: i.steps,
+            omega: i.omega,
+            settle_time: i.settle_time,
+            relative_residual: i.relative_residual,
+            newton_iterations: i.newton_iterations,
+        }
+    }
 }
 
 /// What a run counts as it goes, kept across a resume by its checkpoint.
@@ -685,6 +718,80 @@ impl Job {
         })
     }
 
+    /// The scene's static solve from `state` (at the scene's end time);
+    /// the Newton iterations it took.
+    fn solve_static(
+        &self,
+        state: &mut State,
+        progress: ProgressFn<'_>,
+        cancel: &Cancel,
+    ) -> Result<u64, JobError> {
+        let opts = self.input.static_options();
+        progress(Progress::Solving);
+        let r = solve_static_cancellable(&self.problem, state, &opts, &cancel.0);
+        progress(Progress::StageDone);
+        let info = r.map_err(|source| JobError::Solver {
+            scene: self.input.name(),
+            stage: match source {
+                mss_core::solver::SolverError::UnstableEquilibrium { .. } => {
+                    "static solve failed ([solver] accept_unstable = true keeps an \
+                     unstable equilibrium)"
+                }
+                mss_core::solver::SolverError::Mechanism { .. }
+                    if self.problem.contact().is_some() =>
+                {
+                    "static solve failed ([solver] start = \"settled\" settles bodies that \
+                     only contact holds)"
+                }
+                _ => "static solve failed",
+            },
+            source: Box::new(source),
+        })?;
+        log::info!(
+            "static equilibrium: {} load steps, {} Newton iterations, relative residual {:.2e}",
+            info.load_steps,
+            info.newton_iterations,
+            info.relative_residual
+        );
+        Ok(u64::from(info.newton_iterations))
+    }
+
+    /// Brings `state` to rest under the loads at its time (`[solver] start
+    /// = "settled"`, [`mss_core::solver::settle`]).
+    fn settle(
+        &self,
+        state: &mut State,
+        plan: &TimePlan,
+        progress: ProgressFn<'_>,
+        cancel: &Cancel,
+    ) -> Result<SettleInfo, JobError> {
+        let mut integrator = self
+            .input
+            .settle_integrator(&self.registry, &self.problem, plan)?;
+        progress(Progress::Solving);
+        let r = settle_cancellable(
+            &self.problem,
+            integrator.as_mut(),
+            state,
+            &self.input.scene.solver.settle_options(),
+            &cancel.0,
+        );
+        progress(Progress::StageDone);
+        let info = r.map_err(|source| JobError::Solver {
+            scene: self.input.name(),
+            stage: "settling the start ([solver] start = \"settled\") failed",
+            source: Box::new(source),
+        })?;
+        log::info!(
+            "settled: {} steps ({:.3e} s simulated, damping last at {:.3e} rad/s), residual {:.2e} of the loads",
+            info.steps,
+            info.settle_time,
+            info.omega,
+            info.relative_residual
+        );
+        Ok(info)
+    }
+
     fn run_from(
         &self,
         out_dir: &Path,
@@ -708,6 +815,8 @@ impl Job {
         self.check_disk_space(out_dir)?;
         let mut state = State::at_rest(problem.model());
         problem.apply_constraints(&mut state);
+        let settle_start = s.start == Start::Settled && resume.is_none();
+        let mut settled = None;
         let mut steps_done = 0;
         let mut totals = RunTotals::default();
         let mut interrupted = false;
@@ -717,30 +826,16 @@ impl Job {
                 // A static solve is the whole computation: do it before creating
                 // any file, so that a failure leaves nothing behind.
                 let rest_state = state.clone();
-                let opts = self.input.static_options();
                 state.time = s.duration;
-                progress(Progress::Solving);
-                let r = solve_static_cancellable(problem, &mut state, &opts, &cancel.0);
-                progress(Progress::StageDone);
-                let info = r.map_err(|source| JobError::Solver {
-                    scene: name.clone(),
-                    stage: match source {
-                        mss_core::solver::SolverError::UnstableEquilibrium { .. } => {
-                            "static solve failed ([solver] accept_unstable = true keeps an \
-                             unstable equilibrium)"
-                        }
-                        _ => "static solve failed",
-                    },
-                    source: Box::new(source),
-                })?;
-                log::info!(
-                    "static equilibrium: {} load steps, {} Newton iterations, relative residual {:.2e}",
-                    info.load_steps,
-                    info.newton_iterations,
-                    info.relative_residual
-                );
+                if settle_start {
+                    // The settling is the solve: it settles bodies that
+                    // only contact holds, which Newton cannot start from.
+                    let info = self.settle(&mut state, &plan, progress, cancel)?;
+                    settled = Some(info.into());
+                } else {
+                    totals.newton_iterations = self.solve_static(&mut state, progress, cancel)?;
+                }
                 steps_done = 1;
-                totals.newton_iterations = u64::from(info.newton_iterations);
                 totals.peak = (largest_displacement(problem.model(), &state.x), state.time);
                 prepare_output_folder(out_dir)?;
                 remove_previous_run(out_dir, &self.registry.exporters)?;
@@ -755,6 +850,10 @@ impl Job {
                 prepare_output_folder(out_dir)?;
                 let first_step = match &resume {
                     None => {
+                        if settle_start {
+                            let info = self.settle(&mut state, &plan, progress, cancel)?;
+                            settled = Some(info.into());
+                        }
                         remove_previous_run(out_dir, &self.registry.exporters)?;
                         writer = self.writer(out_dir)?;
                         if !plan.last_only {
@@ -947,6 +1046,7 @@ impl Job {
             folded_cells,
             most_folded_cells: totals.most_folded,
             load_check,
+            settled,
         })
     }
 

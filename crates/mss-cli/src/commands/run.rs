@@ -247,6 +247,14 @@ fn print_summary(s: &RunSummary) -> Result<(), crate::StdoutError> {
     if let Some(verdict) = &s.load_check {
         crate::outln!("under load       {verdict}");
     }
+    if let Some(settled) = &s.settled {
+        crate::outln!(
+            "settled          in {} steps ({:.3e} s simulated), residual {:.1e} of the loads",
+            settled.steps,
+            settled.settle_time,
+            settled.relative_residual
+        );
+    }
     if s.newton_iterations > 0 {
         crate::outln!(
             "newton           {} iterations, {:.2} per step",

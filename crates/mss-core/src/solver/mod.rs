@@ -36,6 +36,7 @@ mod explicit;
 mod implicit;
 mod linear;
 pub(crate) mod multigrid;
+mod settle;
 mod statics;
 
 use std::sync::OnceLock;
@@ -48,6 +49,7 @@ pub use explicit::{
 };
 pub use implicit::{IMPLICIT_MATRIX_FREE_ABOVE, Implicit, ImplicitOptions};
 pub use linear::{DIRECT_MAX_FREE_DOFS, LinearSolver, LinearSolverKind, LinearStats};
+pub use settle::{SettleInfo, SettleOptions, settle, settle_cancellable};
 pub use statics::{
     FOLLOW_DEPTH, MATRIX_FREE_ABOVE, MAX_FAILED_INCREMENTS, OBSTACLE_INCREMENT,
     STABILITY_TEST_MAX_FACTOR_BYTES, Stability, StaticInfo, StaticOptions, solve_static,
@@ -576,6 +578,24 @@ pub enum SolverError {
     /// The sparse linear solver failed for another reason.
     #[error("linear solver failed: {0}")]
     LinearSolver(String),
+    /// A settling ([`settle_cancellable`]) was asked to stop.
+    #[error("the settling was stopped after {settle_time:.3e} s of simulated time")]
+    SettleCancelled {
+        /// The simulated time the settling had taken (s).
+        settle_time: f64,
+    },
+    /// A settled start ([`settle`]) did not come to rest in its time.
+    #[error(
+        "the bodies did not come to rest in {max_time} s of settling (residual force {relative_residual:.2e} of the loads, {rtol:.0e} asked): a body that slides down a slope steeper than its friction, or falls with nothing below it, has no rest to settle into, so start such a run without settling; a large or soft body may need a longer settle time"
+    )]
+    NotSettled {
+        /// The settle time allowed (s of simulated time).
+        max_time: f64,
+        /// The residual force over the loads' reached.
+        relative_residual: f64,
+        /// The residual force over the loads' asked.
+        rtol: f64,
+    },
 }
 
 const EXPLICIT_HINT: &str = "Try a smaller time step, the implicit solver, or more damping.";

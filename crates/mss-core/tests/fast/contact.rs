@@ -8,8 +8,8 @@ use mss_core::contact::{Contact, ContactSettings, Cuboid, Obstacle, Path, Plane,
 use mss_core::loads::{Damping, LoadSpec};
 use mss_core::model::{HourglassControl, VolumetricBarrier};
 use mss_core::solver::{
-    Explicit, ExplicitOptions, Implicit, ImplicitOptions, Integrator, Problem, State,
-    StaticOptions, solve_static,
+    Explicit, ExplicitOptions, Implicit, ImplicitOptions, Integrator, Problem, SettleOptions,
+    SolverError, State, StaticOptions, settle, solve_static,
 };
 use mss_core::{ConstraintSpec, Material, Model, NodeSelector, SpringsOnly, Vec3};
 
@@ -158,6 +158,78 @@ fn a_block_sticks_below_the_friction_angle_and_slides_above() {
     assert!(
         (got - expected).abs() < 0.03 * expected,
         "{got} vs {expected} m/s^2"
+    );
+}
+
+/// Below the friction angle with no damping at all (tan 0.4, mu 0.5): the
+/// block released unstressed rings (its normal force swings between 0.6
+/// and 1.5 times its weight), slips whenever the ringing unloads it, and
+/// walks millimetres down the slope, as an undamped elastic body does;
+/// settled first (`solver::settle`), it stays, in either solver.
+#[test]
+fn a_settled_block_sticks_on_a_slope_without_damping() {
+    let (tan, mu) = (0.4f64, 0.5);
+    let a = tan.atan();
+    let incline = Vec3::new(0.0, G * a.sin(), -G * a.cos());
+    let friction = |s: ContactSettings| ContactSettings {
+        friction_static: mu,
+        friction_kinetic: mu,
+        ..s
+    };
+    let p = problem(block(0.0), incline, ground(), friction, Damping::NONE, &[]);
+    let explicit = || Box::new(Explicit::new(&p, ExplicitOptions::default()).unwrap());
+    let implicit = || {
+        let opts = ImplicitOptions {
+            dt: 1e-3,
+            ..ImplicitOptions::default()
+        };
+        Box::new(Implicit::new(&p, opts).unwrap())
+    };
+    let moved = |it: &mut dyn Integrator, settled: bool| {
+        let mut s = State::at_rest(p.model());
+        if settled {
+            let opts = SettleOptions::default();
+            let info = settle(&p, it, &mut s, &opts).unwrap();
+            assert!(info.relative_residual <= opts.rtol, "{info:?}");
+            assert_eq!(s.time, 0.0, "the run starts at its start time");
+            assert!(s.v.iter().all(|v| *v == Vec3::zeros()));
+            // At rest on the slope: the contact carries the weight.
+            let weight = p.model().total_mass() * G * a.cos();
+            let normal: f64 = p.contact_forces(&s).iter().map(|f| f.z).sum();
+            assert!(
+                (normal - weight).abs() < 1e-4 * weight,
+                "{normal} vs {weight}"
+            );
+        }
+        let y0 = mean_y(&s);
+        while s.time < 0.6 - 1e-9 {
+            it.step(&p, &mut s).unwrap();
+        }
+        (mean_y(&s) - y0).abs()
+    };
+    let unsettled = moved(explicit().as_mut(), false);
+    assert!(
+        unsettled > 1e-3,
+        "released unstressed it slips: {unsettled} m"
+    );
+    let settled = moved(explicit().as_mut(), true);
+    assert!(settled < 1e-6, "explicit, settled: moved {settled} m");
+    let settled = moved(implicit().as_mut(), true);
+    assert!(settled < 1e-6, "implicit, settled: moved {settled} m");
+    // Above the friction angle there is no rest to settle into.
+    let b = 0.8f64.atan();
+    let steep = Vec3::new(0.0, G * b.sin(), -G * b.cos());
+    let p = problem(block(0.0), steep, ground(), friction, Damping::NONE, &[]);
+    let mut it = Explicit::new(&p, ExplicitOptions::default()).unwrap();
+    let mut s = State::at_rest(p.model());
+    let opts = SettleOptions {
+        max_time: 0.3,
+        ..SettleOptions::default()
+    };
+    let r = settle(&p, &mut it, &mut s, &opts);
+    assert!(
+        matches!(r, Err(SolverError::NotSettled { max_time, .. }) if max_time == 0.3),
+        "{r:?}"
     );
 }
 

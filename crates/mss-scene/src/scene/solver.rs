@@ -6,6 +6,7 @@ use mss_core::Precision;
 use mss_core::loads::Damping;
 use mss_core::solver::{
     DEFAULT_MAX_NEWTON, DEFAULT_NEWTON_RTOL, ExplicitOptions, Integrators, LinearSolverKind,
+    SettleOptions,
 };
 use serde::Deserialize;
 
@@ -132,6 +133,40 @@ pub struct SolverSection {
     /// static) refuse `"f32"`.
     #[serde(default)]
     pub precision: Precision,
+    /// How the run starts: `"rest"` (default: the bodies at rest in their
+    /// rest shape, the loads switched on at once) or `"settled"` (first
+    /// brought to rest under the loads at the start time, contact and
+    /// friction included: [`mss_core::solver::settle`]). With
+    /// `kind = "static"`, `"settled"` makes the settling the solve (it
+    /// settles bodies that only contact holds, which Newton cannot start).
+    #[serde(default)]
+    pub start: Start,
+    /// `start = "settled"`: the simulated time the settling may take before
+    /// the run fails (s, default [`SettleOptions::default`]'s 10).
+    #[serde(default = "default_settle_time")]
+    pub settle_time: f64,
+    /// `start = "settled"`: settled when the residual force is at most this
+    /// fraction of the loads (default [`SettleOptions::default`]'s 1e-4).
+    #[serde(default = "default_settle_tolerance")]
+    pub settle_tolerance: f64,
+}
+
+/// `[solver] start`: where a run begins.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Start {
+    /// The rest shape, at rest, loads on at once.
+    #[default]
+    Rest,
+    /// At rest under the loads ([`mss_core::solver::settle`]).
+    Settled,
+}
+
+fn default_settle_time() -> f64 {
+    SettleOptions::default().max_time
+}
+fn default_settle_tolerance() -> f64 {
+    SettleOptions::default().rtol
 }
 
 fn default_load_steps() -> u32 {
@@ -171,6 +206,9 @@ impl Default for SolverSection {
             linear: false,
             accept_unstable: false,
             precision: Precision::F64,
+            start: Start::Rest,
+            settle_time: default_settle_time(),
+            settle_tolerance: default_settle_tolerance(),
         }
     }
 }
@@ -229,6 +267,25 @@ impl SolverSection {
                 format!("= {}; use 1 to 1000000 increments", s.load_steps),
             );
         }
+        if !(s.settle_time.is_finite() && s.settle_time > 0.0) {
+            return bad(
+                "settle_time",
+                format!(
+                    "= {}; must be a positive number of seconds (simulated)",
+                    s.settle_time
+                ),
+            );
+        }
+        if !(s.settle_tolerance.is_finite() && s.settle_tolerance > 0.0 && s.settle_tolerance < 1.0)
+        {
+            return bad(
+                "settle_tolerance",
+                format!(
+                    "= {}; must be in (0, 1) (residual force over the loads)",
+                    s.settle_tolerance
+                ),
+            );
+        }
         if s.precision != Precision::F64 && s.is_static() {
             return bad(
                 "precision",
@@ -252,6 +309,14 @@ impl SolverSection {
     /// matrices); the registry's entries say which are.
     pub fn is_explicit(&self, integrators: &Integrators) -> bool {
         integrators.is_explicit(&self.kind)
+    }
+
+    /// The settling of `start = "settled"`.
+    pub fn settle_options(&self) -> SettleOptions {
+        SettleOptions {
+            rtol: self.settle_tolerance,
+            max_time: self.settle_time,
+        }
     }
 
     /// The damping of the run.

@@ -71,6 +71,80 @@ fn the_bundled_stack_rests_with_the_upper_weight_carried_by_the_lower_cube() {
     assert!(bodies.max_depth(&s.x) < 0.02 * model.h());
 }
 
+/// `[solver] start = "settled"`: the stack with no damping at all starts
+/// at rest under its weight (the upper cube, placed 5 mm above, has landed
+/// and settled) and stays there: its largest displacement over the run is
+/// the one it starts with, and the upper weight crosses the contact.
+/// Started at rest, the same scene drops and rings.
+#[test]
+fn a_settled_stack_starts_at_rest_and_stays_without_damping() {
+    let run = |start: &str| {
+        let text = STACK
+            .replace(
+                "damping = 10.0",
+                &format!("damping = 0.0\nstart = \"{start}\""),
+            )
+            .replace("duration = 1.0", "duration = 0.3")
+            .replace("every_time = 0.02", "every_time = 0.1");
+        let out = tempfile::tempdir().unwrap();
+        job(&text)
+            .run(out.path(), &no_progress, &mss_scene::Cancel::new())
+            .unwrap()
+    };
+    let summary = run("settled");
+    let settled = summary.settled.expect("settled");
+    assert!(
+        settled.steps > 0 && settled.relative_residual <= 1e-4,
+        "{settled:?}"
+    );
+    let upper = 0.216 * 9.81;
+    let between = summary.bodies[1].contact_force_from_bodies;
+    assert!((between[2] - upper).abs() < 0.01 * upper, "{between:?}");
+    let (end, peak) = (summary.max_displacement, summary.peak_displacement);
+    assert!(peak - end < 1e-4 * end, "moved: peak {peak} m, end {end} m");
+    let summary = run("rest");
+    assert!(summary.settled.is_none());
+    let (end, peak) = (summary.max_displacement, summary.peak_displacement);
+    assert!(
+        peak - end > 1e-2 * end,
+        "dropped and rang: peak {peak} m, end {end} m"
+    );
+}
+
+/// A static solve of bodies that only contact holds (the bundled squeeze:
+/// no node is fixed, the ball starts above the block): Newton has nothing
+/// to start from and says what works; settled, the ball rests between the
+/// block and the pressing plate, and the two push each other equally.
+#[test]
+fn a_static_settle_holds_bodies_only_contact_holds() {
+    // At 0.25 s the plate is 1.5 cm down, 5 mm into the ball (a static
+    // solve places obstacles where they end, at once).
+    let text = SQUEEZE
+        .replace("cells = 12", "cells = 8")
+        .replace("duration = 1.2", "duration = 0.25")
+        .replace("kind = \"explicit\"", "kind = \"static\"");
+    let out = tempfile::tempdir().unwrap();
+    let e = job(&text)
+        .run(out.path(), &no_progress, &mss_scene::Cancel::new())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("start = \"settled\""), "{e}");
+    let text = text.replace("[solver]", "[solver]\nstart = \"settled\"");
+    let summary = job(&text)
+        .run(out.path(), &no_progress, &mss_scene::Cancel::new())
+        .unwrap();
+    assert!(summary.settled.unwrap().relative_residual <= 1e-4);
+    let (a, b) = (
+        summary.bodies[0].contact_force_from_bodies,
+        summary.bodies[1].contact_force_from_bodies,
+    );
+    let ball_weight = summary.bodies[1].mass * 9.81;
+    assert!(
+        a[2] < -1.2 * ball_weight && (a[2] + b[2]).abs() < 1e-9 * a[2].abs(),
+        "{a:?} {b:?}"
+    );
+}
+
 #[test]
 fn a_squeezed_ball_and_the_block_push_each_other_equally_and_the_outputs_hold_both() {
     // The bundled squeeze until the plate presses hardest, frames every 0.1 s.
@@ -259,6 +333,18 @@ fn bad_bodies_are_typed_errors_naming_the_key() {
             "[[bodies]] #1 (a) [[fixed]] #1",
         ),
         ("[solver]\nkind = \"static\"\n".to_owned(), "[mesh]"),
+        (
+            format!("[solver]\nstart = \"later\"\n{}", body("a", "")),
+            "start",
+        ),
+        (
+            format!("[solver]\nsettle_time = -1.0\n{}", body("a", "")),
+            "settle_time",
+        ),
+        (
+            format!("[solver]\nsettle_tolerance = 2.0\n{}", body("a", "")),
+            "settle_tolerance",
+        ),
     ];
     for (text, key) in cases {
         let e = SceneInput::from_toml(&text, "bad.toml")
