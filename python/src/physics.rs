@@ -9,8 +9,8 @@ use mss_scene::mss_core::contact::ContactPoints;
 use mss_scene::mss_core::loads::Damping;
 use mss_scene::mss_core::simulation::Simulation;
 use mss_scene::mss_core::solver::{
-    Integrator, IntegratorSettings, Integrators, LinearSolverKind, Problem, Stability, State,
-    StaticOptions, solve_static,
+    Integrator, IntegratorSettings, Integrators, LinearSolverKind, Problem, SettleOptions,
+    Stability, State, StaticOptions, solve_static,
 };
 use mss_scene::mss_core::{LoadSpec, Material, Model, Parameterizations, Precision, Vec3};
 use mss_scene::obstacles::ObstacleSpec;
@@ -989,6 +989,14 @@ impl PySimulation {
     fn lock(&self) -> std::sync::MutexGuard<'_, Simulation> {
         self.sim.lock().unwrap_or_else(|e| e.into_inner())
     }
+    /// [`Simulation::settle`].
+    pub fn settle_with(
+        &self,
+        opts: &SettleOptions,
+    ) -> Result<mss_scene::mss_core::solver::SettleInfo, mss_scene::mss_core::solver::SolverError>
+    {
+        self.lock().settle(opts)
+    }
 }
 
 #[pymethods]
@@ -1036,6 +1044,36 @@ impl PySimulation {
     fn step(&self, py: Python<'_>, dt: f64) -> PyResult<u32> {
         let info = detached(py, || self.lock().step(dt)).map_err(solver)?;
         Ok(info.substeps)
+    }
+
+    /// settle(rtol=1e-4, max_time=10.0)
+    ///
+    /// Brings the bodies to rest under the loads at the current time,
+    /// contact and friction included (a scene's `[solver] start =
+    /// "settled"`), so that the frames that follow start from equilibrium.
+    /// Returns a dict with `steps`, `settle_time` (s simulated),
+    /// `relative_residual` and `omega`. A body that never comes to rest
+    /// raises `SolverError` after `max_time` seconds of settling.
+    #[pyo3(signature = (rtol = None, max_time = None))]
+    fn settle<'py>(
+        &self,
+        py: Python<'py>,
+        rtol: Option<f64>,
+        max_time: Option<f64>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let defaults = SettleOptions::default();
+        let opts = SettleOptions {
+            rtol: rtol.unwrap_or(defaults.rtol),
+            max_time: max_time.unwrap_or(defaults.max_time),
+            ..defaults
+        };
+        let info = detached(py, || self.settle_with(&opts)).map_err(solver)?;
+        let d = PyDict::new(py);
+        d.set_item("steps", info.steps)?;
+        d.set_item("settle_time", info.settle_time)?;
+        d.set_item("relative_residual", info.relative_residual)?;
+        d.set_item("omega", info.omega)?;
+        Ok(d)
     }
 
     /// Time reached (s).

@@ -329,14 +329,21 @@ impl PyJob {
     /// simulation()
     ///
     /// An interactive `Simulation` of the job's problem (a fresh copy), whose
-    /// `surface_positions()` is the scene's mesh.
+    /// `surface_positions()` is the scene's mesh; settled first when the
+    /// scene says `[solver] start = "settled"`.
     fn simulation(&self, py: Python<'_>) -> PyResult<PySimulation> {
         let job = Arc::clone(&self.job);
         let (problem, surface) = detached(py, || {
             let surface = job.embedding();
             (job.rebuild_problem(), surface)
         });
-        PySimulation::build(problem.map_err(job_error)?, Some(Arc::new(surface)))
+        let sim = PySimulation::build(problem.map_err(job_error)?, Some(Arc::new(surface)))?;
+        let solver_section = &self.job.input.scene.solver;
+        if solver_section.start == mss_scene::scene::Start::Settled {
+            let opts = solver_section.settle_options();
+            detached(py, || sim.settle_with(&opts)).map_err(crate::errors::solver)?;
+        }
+        Ok(sim)
     }
 
     fn __repr__(&self) -> String {

@@ -190,8 +190,17 @@ fn main() {
             let dt = it.dt();
             let m = measure(&p, it, tan, settled);
             println!(
-                "{tan:.1}  {name}  {dt:.2e}  {:>10.4}                {:.2}..{:.2}    {:.3} {:.4}",
-                m.value, m.n_min, m.n_max, m.n_mean, m.friction_ratio
+                "{tan:.1}  {name}  {dt:.2e}  {:>10}                {:.2}..{:.2}    {:.3} {:.4}",
+                // Distances moved to the micrometre and below.
+                if m.value.abs() < 1e-3 {
+                    format!("{:.2e}", m.value)
+                } else {
+                    format!("{:.4}", m.value)
+                },
+                m.n_min,
+                m.n_max,
+                m.n_mean,
+                m.friction_ratio
             );
         }
     }

@@ -33,7 +33,10 @@
 use std::sync::{Arc, RwLock};
 
 use crate::loads::Load;
-use crate::solver::{Explicit, ExplicitOptions, Integrator, Problem, SolverError, State, StepInfo};
+use crate::solver::{
+    Explicit, ExplicitOptions, Integrator, Problem, SettleInfo, SettleOptions, SolverError, State,
+    StepInfo, settle,
+};
 use crate::{BlockCsr, Mat3, Model, Precision, Vec3};
 
 /// What a pick holds: nodes, their offsets from the target, the stiffness.
@@ -146,6 +149,24 @@ impl Simulation {
             .as_mut()
             .ok_or(SolverError::BadTimeStep(dt))?;
         integrator.step(&self.problem, &mut self.state)
+    }
+
+    /// Brings the state to rest under the loads at its time, contact and
+    /// friction included ([`settle`], with the
+    /// explicit scheme at its stable step), so that the frames that follow
+    /// start from equilibrium (a scene's `[solver] start = "settled"`). On
+    /// error the state is where the settling got to.
+    pub fn settle(&mut self, opts: &SettleOptions) -> Result<SettleInfo, SolverError> {
+        let mut integrator = Explicit::new(
+            &self.problem,
+            ExplicitOptions {
+                precision: self.precision,
+                ..ExplicitOptions::default()
+            },
+        )?;
+        // The frame integrator's cached forces are of the state before.
+        self.integrator = None;
+        settle(&self.problem, &mut integrator, &mut self.state, opts)
     }
 
     /// Runs the internal force pass in `precision` from the next step on

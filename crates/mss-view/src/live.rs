@@ -191,7 +191,13 @@ impl Body {
         let problem = job
             .interactive_problem(extra)
             .map_err(|e| mss_scene::error::one_line(&e))?;
-        let sim = Simulation::new(problem).map_err(|e| e.to_string())?;
+        let mut sim = Simulation::new(problem).map_err(|e| e.to_string())?;
+        let solver = &job.input.scene.solver;
+        if solver.start == mss_scene::scene::Start::Settled {
+            // Settled before the first frame, as `mss run` starts it.
+            sim.settle(&solver.settle_options())
+                .map_err(|e| format!("{}: settling the start failed: {e}", job.input.name()))?;
+        }
 
         let embedding = job.embedding();
         let skin = job.skin();

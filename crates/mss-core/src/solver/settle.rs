@@ -39,7 +39,8 @@
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use super::{Integrator, Problem, SolverError, State, free_norm};
+use super::statics::obstacle_travel;
+use super::{Integrator, OBSTACLE_INCREMENT, Problem, SolverError, State, free_norm};
 use crate::Vec3;
 
 /// Steps between two checks of the residual force (each check costs a
@@ -56,6 +57,13 @@ pub struct SettleOptions {
     /// Simulated time (s) after which a settle that has not come to rest
     /// fails.
     pub max_time: f64,
+    /// Settle along the obstacles' paths from this time to the state's
+    /// time: at successive times, each moving the obstacles by at most
+    /// [`OBSTACLE_INCREMENT`] cells, as a slow press would, instead of
+    /// placing them where they are at the state's time at once (a plate
+    /// that ends deep in a ball would shoot it out). `None`: at the state's
+    /// time only.
+    pub follow_from: Option<f64>,
 }
 
 impl Default for SettleOptions {
@@ -67,6 +75,7 @@ impl Default for SettleOptions {
         Self {
             rtol: 1e-4,
             max_time: 10.0,
+            follow_from: None,
         }
     }
 }
@@ -124,6 +133,62 @@ pub fn settle_cancellable(
             opts.max_time
         )));
     }
+    let end = state.time;
+    let mut total = SettleInfo {
+        steps: 0,
+        omega: 0.0,
+        settle_time: 0.0,
+        relative_residual: 0.0,
+        newton_iterations: 0,
+    };
+    for t in stops(problem, opts.follow_from, end) {
+        state.time = t;
+        let info = settle_at(problem, integrator, state, opts, cancel, total.settle_time)?;
+        total.steps += info.steps;
+        total.settle_time += info.settle_time;
+        total.newton_iterations += info.newton_iterations;
+        total.relative_residual = info.relative_residual;
+        if info.omega > 0.0 {
+            total.omega = info.omega;
+        }
+    }
+    Ok(total)
+}
+
+/// The times to settle at, ending at `end`: from `from` on, the obstacles
+/// move by at most [`OBSTACLE_INCREMENT`] cells between two.
+fn stops(problem: &Problem, from: Option<f64>, end: f64) -> Vec<f64> {
+    let (Some(t0), Some(contact)) = (from, problem.contact()) else {
+        return vec![end];
+    };
+    if t0.is_nan() || t0 >= end {
+        return vec![end];
+    }
+    let travel = obstacle_travel(contact, t0, end);
+    let increments = (travel / (OBSTACLE_INCREMENT * problem.model().h())).ceil();
+    // A bound: a path a thousand increments long is followed in a thousand.
+    let k = increments.clamp(1.0, 1000.0) as usize;
+    (0..=k)
+        .map(|i| {
+            if i == k {
+                end
+            } else {
+                t0 + (end - t0) * i as f64 / k as f64
+            }
+        })
+        .collect()
+}
+
+/// [`settle_cancellable`] at the state's time, `spent` seconds of the
+/// budget already used.
+fn settle_at(
+    problem: &Problem,
+    integrator: &mut dyn Integrator,
+    state: &mut State,
+    opts: &SettleOptions,
+    cancel: &AtomicBool,
+    spent: f64,
+) -> Result<SettleInfo, SolverError> {
     let model = problem.model();
     let n = model.num_nodes();
     let free: Vec<bool> = (0..n)
@@ -152,7 +217,7 @@ pub fn settle_cancellable(
         if cancel.load(Ordering::Relaxed) {
             state.time = start;
             return Err(SolverError::SettleCancelled {
-                settle_time: info.settle_time,
+                settle_time: spent + info.settle_time,
             });
         }
         x_before.copy_from_slice(&state.x);
@@ -218,7 +283,7 @@ pub fn settle_cancellable(
                 return Ok(info);
             }
         }
-        if info.settle_time >= opts.max_time {
+        if spent + info.settle_time >= opts.max_time {
             info.relative_residual = residual.relative_to_loads(net, problem, state, &free);
             return Err(SolverError::NotSettled {
                 max_time: opts.max_time,

@@ -218,7 +218,7 @@ impl Drop for ObstaclesPutBack<'_> {
 
 /// The length of the longest obstacle path of `contact` from `t0` to `t1`
 /// (m), sampled at 256 times.
-fn obstacle_travel(contact: &crate::contact::Contact, t0: f64, t1: f64) -> f64 {
+pub(super) fn obstacle_travel(contact: &crate::contact::Contact, t0: f64, t1: f64) -> f64 {
     const SAMPLES: usize = 256;
     contact
         .obstacles()

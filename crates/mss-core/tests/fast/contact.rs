@@ -216,6 +216,23 @@ fn a_settled_block_sticks_on_a_slope_without_damping() {
     assert!(settled < 1e-6, "explicit, settled: moved {settled} m");
     let settled = moved(implicit().as_mut(), true);
     assert!(settled < 1e-6, "implicit, settled: moved {settled} m");
+    // An interactive simulation settles the same way before its frames.
+    let mut sim = mss_core::simulation::Simulation::new(problem(
+        block(0.0),
+        incline,
+        ground(),
+        friction,
+        Damping::NONE,
+        &[],
+    ))
+    .unwrap();
+    sim.settle(&SettleOptions::default()).unwrap();
+    let y0 = mean_y(sim.state());
+    for _ in 0..36 {
+        sim.step(1.0 / 60.0).unwrap();
+    }
+    let moved = (mean_y(sim.state()) - y0).abs();
+    assert!(moved < 1e-6, "simulation, settled: moved {moved} m");
     // Above the friction angle there is no rest to settle into.
     let b = 0.8f64.atan();
     let steep = Vec3::new(0.0, G * b.sin(), -G * b.cos());

@@ -311,11 +311,14 @@ impl SolverSection {
         integrators.is_explicit(&self.kind)
     }
 
-    /// The settling of `start = "settled"`.
+    /// The settling of `start = "settled"`: a static solve's, at the end
+    /// time, follows the obstacles along their paths from time 0, as a
+    /// static Newton solve does.
     pub fn settle_options(&self) -> SettleOptions {
         SettleOptions {
             rtol: self.settle_tolerance,
             max_time: self.settle_time,
+            follow_from: self.is_static().then_some(0.0),
         }
     }
 

@@ -113,15 +113,16 @@ fn a_settled_stack_starts_at_rest_and_stays_without_damping() {
 
 /// A static solve of bodies that only contact holds (the bundled squeeze:
 /// no node is fixed, the ball starts above the block): Newton has nothing
-/// to start from and says what works; settled, the ball rests between the
-/// block and the pressing plate, and the two push each other equally.
+/// to start from and says what works; settled (backward Euler, along the
+/// plate's path), the ball rests between the block and the pressing plate,
+/// and the two push each other equally.
 #[test]
 fn a_static_settle_holds_bodies_only_contact_holds() {
-    // At 0.25 s the plate is 1.5 cm down, 5 mm into the ball (a static
-    // solve places obstacles where they end, at once).
+    // At 0.6 s the plate is 3 cm down, 2 cm into the ball: placed there at
+    // once it would shoot the ball out; the settling follows its path.
     let text = SQUEEZE
         .replace("cells = 12", "cells = 8")
-        .replace("duration = 1.2", "duration = 0.25")
+        .replace("duration = 1.2", "duration = 0.6")
         .replace("kind = \"explicit\"", "kind = \"static\"");
     let out = tempfile::tempdir().unwrap();
     let e = job(&text)
@@ -140,7 +141,7 @@ fn a_static_settle_holds_bodies_only_contact_holds() {
     );
     let ball_weight = summary.bodies[1].mass * 9.81;
     assert!(
-        a[2] < -1.2 * ball_weight && (a[2] + b[2]).abs() < 1e-9 * a[2].abs(),
+        a[2] < -5.0 * ball_weight && (a[2] + b[2]).abs() < 1e-9 * a[2].abs(),
         "{a:?} {b:?}"
     );
 }
