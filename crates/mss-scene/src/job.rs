@@ -831,6 +831,8 @@ impl Job {
                     // The settling is the solve: it settles bodies that
                     // only contact holds, which Newton cannot start from.
                     let info = self.settle(&mut state, &plan, progress, cancel)?;
+                    // The settling's Newton iterations are the solve's.
+                    totals.newton_iterations = info.newton_iterations;
                     settled = Some(info.into());
                 } else {
                     totals.newton_iterations = self.solve_static(&mut state, progress, cancel)?;

@@ -134,7 +134,11 @@ fn a_static_settle_holds_bodies_only_contact_holds() {
     let summary = job(&text)
         .run(out.path(), &no_progress, &mss_scene::Cancel::new())
         .unwrap();
-    assert!(summary.settled.unwrap().relative_residual <= 1e-4);
+    let settled = summary.settled.unwrap();
+    assert!(settled.relative_residual <= 1e-4);
+    // Backward Euler settled it: its Newton iterations are the solve's.
+    assert!(settled.newton_iterations > 0);
+    assert_eq!(summary.newton_iterations, settled.newton_iterations);
     let (a, b) = (
         summary.bodies[0].contact_force_from_bodies,
         summary.bodies[1].contact_force_from_bodies,
