@@ -527,6 +527,11 @@ class Simulation:
     def precision(self, value: Literal["f64", "f32"]) -> None: ...
     def step(self, dt: float) -> int:
         """Advances by dt (s) in as many sub-steps as stability asks; returns them."""
+    def settle(
+        self, rtol: Optional[float] = None, max_time: Optional[float] = None
+    ) -> dict[str, Any]:
+        """Brings the bodies to rest under the loads at the current time (a scene's
+        ``start = "settled"``); ``steps``, ``settle_time``, ``relative_residual``, ``omega``."""
     @property
     def time(self) -> float:
         """(s)."""
