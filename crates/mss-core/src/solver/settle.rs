@@ -141,9 +141,18 @@ pub fn settle_cancellable(
         relative_residual: 0.0,
         newton_iterations: 0,
     };
+    let free = problem.free_mask();
     for t in stops(problem, opts.follow_from, end) {
         state.time = t;
-        let info = settle_at(problem, integrator, state, opts, cancel, total.settle_time)?;
+        let info = settle_at(
+            problem,
+            integrator,
+            state,
+            opts,
+            cancel,
+            &free,
+            total.settle_time,
+        )?;
         total.steps += info.steps;
         total.settle_time += info.settle_time;
         total.newton_iterations += info.newton_iterations;
@@ -181,26 +190,25 @@ fn stops(problem: &Problem, from: Option<f64>, end: f64) -> Vec<f64> {
 
 /// [`settle_cancellable`] at the state's time, `spent` seconds of the
 /// budget already used.
+#[allow(clippy::too_many_arguments)]
 fn settle_at(
     problem: &Problem,
     integrator: &mut dyn Integrator,
     state: &mut State,
     opts: &SettleOptions,
     cancel: &AtomicBool,
+    free: &[bool],
     spent: f64,
 ) -> Result<SettleInfo, SolverError> {
     let model = problem.model();
     let n = model.num_nodes();
-    let free: Vec<bool> = (0..n)
-        .flat_map(|i| problem.constraints().mask(i).map(|held| !held))
-        .collect();
     let start = state.time;
     let mut residual = Residual::new(n);
     let mut info = SettleInfo {
         steps: 0,
         omega: 0.0,
         settle_time: 0.0,
-        relative_residual: residual.relative(problem, state, &free),
+        relative_residual: residual.relative(problem, state, free),
         newton_iterations: 0,
     };
     if info.relative_residual <= opts.rtol {
@@ -255,14 +263,7 @@ fn settle_at(
         }
         have_prev = true;
         if info.omega > 0.0 {
-            let keep = (-2.0 * info.omega * dt).exp();
-            for (i, v) in state.v.iter_mut().enumerate() {
-                for d in 0..3 {
-                    if free[3 * i + d] {
-                        v[d] *= keep;
-                    }
-                }
-            }
+            scale_free_velocities(state, free, (-2.0 * info.omega * dt).exp());
         }
         // The residual is the net force of the step just taken (`M dv/dt`),
         // the forces the integrator applies: its contact with a moving
@@ -270,7 +271,7 @@ fn settle_at(
         // of `Contact::forces`, and the run continues with the integrator.
         let net = net.sqrt();
         if info.steps.is_multiple_of(CHECK_EVERY) {
-            info.relative_residual = residual.relative_to_loads(net, problem, state, &free);
+            info.relative_residual = residual.relative_to_loads(net, problem, state, free);
             log::trace!(
                 "settle: step {} at {:.4e} s, omega {:.3e}/s, residual {:.3e} of the loads",
                 info.steps,
@@ -279,12 +280,12 @@ fn settle_at(
                 info.relative_residual
             );
             if info.relative_residual <= opts.rtol {
-                zero_free_velocities(state, &free);
+                scale_free_velocities(state, free, 0.0);
                 return Ok(info);
             }
         }
         if spent + info.settle_time >= opts.max_time {
-            info.relative_residual = residual.relative_to_loads(net, problem, state, &free);
+            info.relative_residual = residual.relative_to_loads(net, problem, state, free);
             return Err(SolverError::NotSettled {
                 max_time: opts.max_time,
                 relative_residual: info.relative_residual,
@@ -294,11 +295,12 @@ fn settle_at(
     }
 }
 
-fn zero_free_velocities(state: &mut State, free: &[bool]) {
+/// Multiplies the free velocity components by `factor`.
+fn scale_free_velocities(state: &mut State, free: &[bool], factor: f64) {
     for (i, v) in state.v.iter_mut().enumerate() {
         for d in 0..3 {
             if free[3 * i + d] {
-                v[d] = 0.0;
+                v[d] *= factor;
             }
         }
     }
