@@ -166,15 +166,16 @@ struct Entry {
 /// near it needs: its grown box, its plane, and the vectors whose dot
 /// products with `p - a` are the barycentric coordinates of `p`'s
 /// projection (computed once per search, not once per point).
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, Default)]
 struct Geometry {
     triangle: u32,
+    /// How far from the triangle a point still touches it (m): the depth
+    /// limit in its body's cells; its box is grown by as much.
+    reach: f64,
     lo: Vec3,
     hi: Vec3,
     corners: [Vec3; 3],
     normal: Vec3,
-    /// Twice the area (m^2).
-    area: f64,
     /// `(e2 x n) / |e1 x e2|`: `beta_b = (p - a) . to_b`.
     to_b: Vec3,
     /// `(n x e1) / |e1 x e2|`: `beta_c = (p - a) . to_c`.
@@ -182,25 +183,37 @@ struct Geometry {
 }
 
 impl Geometry {
+    /// The triangle's geometry at `corners`, its box grown by `grow` (m,
+    /// its reach); `None` when it has no area.
     fn new(triangle: u32, corners: [Vec3; 3], grow: f64) -> Option<Self> {
+        let mut g = Self::default();
+        g.set(triangle, corners, grow).then_some(g)
+    }
+
+    /// Makes `self` [`Geometry::new`]'s, in place (a search makes
+    /// thousands: built elsewhere and moved, each cost two copies of its
+    /// 200 bytes); false when the triangle has no area.
+    #[inline]
+    fn set(&mut self, triangle: u32, corners: [Vec3; 3], grow: f64) -> bool {
         let [a, b, c] = corners;
         let (e1, e2) = (b - a, c - a);
         let cross = e1.cross(&e2);
         let area2 = cross.norm();
         if !(area2 > 0.0 && area2.is_finite()) {
-            return None;
+            return false;
         }
-        let normal = cross / area2;
-        Some(Self {
-            triangle,
-            lo: a.inf(&b).inf(&c).add_scalar(-grow),
-            hi: a.sup(&b).sup(&c).add_scalar(grow),
-            corners,
-            normal,
-            area: area2,
-            to_b: e2.cross(&normal) / area2,
-            to_c: normal.cross(&e1) / area2,
-        })
+        // One division, not nine.
+        let inverse = 1.0 / area2;
+        let normal = cross * inverse;
+        self.triangle = triangle;
+        self.reach = grow;
+        self.lo = a.inf(&b).inf(&c).add_scalar(-grow);
+        self.hi = a.sup(&b).sup(&c).add_scalar(grow);
+        self.corners = corners;
+        self.normal = normal;
+        self.to_b = e2.cross(&normal) * inverse;
+        self.to_c = normal.cross(&e1) * inverse;
+        true
     }
 
     /// The barycentric coordinates of `p`'s projection onto the plane
@@ -227,32 +240,59 @@ impl Geometry {
         if gap.abs() >= beyond {
             return None;
         }
-        // Outside: the nearest point of the three edges.
         let t = &self.corners;
-        let mut best = (f64::INFINITY, [0.0; 3]);
-        for (i, j) in [(0, 1), (1, 2), (2, 0)] {
-            let e = t[j] - t[i];
-            let len2 = e.norm_squared();
-            let s = if len2 > 0.0 {
-                ((p - t[i]).dot(&e) / len2).clamp(0.0, 1.0)
-            } else {
-                0.0
-            };
-            let d = (p - (t[i] + e * s)).norm();
-            if d < best.0 {
-                let mut w = [0.0; 3];
-                w[i] = 1.0 - s;
-                w[j] = s;
-                best = (d, w);
-            }
+        // The distance to the corners' box is a lower bound of the
+        // distance to the triangle: most triangles near a point lie beside
+        // the one it projects onto, and are left here without their edges
+        // (a little margin for rounding keeps the pick the same).
+        let (lo, hi) = (
+            self.lo.add_scalar(self.reach),
+            self.hi.add_scalar(-self.reach),
+        );
+        let outside = Vec3::from_fn(|k, _| (lo[k] - p[k]).max(p[k] - hi[k]).max(0.0));
+        if outside.norm_squared() > beyond * beyond * (1.0 + 1e-9) {
+            return None;
         }
+        // Outside. Beyond the line of one edge (the opposite corner's
+        // weight negative), the segment from `p` to any point of the
+        // triangle crosses that edge: the closest point is on it. Beyond
+        // two, it is on both: their common corner.
+        let edge = |i: usize, j: usize| {
+            let e = t[j] - t[i];
+            let s = ((p - t[i]).dot(&e) / e.norm_squared()).clamp(0.0, 1.0);
+            let mut w = [0.0; 3];
+            w[i] = 1.0 - s;
+            w[j] = s;
+            ((p - (t[i] + e * s)).norm_squared(), w)
+        };
+        let corner = |i: usize| {
+            let mut w = [0.0; 3];
+            w[i] = 1.0;
+            ((p - t[i]).norm_squared(), w)
+        };
+        let best = match beta.map(|w| w < 0.0) {
+            [true, false, false] => edge(1, 2),
+            [false, true, false] => edge(2, 0),
+            [false, false, true] => edge(0, 1),
+            [false, true, true] => corner(0),
+            [true, false, true] => corner(1),
+            [true, true, false] => corner(2),
+            // Not a number: nothing is near.
+            _ => return None,
+        };
         Some(Closest {
-            distance: best.0,
+            distance: best.0.sqrt(),
             gap,
             beta: best.1,
             normal: self.normal,
         })
     }
+}
+
+/// A triangle's normal times twice its area: summed over a point's own
+/// triangles, its outward direction.
+fn area_normal([a, b, c]: [Vec3; 3]) -> Vec3 {
+    (b - a).cross(&(c - a))
 }
 
 /// The broad phase's grid: its entries bucketed by a hash of their grid
@@ -329,13 +369,25 @@ struct Candidates {
     half_skin: f64,
     /// The points that may touch (point indices, ascending).
     near: Vec<u32>,
-    /// Per near point, its range of `triangles`.
+    /// Per near point, its range of `slots`.
     offsets: Vec<u32>,
-    /// Candidate triangles, ascending per point.
-    triangles: Vec<u32>,
-    /// The triangles with a node among the near points (ascending): those
-    /// whose geometry a search builds.
+    /// Candidate triangles as indices into `needed`, ascending by triangle
+    /// per point.
+    slots: Vec<u32>,
+    /// The candidate triangles (ascending): those whose geometry a search
+    /// builds.
     needed: Vec<u32>,
+    /// Every triangle with a corner among the near points (ascending),
+    /// with the index in `near` of each corner (`u32::MAX` for a corner
+    /// that is no near point): the near points' outward normals.
+    own: Vec<(u32, [u32; 3])>,
+    /// The needed triangles' geometry at the last positions searched
+    /// (kept to reuse its memory), and whether each has any (an area).
+    geometry: Vec<Geometry>,
+    valid: Vec<bool>,
+    /// Per near point, the sum of its own triangles' area-weighted normals
+    /// at the last positions searched.
+    normals: Vec<Vec3>,
 }
 
 impl Candidates {
@@ -931,9 +983,10 @@ impl BodyContact {
                 continue;
             };
             // Every triangle of a near point is here: its normal is whole.
+            let normal = area_normal(corners);
             for &n in &tri.nodes {
                 if let Some(sum) = point_normals.get_mut(self.point_of_node[n as usize] as usize) {
-                    *sum += g.normal * g.area;
+                    *sum += normal;
                 }
             }
             let index = geometry.len() as u32;
@@ -1033,9 +1086,11 @@ impl BodyContact {
         let mut next = found.iter().map(|p| p.point as usize).peekable();
         let mut kept = Vec::new();
         for (i, anchor) in anchors.iter().enumerate().take(self.points.len()) {
+            if anchor.is_none() {
+                continue;
+            }
             while next.next_if(|&j| j < i).is_some() {}
-            if anchor.is_some()
-                && next.peek() != Some(&i)
+            if next.peek() != Some(&i)
                 && let Some(pair) = self.persisting(i, x[self.points[i] as usize], x, anchors)
             {
                 kept.push(pair);
@@ -1077,7 +1132,10 @@ impl BodyContact {
         {
             return None;
         }
-        let g = Geometry::new(t, tri.nodes.map(|n| x[n as usize]), 0.0)?;
+        let mut g = Geometry::default();
+        if !g.set(t, tri.nodes.map(|n| x[n as usize]), 0.0) {
+            return None;
+        }
         let p = x[self.points[i] as usize];
         let beyond = g.barycentric(p).into_iter().fold(f64::INFINITY, f64::min);
         if beyond.is_nan() || beyond < -TRIANGLE_PREFERENCE {
@@ -1102,7 +1160,10 @@ impl BodyContact {
     fn persisting(&self, i: usize, p: Vec3, x: &[Vec3], anchors: &[Option<Vec3>]) -> Option<Pair> {
         let (t, _, _) = Self::anchor_of(anchors, i)?;
         let tri = self.triangles.get(t as usize)?;
-        let g = Geometry::new(t, tri.nodes.map(|n| x[n as usize]), 0.0)?;
+        let mut g = Geometry::default();
+        if !g.set(t, tri.nodes.map(|n| x[n as usize]), 0.0) {
+            return None;
+        }
         let near = g.closest(p, f64::INFINITY)?;
         let limit = PERSIST_LIMIT * self.body_h[tri.body as usize];
         (near.gap < 0.0 && -near.gap < limit).then_some(Pair {
@@ -1117,20 +1178,17 @@ impl BodyContact {
     /// A key of the points' positions' bits (every node of a surface
     /// triangle is a point): any change of one coordinate changes it.
     fn positions_key(&self, x: &[Vec3]) -> u64 {
-        // Three independent chains (one per coordinate), not one: a step
-        // asks three or four times, and one chain of multiplications over
-        // every point's coordinates waited on each product in turn.
-        const PRIME: u64 = 0x0000_0100_0000_01b3;
-        let mut h = [0xcbf2_9ce4_8422_2325u64; 3];
-        for &n in &self.points {
-            let p = x[n as usize];
-            for (h, c) in h.iter_mut().zip(p.iter()) {
-                *h = (*h ^ c.to_bits()).wrapping_mul(PRIME);
-            }
-        }
+        // A wrapping sum of each coordinate's bits times an odd number of
+        // its own: one coordinate's change changes it, and the terms are
+        // independent (a step asks four times; a chain of multiplications
+        // waited on each product in turn).
         let mut key = x.len() as u64;
-        for part in h {
-            key = (key ^ part).wrapping_mul(PRIME);
+        for (k, &n) in self.points.iter().enumerate() {
+            let p = x[n as usize];
+            let m = (k as u64).wrapping_mul(0x9e37_79b9_7f4a_7c16) | 1;
+            let bits =
+                p.x.to_bits() ^ p.y.to_bits().rotate_left(21) ^ p.z.to_bits().rotate_left(42);
+            key = key.wrapping_add(bits.wrapping_mul(m));
         }
         key
     }
@@ -1200,11 +1258,25 @@ impl BodyContact {
         if (0..3).any(|k| p[k] < g.lo[k] || p[k] > g.hi[k]) {
             return;
         }
-        let t = g.triangle;
-        let tri = &self.triangles[t as usize];
-        if self.excluded(i, tri) {
+        if self.excluded(i, &self.triangles[g.triangle as usize]) {
             return;
         }
+        Self::weigh(best, p, g);
+    }
+
+    /// [`BodyContact::consider`] past the checks of the point's body and
+    /// exclusion (a candidate list has passed them when it was made).
+    fn consider_candidate(best: &mut Nearest, p: Vec3, g: &Geometry) {
+        if (0..3).any(|k| p[k] < g.lo[k] || p[k] > g.hi[k]) {
+            return;
+        }
+        Self::weigh(best, p, g);
+    }
+
+    /// Counts triangle `g`, which may touch `best`'s point at `p`, in
+    /// `best`.
+    fn weigh(best: &mut Nearest, p: Vec3, g: &Geometry) {
+        let t = g.triangle;
         let faces = best.outward == Vec3::zeros() || best.outward.dot(&g.normal) < -FACING_COSINE;
         let slot = if faces {
             &mut best.facing
@@ -1215,7 +1287,7 @@ impl BodyContact {
         let Some(near) = g.closest(p, beyond) else {
             return;
         };
-        if near.distance >= DEPTH_LIMIT * self.body_h[tri.body as usize] {
+        if near.distance >= g.reach {
             return;
         }
         // Nearer, or as near and less deep, or (an exact tie, where two
@@ -1231,7 +1303,7 @@ impl BodyContact {
             *slot = Some((
                 near.distance,
                 Pair {
-                    point: i as u32,
+                    point: best.point as u32,
                     triangle: t,
                     beta: near.beta,
                     normal: near.normal,
@@ -1270,7 +1342,10 @@ impl BodyContact {
                                     let g = &keys.geometry[e.geometry as usize];
                                     let inside = (0..3)
                                         .all(|k| p[k] >= g.lo[k] - skin && p[k] <= g.hi[k] + skin);
-                                    if e.key == key && inside {
+                                    if e.key == key
+                                        && inside
+                                        && !self.excluded(i, &self.triangles[g.triangle as usize])
+                                    {
                                         list.push(g.triangle);
                                     }
                                 }
@@ -1283,28 +1358,47 @@ impl BodyContact {
                 })
             })
             .collect();
+        // The needed triangles: the candidates and the near points' own.
+        let mut near_of_node = vec![u32::MAX; x.len()];
+        for (k, &i) in near.iter().enumerate() {
+            near_of_node[self.points[i as usize] as usize] = k as u32;
+        }
+        let mut slot_of = vec![u32::MAX; self.triangles.len()];
+        for list in &lists {
+            for &t in list {
+                slot_of[t as usize] = 0;
+            }
+        }
+        let mut needed = Vec::new();
+        let mut own = Vec::new();
+        for (t, tri) in self.triangles.iter().enumerate() {
+            if slot_of[t] == 0 {
+                slot_of[t] = needed.len() as u32;
+                needed.push(t as u32);
+            }
+            let corners = tri.nodes.map(|n| near_of_node[n as usize]);
+            if corners.iter().any(|&k| k != u32::MAX) {
+                own.push((t as u32, corners));
+            }
+        }
         let mut offsets = Vec::with_capacity(near.len() + 1);
         offsets.push(0u32);
-        let mut triangles = Vec::new();
+        let mut slots = Vec::new();
         for list in lists {
-            triangles.extend(list);
-            offsets.push(triangles.len() as u32);
+            slots.extend(list.into_iter().map(|t| slot_of[t as usize]));
+            offsets.push(slots.len() as u32);
         }
-        let needed = (0..self.triangles.len() as u32)
-            .filter(|&t| {
-                self.triangles[t as usize]
-                    .nodes
-                    .iter()
-                    .any(|&n| near_nodes[n as usize])
-            })
-            .collect();
         Candidates {
             reference: self.points.iter().map(|&n| x[n as usize]).collect(),
             half_skin: 0.5 * skin,
-            near,
             offsets,
-            triangles,
+            slots,
+            geometry: vec![Geometry::default(); needed.len()],
+            valid: vec![false; needed.len()],
+            normals: vec![Vec3::zeros(); near.len()],
+            near,
             needed,
+            own,
         }
     }
 
@@ -1319,31 +1413,36 @@ impl BodyContact {
         if !held.as_ref().is_some_and(|c| c.hold(x, &self.points)) {
             *held = Some(self.build_candidates(x));
         }
-        let c = held.as_ref().expect("made above");
-        // The needed triangles' geometry now, and the near points' normals
-        // (every triangle of a near point is needed), as the broad phase
-        // makes them.
-        let mut geometry_of = vec![u32::MAX; self.triangles.len()];
-        let mut geometry = Vec::with_capacity(c.needed.len());
-        let mut point_normals = vec![Vec3::zeros(); self.points.len()];
-        for &t in &c.needed {
+        let c = held.as_mut().expect("made above");
+        // The candidates' geometry now (in place: a search makes thousands
+        // and each is 200 bytes), and the near points' normals from all
+        // their own triangles, as the broad phase makes them.
+        for ((&t, g), valid) in c.needed.iter().zip(&mut c.geometry).zip(&mut c.valid) {
             let tri = &self.triangles[t as usize];
             let corners = tri.nodes.map(|n| x[n as usize]);
+            let grow = DEPTH_LIMIT * self.body_h[tri.body as usize];
+            *valid =
+                corners.iter().all(|p| p.iter().all(|v| v.is_finite())) && g.set(t, corners, grow);
+        }
+        c.normals.fill(Vec3::zeros());
+        for (t, corner_near) in &c.own {
+            let tri = &self.triangles[*t as usize];
+            let corners = tri.nodes.map(|n| x[n as usize]);
+            // As the broad phase: a triangle it leaves out counts nowhere.
             if !corners.iter().all(|p| p.iter().all(|v| v.is_finite())) {
                 continue;
             }
-            let grow = DEPTH_LIMIT * self.body_h[tri.body as usize];
-            let Some(g) = Geometry::new(t, corners, grow) else {
+            let normal = area_normal(corners);
+            if !(normal.norm() > 0.0 && normal.norm().is_finite()) {
                 continue;
-            };
-            for &n in &tri.nodes {
-                if let Some(sum) = point_normals.get_mut(self.point_of_node[n as usize] as usize) {
-                    *sum += g.normal * g.area;
+            }
+            for &k in corner_near {
+                if let Some(sum) = c.normals.get_mut(k as usize) {
+                    *sum += normal;
                 }
             }
-            geometry_of[t as usize] = geometry.len() as u32;
-            geometry.push(g);
         }
+        let c = &*c;
         let starts: Vec<usize> = (0..c.near.len()).step_by(POINT_CHUNK).collect();
         let per_chunk: Vec<Vec<Pair>> = starts
             .into_par_iter()
@@ -1355,13 +1454,11 @@ impl BodyContact {
                     if !p.iter().all(|v| v.is_finite()) {
                         continue;
                     }
-                    let mut best = Nearest::new(i, point_normals.get(i).copied());
-                    let list = &c.triangles[c.offsets[k] as usize..c.offsets[k + 1] as usize];
-                    for &t in list {
-                        let g = geometry_of[t as usize];
-                        if g != u32::MAX {
-                            let body = self.triangles[t as usize].body;
-                            self.consider(&mut best, p, body, &geometry[g as usize]);
+                    let mut best = Nearest::new(i, Some(c.normals[k]));
+                    let list = &c.slots[c.offsets[k] as usize..c.offsets[k + 1] as usize];
+                    for &slot in list {
+                        if c.valid[slot as usize] {
+                            Self::consider_candidate(&mut best, p, &c.geometry[slot as usize]);
                         }
                     }
                     // Inside only (a point just outside is a candidate,
@@ -1441,9 +1538,7 @@ impl BodyContact {
         for pair in self.pairs(&x, anchors).iter() {
             let touch = self.touch(pair, &x, &v, anchors);
             self.spread(pair, touch.force, f);
-            for (n, _) in self.pair_weights(pair) {
-                touched.push(n);
-            }
+            self.note_nodes(pair, touched);
         }
     }
 
@@ -1456,20 +1551,22 @@ impl BodyContact {
         }
     }
 
-    /// The nodes a pair's force moves and their weights: the point's with
-    /// `+`, its triangle's with minus their barycentric weights (a node of
-    /// several may come more than once).
-    fn pair_weights(&self, pair: &Pair) -> Vec<(u32, f64)> {
+    /// Notes in `touched` the nodes a pair's force moves: its point's and
+    /// its triangle's (a node of several may come more than once).
+    fn note_nodes(&self, pair: &Pair, touched: &mut Vec<u32>) {
         let tri = &self.triangles[pair.triangle as usize];
-        let mut out = self.nodes_of(self.points[pair.point as usize]);
-        for (k, &corner) in tri.nodes.iter().enumerate() {
-            out.extend(
-                self.nodes_of(corner)
-                    .into_iter()
-                    .map(|(n, w)| (n, -pair.beta[k] * w)),
-            );
+        let point = self.points[pair.point as usize];
+        match &self.carrier {
+            None => {
+                touched.push(point);
+                touched.extend_from_slice(&tri.nodes);
+            }
+            Some(c) => {
+                for v in std::iter::once(point).chain(tri.nodes) {
+                    touched.extend(c.bound(v).map(|(n, _)| n));
+                }
+            }
         }
-        out
     }
 
     /// Adds the contact's exact `d(force)/dx` to `jac` (see the module

@@ -93,7 +93,8 @@ fn value(a: DVec) -> Vec3 {
 
 /// The barycentric weights of the point's closest point on the triangle
 /// `t`, as `Geometry::closest` picks it: the projection where it falls
-/// inside, else the nearest point of the nearest edge (the first of equals).
+/// inside, else the nearest point of the edge it lies beyond (the corner
+/// of the two edges it lies beyond).
 fn closest_weights(p: DVec, t: [DVec; 3], normal: DVec, area2: D) -> [D; 3] {
     let (e1, e2) = (sub(t[1], t[0]), sub(t[2], t[0]));
     let w = sub(p, t[0]);
@@ -104,33 +105,37 @@ fn closest_weights(p: DVec, t: [DVec; 3], normal: DVec, area2: D) -> [D; 3] {
     if beta.iter().all(|b| b.v >= 0.0) {
         return beta;
     }
-    let mut best = (f64::INFINITY, [D::cst(0.0); 3]);
-    for (i, j) in [(0, 1), (1, 2), (2, 0)] {
+    let edge = |i: usize, j: usize| {
         let e = sub(t[j], t[i]);
-        let len2 = dot(e, e);
-        let s = if len2.v > 0.0 {
-            let s = dot(sub(p, t[i]), e) / len2;
-            // A clamped parameter is a constant: the closest point stays
-            // at the corner while the point moves a little.
-            if s.v < 0.0 {
-                D::cst(0.0)
-            } else if s.v > 1.0 {
-                D::cst(1.0)
-            } else {
-                s
-            }
-        } else {
+        let s = dot(sub(p, t[i]), e) / dot(e, e);
+        // A clamped parameter is a constant: the closest point stays at
+        // the corner while the point moves a little.
+        let s = if s.v < 0.0 {
             D::cst(0.0)
+        } else if s.v > 1.0 {
+            D::cst(1.0)
+        } else {
+            s
         };
-        let d = value(sub(p, add(t[i], times(e, s)))).norm();
-        if d < best.0 {
-            let mut weights = [D::cst(0.0); 3];
-            weights[i] = D::cst(1.0) - s;
-            weights[j] = s;
-            best = (d, weights);
-        }
+        let mut weights = [D::cst(0.0); 3];
+        weights[i] = D::cst(1.0) - s;
+        weights[j] = s;
+        weights
+    };
+    let corner = |i: usize| {
+        let mut weights = [D::cst(0.0); 3];
+        weights[i] = D::cst(1.0);
+        weights
+    };
+    match beta.map(|b| b.v < 0.0) {
+        [true, false, false] => edge(1, 2),
+        [false, true, false] => edge(2, 0),
+        [false, false, true] => edge(0, 1),
+        [false, true, true] => corner(0),
+        [true, false, true] => corner(1),
+        [true, true, false] => corner(2),
+        _ => [D::cst(f64::NAN); 3],
     }
-    best.1
 }
 
 /// The forces of the touch `input` describes and their exact derivatives,
