@@ -56,7 +56,7 @@ mod bodies;
 mod pair_tangent;
 pub use bodies::{
     BodyContact, BodyContactError, DEFAULT_BODY_FREQUENCY_FRACTION, DEPTH_LIMIT, PERSIST_LIMIT,
-    SELF_EXCLUSION, TRIANGLE_PREFERENCE,
+    SELF_EXCLUSION, StepPairs, TRIANGLE_PREFERENCE,
 };
 
 /// The `velocity` and `offset` of an obstacle that follows its `path`.
@@ -887,14 +887,27 @@ impl Contact {
         f: &mut [Vec3],
         touched: &mut Vec<u32>,
     ) {
+        self.add_surface_point_forces(t, x, v, anchors, f, touched);
+        if let Some(b) = &self.bodies {
+            b.add_forces_noting(x, v, self.body_anchors(anchors), f, touched);
+        }
+    }
+
+    /// The surface vertices' part of [`Contact::add_explicit_forces`].
+    fn add_surface_point_forces(
+        &self,
+        t: f64,
+        x: &[Vec3],
+        v: &[Vec3],
+        anchors: &[Option<Vec3>],
+        f: &mut [Vec3],
+        touched: &mut Vec<u32>,
+    ) {
         for &i in &self.surface_points {
             if self.add_point_forces(i as usize, t, x, v, anchors, f) {
                 let point = &self.points[i as usize];
                 touched.extend_from_slice(&point.nodes[..point.len]);
             }
-        }
-        if let Some(b) = &self.bodies {
-            b.add_forces_noting(x, v, self.body_anchors(anchors), f, touched);
         }
     }
 
@@ -947,9 +960,20 @@ impl Contact {
         dt: f64,
         anchors: &mut Vec<Option<Vec3>>,
     ) {
-        if anchors.len() != self.num_anchors() {
-            *anchors = vec![None; self.num_anchors()];
-        }
+        self.anchor_explicit_and_add_forces(t1, x, v, dt, anchors, None);
+    }
+
+    /// The surface vertices' part of
+    /// [`Contact::anchor_explicit_at_step_start`] (`anchors` of the right
+    /// length).
+    fn anchor_surface_points_at_step_start(
+        &self,
+        t1: f64,
+        x: &[Vec3],
+        v: &[Vec3],
+        dt: f64,
+        anchors: &mut [Option<Vec3>],
+    ) {
         let nobs = self.obstacles.len();
         let t0 = t1 - dt;
         for &i in &self.surface_points {
@@ -963,10 +987,52 @@ impl Contact {
                 }
             }
         }
-        if let Some(b) = &self.bodies {
-            let start = self.num_obstacle_anchors();
-            b.anchor_at_step_start(x, v, dt, &mut anchors[start..]);
+    }
+
+    /// [`Contact::anchor_explicit_at_step_start`], then (with `forces`)
+    /// [`Contact::add_explicit_forces`] at the same time and positions,
+    /// with one search of the body contact's pairs for both; returns those
+    /// pairs for [`Contact::update_body_anchors_with`] after the step.
+    pub fn anchor_explicit_and_add_forces(
+        &self,
+        t1: f64,
+        x: &[Vec3],
+        v: &[Vec3],
+        dt: f64,
+        anchors: &mut Vec<Option<Vec3>>,
+        forces: Option<(&mut [Vec3], &mut Vec<u32>)>,
+    ) -> Option<StepPairs> {
+        if anchors.len() != self.num_anchors() {
+            *anchors = vec![None; self.num_anchors()];
         }
+        self.anchor_surface_points_at_step_start(t1, x, v, dt, anchors);
+        let forces = forces.map(|(f, touched)| {
+            self.add_surface_point_forces(t1, x, v, anchors, f, touched);
+            (f, touched)
+        });
+        let b = self.bodies.as_ref()?;
+        let start = self.num_obstacle_anchors();
+        Some(b.anchor_at_step_start_and_add_forces(x, v, dt, &mut anchors[start..], forces))
+    }
+
+    /// [`Contact::update_body_anchors`] with the pairs
+    /// [`Contact::anchor_explicit_and_add_forces`] found at the same
+    /// positions and anchors (searched again at others).
+    pub fn update_body_anchors_with(
+        &self,
+        found: StepPairs,
+        x: &[Vec3],
+        v: &[Vec3],
+        anchors: &mut Vec<Option<Vec3>>,
+    ) {
+        let Some(b) = &self.bodies else {
+            return;
+        };
+        if anchors.len() != self.num_anchors() {
+            *anchors = vec![None; self.num_anchors()];
+        }
+        let start = self.num_obstacle_anchors();
+        b.update_anchors_with(found, x, v, &mut anchors[start..]);
     }
 
     /// Anchors for an implicit step from positions `x0` at time `t0`: the

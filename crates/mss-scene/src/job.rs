@@ -728,7 +728,8 @@ impl Job {
     ) -> Result<u64, JobError> {
         let opts = self.input.static_options();
         progress(Progress::Solving);
-        let r = solve_static_cancellable(&self.problem, state, &opts, &cancel.0);
+        let r = solve_static_cancellable(&self.problem, state, &opts, &cancel.0)
+            .map_err(|e| self.name_the_body(e));
         progress(Progress::StageDone);
         let info = r.map_err(|source| JobError::Solver {
             scene: self.input.name(),
@@ -754,6 +755,31 @@ impl Job {
             info.relative_residual
         );
         Ok(u64::from(info.newton_iterations))
+    }
+
+    /// `e` with the body a mechanism frees named as the scene names it
+    /// (the core counts bodies from 1).
+    fn name_the_body(&self, e: mss_core::SolverError) -> mss_core::SolverError {
+        match e {
+            mss_core::SolverError::Mechanism { message, nodes } => {
+                let model = self.problem.model();
+                let named = nodes
+                    .first()
+                    .map(|&n| model.body_of_node(n as usize))
+                    .and_then(|b| Some((b, self.bodies.get(b)?)))
+                    .map_or(message.clone(), |(b, body)| {
+                        message.replace(
+                            &format!("body {} (counted from 1)", b + 1),
+                            &format!("body \"{}\"", body.name),
+                        )
+                    });
+                mss_core::SolverError::Mechanism {
+                    message: named,
+                    nodes,
+                }
+            }
+            other => other,
+        }
     }
 
     /// Brings `state` to rest under the loads at its time (`[solver] start

@@ -453,6 +453,17 @@ struct Pair {
     depth: f64,
 }
 
+/// The pairs an explicit step's end found
+/// ([`BodyContact::anchor_at_step_start_and_add_forces`]), kept for the
+/// anchors' update after the step ([`BodyContact::update_anchors_with`]):
+/// one search and one pass over the anchors fewer per step.
+#[derive(Debug, Clone)]
+pub struct StepPairs {
+    /// The positions' key they were found at.
+    key: u64,
+    pairs: std::sync::Arc<Vec<Pair>>,
+}
+
 /// One touch's force and what friction did.
 struct Touch {
     /// Force on the point (N); its reaction goes to the triangle.
@@ -1267,9 +1278,6 @@ impl BodyContact {
     /// [`BodyContact::consider`] past the checks of the point's body and
     /// exclusion (a candidate list has passed them when it was made).
     fn consider_candidate(best: &mut Nearest, p: Vec3, g: &Geometry) {
-        if (0..3).any(|k| p[k] < g.lo[k] || p[k] > g.hi[k]) {
-            return;
-        }
         Self::weigh(best, p, g);
     }
 
@@ -1342,9 +1350,15 @@ impl BodyContact {
                                     let g = &keys.geometry[e.geometry as usize];
                                     let inside = (0..3)
                                         .all(|k| p[k] >= g.lo[k] - skin && p[k] <= g.hi[k] + skin);
+                                    // Within reach plus the skin: a point and the
+                                    // corners each move less than half the skin
+                                    // while the lists hold, so a triangle farther
+                                    // now stays beyond reach.
                                     if e.key == key
                                         && inside
                                         && !self.excluded(i, &self.triangles[g.triangle as usize])
+                                        && g.closest(p, f64::INFINITY)
+                                            .is_some_and(|c| c.distance < g.reach + skin)
                                     {
                                         list.push(g.triangle);
                                     }
@@ -1535,8 +1549,22 @@ impl BodyContact {
         touched: &mut Vec<u32>,
     ) {
         let (x, v) = (self.carried(x), self.carried(v));
-        for pair in self.pairs(&x, anchors).iter() {
-            let touch = self.touch(pair, &x, &v, anchors);
+        let pairs = self.pairs(&x, anchors);
+        self.add_pair_forces(&pairs, &x, &v, anchors, f, touched);
+    }
+
+    /// The forces of `pairs` into `f`, their nodes noted in `touched`.
+    fn add_pair_forces(
+        &self,
+        pairs: &[Pair],
+        x: &[Vec3],
+        v: &[Vec3],
+        anchors: &[Option<Vec3>],
+        f: &mut [Vec3],
+        touched: &mut Vec<u32>,
+    ) {
+        for pair in pairs {
+            let touch = self.touch(pair, x, v, anchors);
             self.spread(pair, touch.force, f);
             self.note_nodes(pair, touched);
         }
@@ -1710,13 +1738,50 @@ impl BodyContact {
         dt: f64,
         anchors: &mut [Option<Vec3>],
     ) {
-        if anchors.len() != self.points.len() {
-            return;
+        self.anchor_at_step_start_and_add_forces(x, v, dt, anchors, None);
+    }
+
+    /// [`BodyContact::anchor_at_step_start`], then
+    /// [`BodyContact::add_forces_noting`] at the same positions with the
+    /// anchors so set, from one search of the pairs (anchoring a new
+    /// contact on the triangle it touches changes no pair); returns those
+    /// pairs for [`BodyContact::update_anchors_with`] after the step.
+    /// `anchors` holds one entry per point ([`BodyContact::num_points`]);
+    /// of another length nothing is anchored.
+    pub fn anchor_at_step_start_and_add_forces(
+        &self,
+        x: &[Vec3],
+        v: &[Vec3],
+        dt: f64,
+        anchors: &mut [Option<Vec3>],
+        forces: Option<(&mut [Vec3], &mut Vec<u32>)>,
+    ) -> StepPairs {
+        let (xc, vc) = (self.carried(x), self.carried(v));
+        let pairs = self.pairs(&xc, anchors);
+        if anchors.len() == self.points.len() {
+            self.anchor_pairs_at_step_start(&pairs, &xc, &vc, dt, anchors);
         }
-        let (x, v) = (self.carried(x), self.carried(v));
-        let (x, v) = (&x[..], &v[..]);
+        if let Some((f, touched)) = forces {
+            self.add_pair_forces(&pairs, &xc, &vc, anchors, f, touched);
+        }
+        StepPairs {
+            key: self.positions_key(&xc),
+            pairs,
+        }
+    }
+
+    /// Anchors each of `pairs` without an anchor where its point and
+    /// triangle were at the step's start (`x - dt v`).
+    fn anchor_pairs_at_step_start(
+        &self,
+        pairs: &[Pair],
+        x: &[Vec3],
+        v: &[Vec3],
+        dt: f64,
+        anchors: &mut [Option<Vec3>],
+    ) {
         let start = |n: u32| x[n as usize] - v[n as usize] * dt;
-        for pair in self.pairs(x, anchors).iter() {
+        for pair in pairs {
             let i = pair.point as usize;
             if anchors[i].is_some() {
                 continue;
@@ -1744,8 +1809,37 @@ impl BodyContact {
             }
         }
         let (x, v) = (self.carried(x), self.carried(v));
-        let (x, v) = (&x[..], &v[..]);
-        let pairs = self.pairs(x, anchors);
+        let pairs = self.pairs(&x, anchors);
+        self.update_anchors_of_pairs(&pairs, &x, &v, anchors);
+    }
+
+    /// [`BodyContact::update_anchors`] with the pairs an explicit step's
+    /// end found ([`BodyContact::anchor_at_step_start_and_add_forces`]):
+    /// at the same positions and anchors, they are the pairs (searched
+    /// again when the positions differ).
+    pub fn update_anchors_with(
+        &self,
+        found: StepPairs,
+        x: &[Vec3],
+        v: &[Vec3],
+        anchors: &mut [Option<Vec3>],
+    ) {
+        let (xc, vc) = (self.carried(x), self.carried(v));
+        if anchors.len() != self.points.len() || found.key != self.positions_key(&xc) {
+            self.update_anchors(x, v, anchors);
+            return;
+        }
+        self.update_anchors_of_pairs(&found.pairs, &xc, &vc, anchors);
+    }
+
+    /// [`BodyContact::update_anchors`] with the pairs at `x` found.
+    fn update_anchors_of_pairs(
+        &self,
+        pairs: &[Pair],
+        x: &[Vec3],
+        v: &[Vec3],
+        anchors: &mut [Option<Vec3>],
+    ) {
         // The points that touch no more (pairs are in point order).
         let mut next_pair = pairs.iter().map(|p| p.point as usize).peekable();
         for (i, a) in anchors.iter_mut().enumerate() {

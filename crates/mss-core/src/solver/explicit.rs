@@ -268,6 +268,9 @@ pub struct Explicit {
     /// of [`Integrator::step`]: obstacles may have been moved by hand, or
     /// the state changed).
     contact_fresh: bool,
+    /// The body contact's pairs at a sub-step's end, for its anchors'
+    /// update (one search fewer).
+    step_pairs: Option<crate::contact::StepPairs>,
     cache_key: u64,
     cache_time: f64,
     cache_valid: bool,
@@ -380,6 +383,7 @@ impl Explicit {
             mark: vec![0; problem.contact().map_or(0, Contact::num_points)],
             stamp: 0,
             contact_fresh: true,
+            step_pairs: None,
             cache_key: 0,
             cache_time: f64::NAN,
             cache_valid: false,
@@ -922,11 +926,15 @@ impl Explicit {
             }
         }
         if contact.has_explicit_part() {
-            contact.anchor_explicit_at_step_start(t1, &state.x, &state.v, dt, &mut state.contact);
-            if verlet {
-                let (f, touched) = (&mut self.f_contact, &mut self.contact_touched);
-                contact.add_explicit_forces(t1, &state.x, &state.v, &state.contact, f, touched);
-            }
+            let forces = verlet.then_some((&mut self.f_contact[..], &mut self.contact_touched));
+            self.step_pairs = contact.anchor_explicit_and_add_forces(
+                t1,
+                &state.x,
+                &state.v,
+                dt,
+                &mut state.contact,
+                forces,
+            );
         }
         ok
     }
@@ -939,7 +947,10 @@ impl Explicit {
         let (t, x, v) = (state.time, &state.x, &state.v);
         contact.update_anchors_of(&self.candidates, t, x, v, &mut state.contact);
         contact.update_anchors_of(contact.surface_points(), t, x, v, &mut state.contact);
-        contact.update_body_anchors(x, v, &mut state.contact);
+        match self.step_pairs.take() {
+            Some(found) => contact.update_body_anchors_with(found, x, v, &mut state.contact),
+            None => contact.update_body_anchors(x, v, &mut state.contact),
+        }
     }
 
     /// The divergence checks of a sub-step; when they pass, the stiffness

@@ -40,9 +40,9 @@ fn mechanism_message(problem: &Problem, nodes: &[u32]) -> String {
     match free_body {
         Some(b) => format!(
             "body {} (counted from 1) has no fixed node and only contact holds it, but at rest it \
-             touches nothing firmly enough to stop its rigid motions: a static solve cannot \
-             settle it onto the others; run the scene in time (kind = \"explicit\" or \
-             \"implicit\") with damping until it rests, start it touching, or fix a region of it",
+             touches nothing firmly enough to stop its rigid motions: Newton cannot start \
+             from there; settle it first (solver::settle, which lets it fall and rest on the \
+             others), start it touching, or fix a region of it",
             b + 1
         ),
         None => MECHANISM_MESSAGE.into(),
@@ -401,7 +401,7 @@ fn solve_static_here(
             // Penalty contact holds a body only once it touches, and a
             // static solve starts from rest, where it may not: there is no
             // unique equilibrium to start from.
-            "no node is fixed and only obstacles hold the body: a static solve cannot settle a free body onto them (at rest it touches them nowhere, or not firmly enough to stop its rigid motions); run it in time (kind = \"explicit\" or \"implicit\") with damping until it rests, or fix a region".to_string()
+            "no node is fixed and only obstacles hold the body: a static solve cannot settle a free body onto them (at rest it touches them nowhere, or not firmly enough to stop its rigid motions); settle it first (solver::settle, which lets it fall and rest on them), or fix a region".to_string()
         } else if held == 0 {
             "no node is fixed: the static problem has no unique solution (the body can translate and rotate freely under its loads); fix a region, e.g. a face or the lowest layer of nodes".to_string()
         } else {

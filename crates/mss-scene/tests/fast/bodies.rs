@@ -150,6 +150,28 @@ fn a_static_settle_holds_bodies_only_contact_holds() {
     );
 }
 
+/// A static solve that fails because one body floats free (the block is
+/// held, the ball above it touches nothing) names that body as the scene
+/// does.
+#[test]
+fn a_static_solve_names_the_body_that_floats_free() {
+    let text = SQUEEZE
+        .replace("cells = 12", "cells = 6")
+        .replace("duration = 1.2", "duration = 0.1")
+        .replace("kind = \"explicit\"", "kind = \"static\"")
+        .replace(
+            "translate = [0.0, 0.0, 0.03]\n",
+            "translate = [0.0, 0.0, 0.03]\n[[bodies.fixed]]\nkind = \"lowest_layer\"\n",
+        );
+    let out = tempfile::tempdir().unwrap();
+    let e = job(&text)
+        .run(out.path(), &no_progress, &mss_scene::Cancel::new())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("body \"ball\" has no fixed node"), "{e}");
+    assert!(e.contains("start = \"settled\""), "{e}");
+}
+
 #[test]
 fn a_squeezed_ball_and_the_block_push_each_other_equally_and_the_outputs_hold_both() {
     // The bundled squeeze until the plate presses hardest, frames every 0.1 s.
