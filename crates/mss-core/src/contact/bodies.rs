@@ -253,10 +253,14 @@ impl Geometry {
         if outside.norm_squared() > beyond * beyond * (1.0 + 1e-9) {
             return None;
         }
-        // Outside. Beyond the line of one edge (the opposite corner's
-        // weight negative), the segment from `p` to any point of the
-        // triangle crosses that edge: the closest point is on it. Beyond
-        // two, it is on both: their common corner.
+        // Outside. Beyond the line of one edge only (the opposite
+        // corner's weight negative), `p` lies in the cone from that corner
+        // through the edge, so the segment from it to that corner crosses
+        // the edge: the closest point is on it. Beyond two, it is on one of
+        // their edges (on the inner side of the third line, `p` is nearest
+        // to no point inside the third edge); at a corner of 90 degrees or
+        // less, their common corner, but past an obtuse corner, inside
+        // either edge.
         let edge = |i: usize, j: usize| {
             let e = t[j] - t[i];
             let s = ((p - t[i]).dot(&e) / e.norm_squared()).clamp(0.0, 1.0);
@@ -265,18 +269,16 @@ impl Geometry {
             w[j] = s;
             ((p - (t[i] + e * s)).norm_squared(), w)
         };
-        let corner = |i: usize| {
-            let mut w = [0.0; 3];
-            w[i] = 1.0;
-            ((p - t[i]).norm_squared(), w)
-        };
+        // The nearer of two edges, the first of equals (in the order
+        // (0, 1), (1, 2), (2, 0), as the tangent takes them).
+        let nearer = |a: (f64, [f64; 3]), b: (f64, [f64; 3])| if b.0 < a.0 { b } else { a };
         let best = match beta.map(|w| w < 0.0) {
             [true, false, false] => edge(1, 2),
             [false, true, false] => edge(2, 0),
             [false, false, true] => edge(0, 1),
-            [false, true, true] => corner(0),
-            [true, false, true] => corner(1),
-            [true, true, false] => corner(2),
+            [false, true, true] => nearer(edge(0, 1), edge(2, 0)),
+            [true, false, true] => nearer(edge(0, 1), edge(1, 2)),
+            [true, true, false] => nearer(edge(1, 2), edge(2, 0)),
             // Not a number: nothing is near.
             _ => return None,
         };
@@ -1993,6 +1995,55 @@ mod tests {
                     && p.beta == q.beta
                     && p.normal == q.normal
             })
+    }
+
+    /// `Geometry::closest` picks the edge by the weights' signs: its
+    /// distance and closest point are those of the nearest of all three
+    /// edges (or the projection inside), for triangles acute and obtuse
+    /// and points all around them (past an obtuse corner, an edge's inside
+    /// is nearer than the corner).
+    #[test]
+    fn the_closest_point_is_the_nearest_of_the_triangle() {
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut next = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let mut obtuse_inside_an_edge = 0;
+        for _ in 0..2000 {
+            let corners = [(); 3].map(|_| Vec3::new(next(), next(), 0.2 * next()));
+            let Some(g) = Geometry::new(0, corners, 0.0) else {
+                continue;
+            };
+            let p = Vec3::new(2.0 * next(), 2.0 * next(), next());
+            let near = g.closest(p, f64::INFINITY).unwrap();
+            let q: Vec3 = (0..3).map(|k| corners[k] * near.beta[k]).sum();
+            // The brute force: the projection if inside, else every edge.
+            let beta = g.barycentric(p);
+            let expected = if beta.iter().all(|&w| w >= 0.0) {
+                near.gap.abs()
+            } else {
+                (0..3)
+                    .map(|i| {
+                        let (a, b) = (corners[i], corners[(i + 1) % 3]);
+                        let s = ((p - a).dot(&(b - a)) / (b - a).norm_squared()).clamp(0.0, 1.0);
+                        (p - (a + (b - a) * s)).norm()
+                    })
+                    .fold(f64::INFINITY, f64::min)
+            };
+            assert!(
+                (near.distance - expected).abs() <= 1e-12,
+                "{} vs {expected}",
+                near.distance
+            );
+            assert!(((p - q).norm() - expected).abs() <= 1e-12);
+            let negative = beta.iter().filter(|&&w| w < 0.0).count();
+            let on_corner = near.beta.contains(&1.0);
+            obtuse_inside_an_edge += usize::from(negative == 2 && !on_corner);
+        }
+        assert!(obtuse_inside_an_edge > 10, "{obtuse_inside_an_edge}");
     }
 
     /// The candidate lists find exactly the pairs the grid search finds, as

@@ -93,8 +93,8 @@ fn value(a: DVec) -> Vec3 {
 
 /// The barycentric weights of the point's closest point on the triangle
 /// `t`, as `Geometry::closest` picks it: the projection where it falls
-/// inside, else the nearest point of the edge it lies beyond (the corner
-/// of the two edges it lies beyond).
+/// inside, else the nearest point of the edge it lies beyond (of the
+/// nearer of two it lies beyond).
 fn closest_weights(p: DVec, t: [DVec; 3], normal: DVec, area2: D) -> [D; 3] {
     let (e1, e2) = (sub(t[1], t[0]), sub(t[2], t[0]));
     let w = sub(p, t[0]);
@@ -120,22 +120,20 @@ fn closest_weights(p: DVec, t: [DVec; 3], normal: DVec, area2: D) -> [D; 3] {
         let mut weights = [D::cst(0.0); 3];
         weights[i] = D::cst(1.0) - s;
         weights[j] = s;
-        weights
+        let distance2 = value(sub(p, add(t[i], times(e, s)))).norm_squared();
+        (distance2, weights)
     };
-    let corner = |i: usize| {
-        let mut weights = [D::cst(0.0); 3];
-        weights[i] = D::cst(1.0);
-        weights
-    };
-    match beta.map(|b| b.v < 0.0) {
+    let nearer = |a: (f64, [D; 3]), b: (f64, [D; 3])| if b.0 < a.0 { b } else { a };
+    let (_, weights) = match beta.map(|b| b.v < 0.0) {
         [true, false, false] => edge(1, 2),
         [false, true, false] => edge(2, 0),
         [false, false, true] => edge(0, 1),
-        [false, true, true] => corner(0),
-        [true, false, true] => corner(1),
-        [true, true, false] => corner(2),
-        _ => [D::cst(f64::NAN); 3],
-    }
+        [false, true, true] => nearer(edge(0, 1), edge(2, 0)),
+        [true, false, true] => nearer(edge(0, 1), edge(1, 2)),
+        [true, true, false] => nearer(edge(1, 2), edge(2, 0)),
+        _ => (f64::NAN, [D::cst(f64::NAN); 3]),
+    };
+    weights
 }
 
 /// The forces of the touch `input` describes and their exact derivatives,
