@@ -1277,14 +1277,10 @@ impl BodyContact {
         Self::weigh(best, p, g);
     }
 
-    /// [`BodyContact::consider`] past the checks of the point's body and
-    /// exclusion (a candidate list has passed them when it was made).
-    fn consider_candidate(best: &mut Nearest, p: Vec3, g: &Geometry) {
-        Self::weigh(best, p, g);
-    }
-
     /// Counts triangle `g`, which may touch `best`'s point at `p`, in
-    /// `best`.
+    /// `best`: [`BodyContact::consider`] past its checks, which a
+    /// candidate list passed when it was made (its box check is implied by
+    /// the distance within reach).
     fn weigh(best: &mut Nearest, p: Vec3, g: &Geometry) {
         let t = g.triangle;
         let faces = best.outward == Vec3::zeros() || best.outward.dot(&g.normal) < -FACING_COSINE;
@@ -1474,7 +1470,7 @@ impl BodyContact {
                     let list = &c.slots[c.offsets[k] as usize..c.offsets[k + 1] as usize];
                     for &slot in list {
                         if c.valid[slot as usize] {
-                            Self::consider_candidate(&mut best, p, &c.geometry[slot as usize]);
+                            Self::weigh(&mut best, p, &c.geometry[slot as usize]);
                         }
                     }
                     // Inside only (a point just outside is a candidate,
