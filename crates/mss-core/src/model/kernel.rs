@@ -520,7 +520,7 @@ fn finish_cell<T: Scalar>(
     if let (true, Some((axes, inv_len))) = (p.k_hourglass != 0.0, &axes) {
         twist = Some(add_hourglass_forces(
             p.k_hourglass,
-            x,
+            hourglass_sums(x),
             axes,
             inv_len,
             &mut side,
@@ -804,28 +804,32 @@ fn inverses4<T: Scalar>(l: [T; 4]) -> [T; 4] {
     [l[1] * r01, l[0] * r01, l[3] * r23, l[2] * r23]
 }
 
-/// The hourglass vectors `g_i = 1/8 sum_n s_j s_k(n) x_n` and amplitudes
-/// `q_i = a_i . g_i` of the cell along its current axes `a_i`. `g_i` vanishes
-/// for every affine motion and rotates with the cell, so `q_i` is zero for any
-/// homogeneous strain (tension results stay exact) and invariant under rigid
-/// motions.
-///
-/// `g_i` is summed from the four edges along `j` (each the difference of two
-/// corners of equal `s_k`, signed by it): half the operations of summing the
-/// corners, and the same edge vectors as the springs'.
+/// `8 g_i = sum_n s_j s_k(n) x_n`, the hourglass vectors' sums, from the
+/// four edges along `j` (each the difference of two corners of equal `s_k`,
+/// signed by it): half the operations of summing the corners, and in the
+/// force kernel the springs' edge vectors.
 #[inline(always)]
-fn hourglass_amplitudes<T: Scalar>(x: &[V3<T>; 8], axes: &[V3<T>; 3]) -> ([V3<T>; 3], [T; 3]) {
+fn hourglass_sums<T: Scalar>(x: &[V3<T>; 8]) -> [V3<T>; 3] {
     let edge = |e: usize| {
         let (a, b, _) = CELL_EDGES[e];
         sub(x[b], x[a])
     };
     // Edges 4-7 run along y at z = 0, 0, 1, 1; 8-11 along z at x = 0, 1, 1,
     // 0; 0-3 along x at y = 0, 1, 0, 1.
-    let sums = [
+    [
         sub(add(edge(6), edge(7)), add(edge(4), edge(5))),
         sub(add(edge(9), edge(10)), add(edge(8), edge(11))),
         sub(add(edge(1), edge(3)), add(edge(0), edge(2))),
-    ];
+    ]
+}
+
+/// The hourglass vectors `g_i = 1/8 sum_n s_j s_k(n) x_n` and amplitudes
+/// `q_i = a_i . g_i` of the cell along its current axes `a_i`, given
+/// `8 g_i` ([`hourglass_sums`]). `g_i` vanishes for every affine motion and
+/// rotates with the cell, so `q_i` is zero for any homogeneous strain
+/// (tension results stay exact) and invariant under rigid motions.
+#[inline(always)]
+fn hourglass_amplitudes<T: Scalar>(sums: [V3<T>; 3], axes: &[V3<T>; 3]) -> ([V3<T>; 3], [T; 3]) {
     let mut g = [[T::cst(0.0); 3]; 3];
     let mut q = [T::cst(0.0); 3];
     for i in 0..3 {
@@ -844,12 +848,12 @@ fn hourglass_amplitudes<T: Scalar>(x: &[V3<T>; 8], axes: &[V3<T>; 3]) -> ([V3<T>
 #[inline(always)]
 fn add_hourglass_forces<T: Scalar>(
     k: f64,
-    x: &[V3<T>; 8],
+    sums: [V3<T>; 3],
     axes: &[V3<T>; 3],
     inv_len: &[T; 3],
     side: &mut [V3<T>; 3],
 ) -> [V3<T>; 3] {
-    let (g, q) = hourglass_amplitudes(x, axes);
+    let (g, q) = hourglass_amplitudes(sums, axes);
     let mut twist = [[T::cst(0.0); 3]; 3];
     for i in 0..3 {
         let kq = q[i].scale(-k);
@@ -903,6 +907,11 @@ pub(crate) fn cell_forces_with_edges<T: Scalar>(
     edge_stretch: &[T; 12],
     f: &mut [V3<T>; 8],
 ) {
+    // The corner barrier is asked first: it acts on few cells, and its
+    // forces, when it does, recompute what they need from `x`. Asked at the
+    // end, its edge vectors kept the corners and the springs' edge vectors
+    // live through the whole kernel (register spills).
+    let barrier = p.corner_barrier != 0.0 && corner_barrier_acts(p, x);
     *f = [[T::cst(0.0); 3]; 8];
     let mut axis_sum = [[T::cst(0.0); 3]; 3];
     // Written out edge by edge rather than as a loop over `CELL_EDGES`: the
@@ -941,7 +950,7 @@ pub(crate) fn cell_forces_with_edges<T: Scalar>(
         spring(p.k_diag, w, d, a, b, f);
     }
     finish_cell(p, x, axis_sum, f);
-    if p.corner_barrier != 0.0 {
+    if barrier {
         add_corner_barrier_forces(p, x, f);
     }
 }
@@ -1011,17 +1020,24 @@ pub(crate) fn corner_jacobians<T: Scalar>(x: &[V3<T>; 8], inv_h3: f64) -> ([V3<T
     (edges, jac)
 }
 
+/// Whether any corner of the cells (any lane) is below the corner barrier's
+/// start: elsewhere its forces are exactly zero.
+#[inline(always)]
+fn corner_barrier_acts<T: Scalar>(p: &CellParams, x: &[V3<T>; 8]) -> bool {
+    let inv_h3 = 1.0 / (p.rest_edge * p.rest_edge * p.rest_edge);
+    let (_, jac) = corner_jacobians(x, inv_h3);
+    jac.iter().any(|j| j.any_below(CORNER_BARRIER_START))
+}
+
 /// Adds the forces of the corner barrier `kappa sum_n psi(J_n)`: the
 /// one-point volumetric term sees only the centre, where a cell can keep a
-/// healthy volume while a corner folds through (docs/robustness.md). Skipped,
-/// exactly, for groups of cells where no corner is below the barrier's start.
+/// healthy volume while a corner folds through (docs/robustness.md). Called
+/// only for groups of cells where a corner is below the barrier's start
+/// ([`corner_barrier_acts`]): elsewhere it adds exact zeros.
 #[inline(always)]
 fn add_corner_barrier_forces<T: Scalar>(p: &CellParams, x: &[V3<T>; 8], f: &mut [V3<T>; 8]) {
     let inv_h3 = 1.0 / (p.rest_edge * p.rest_edge * p.rest_edge);
     let (edges, jac) = corner_jacobians(x, inv_h3);
-    if !jac.iter().any(|j| j.any_below(CORNER_BARRIER_START)) {
-        return;
-    }
     for (j, ids) in jac.iter().zip(&CORNER_EDGE_IDS) {
         let coef = corner_barrier_slope(*j).scale(-p.corner_barrier * inv_h3);
         let [ex, ey, ez] = ids.map(|i| edges[i]);
@@ -1098,7 +1114,7 @@ pub(crate) fn cell_energy(p: &CellParams, x: &[V3<f64>; 8]) -> f64 {
     }
     if p.k_hourglass != 0.0 {
         let (axes, _) = cell_axes(&axis_sums(x));
-        let (_, q) = hourglass_amplitudes(x, &axes);
+        let (_, q) = hourglass_amplitudes(hourglass_sums(x), &axes);
         e += 0.5 * p.k_hourglass * dot(q, q);
     }
     if p.corner_barrier != 0.0 {
@@ -1249,7 +1265,7 @@ pub(crate) fn cell_jacobian_closed_form(p: &CellParams, x: &[V3<f64>; 8]) -> [[f
         }
     }
     if let (true, Some((axes, inv_len, turn))) = (p.k_hourglass != 0.0, &axes) {
-        let (g, q) = hourglass_amplitudes(x, axes);
+        let (g, q) = hourglass_amplitudes(hourglass_sums(x), axes);
         for i in 0..3 {
             let u = axes[i];
             let il = inv_len[i];
@@ -3183,7 +3199,7 @@ mod tests {
         let axes = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
         for _ in 0..200 {
             let x: [V3<f64>; 8] = std::array::from_fn(|_| [0; 3].map(|_: i32| noise(&mut seed)));
-            let (g, _) = hourglass_amplitudes(&x, &axes);
+            let (g, _) = hourglass_amplitudes(hourglass_sums(&x), &axes);
             for (i, gi) in g.iter().enumerate() {
                 for (c, gic) in gi.iter().enumerate() {
                     let want: f64 = (0..8).map(|n| 0.125 * hourglass_sign(n, i) * x[n][c]).sum();
@@ -3199,7 +3215,7 @@ mod tests {
                 0.7 * o[1] + 1.1 * o[2],
             ]
         });
-        let (g, q) = hourglass_amplitudes(&affine, &axes);
+        let (g, q) = hourglass_amplitudes(hourglass_sums(&affine), &axes);
         assert!(
             g.iter().flatten().chain(&q).all(|v| v.abs() < 1e-15),
             "{g:?}"
