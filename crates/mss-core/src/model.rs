@@ -1339,15 +1339,33 @@ impl Model {
         ws.edge_stretch.resize(self.num_nodes(), [0.0; 3]);
         self.edge_pass(xs, &mut ws.edge_stretch, batched);
         let edges = &ws.edge_stretch;
-        self.add_batches_by_layers(out, batched, |first, uniform, fc| {
+        self.add_batches_by_layers(out, batched, |first, uniform, fc, nodes| {
             let cells = &self.cells[first..first + fc.len() / 8];
             if uniform {
-                batch_kernel(self.params_of(first), cells, xs, edges, fc);
+                let params = self.params_of(first);
+                // SAFETY: `nodes` is `add_batches_by_layers`' node sums, of
+                // which this batch's nodes are this task's alone.
+                if precision == Precision::F64
+                    && unsafe {
+                        kernel::forces_batch_into_nodes(
+                            params,
+                            cells,
+                            xs,
+                            edges,
+                            fc,
+                            nodes.0.cast::<[f64; 3]>(),
+                        )
+                    }
+                {
+                    return true;
+                }
+                batch_kernel(params, cells, xs, edges, fc);
             } else {
                 fill_cells(fc, first, |cell| {
                     cell_kernel(self.params_of(cell), &self.cells[cell], xs, edges)
                 });
             }
+            false
         });
     }
 
@@ -1356,6 +1374,10 @@ impl Model {
     /// cells from `first` (8 `[x, y, z, 0]` per cell into `values`; `uniform`
     /// when `vectorize` is asked for and the cells share one parameter set, so
     /// that the vector kernel may run), added in the force pass's order.
+    ///
+    /// `batch` may instead add its cells' vectors into the node sums itself
+    /// (it is handed them) and say so by returning true; it must then add
+    /// them in the same order.
     ///
     /// Two phases: the even layers, then the odd ones. A layer's cells touch
     /// the node planes z and z + 1 only, so within a phase no two layers
@@ -1366,7 +1388,7 @@ impl Model {
         &self,
         out: &mut [Vec3],
         vectorize: bool,
-        batch: impl Fn(usize, bool, &mut [[f64; 4]]) + Sync,
+        batch: impl Fn(usize, bool, &mut [[f64; 4]], SharedForces) -> bool + Sync,
     ) {
         out.par_chunks_mut(4 * CHUNK)
             .for_each(|c| c.fill(Vec3::zeros()));
@@ -1391,8 +1413,11 @@ impl Model {
                             && (one_material
                                 || (first..last)
                                     .all(|c| self.cell_material[c] == self.cell_material[first]));
-                        batch(first, uniform, fc);
                         let s = shared;
+                        if batch(first, uniform, fc, s) {
+                            first = last;
+                            continue;
+                        }
                         for (cell, f) in cells.iter().zip(fc.chunks_exact(8)) {
                             for (&v, fv) in cell.iter().zip(f) {
                                 // SAFETY: `v` is a node of a layer of this
@@ -1631,7 +1656,7 @@ impl Model {
     /// matrix-free, in the force pass's layer order (the same bits for any
     /// thread count).
     fn rest_stiffness_mul(&self, mats: &[[[f64; 24]; 24]], v: &[Vec3], out: &mut [Vec3]) {
-        self.add_batches_by_layers(out, false, |first, _, fc| {
+        self.add_batches_by_layers(out, false, |first, _, fc, _| {
             fill_cells(fc, first, |cell| {
                 let k = &mats[self.param_index(cell)];
                 let mut local = [0.0f64; 24];
@@ -1647,6 +1672,7 @@ impl Model {
                     })
                 })
             });
+            false
         });
     }
 
@@ -1661,7 +1687,7 @@ impl Model {
         assert_eq!(v.len(), self.num_nodes(), "directions: one per node");
         assert_eq!(out.len(), self.num_nodes(), "products: one per node");
         let (xs, vs) = (crate::as_arrays(x), crate::as_arrays(v));
-        self.add_batches_by_layers(out, true, |first, uniform, fc| {
+        self.add_batches_by_layers(out, true, |first, uniform, fc, _| {
             let cells = &self.cells[first..first + fc.len() / 8];
             if uniform {
                 kernel::tangent_action_batch(self.params_of(first), cells, xs, vs, fc);
@@ -1670,6 +1696,7 @@ impl Model {
                     kernel::cell_tangent_action(self.params_of(cell), &self.cells[cell], xs, vs)
                 });
             }
+            false
         });
     }
 

@@ -2456,6 +2456,191 @@ mod avx2 {
         }
     }
 
+    /// Whether eight cells lie side by side along x in one row of the
+    /// lattice, numbered like their nodes: cell `l`'s corner `k` is cell
+    /// 0's plus `l`, and each `+x` corner follows its `-x` corner. Their
+    /// corners then form four runs of nine consecutive nodes ([`row_corners`],
+    /// [`add_rows`]).
+    #[inline(always)]
+    pub(super) unsafe fn in_one_row(cells: &[[u32; 8]]) -> bool {
+        // SAFETY: the caller runs where AVX2 is available; `cells` holds
+        // eight cells of 8 u32 (32 bytes each), asserted.
+        unsafe {
+            assert!(cells.len() >= 8);
+            let c0 = cells[0];
+            if c0[1] != c0[0] + 1 || c0[2] != c0[3] + 1 || c0[5] != c0[4] + 1 || c0[6] != c0[7] + 1
+            {
+                return false;
+            }
+            let first = _mm256_loadu_si256(cells.as_ptr().cast());
+            let mut all = -1i32;
+            for (l, cell) in cells.iter().enumerate().take(8).skip(1) {
+                let want = _mm256_add_epi32(first, _mm256_set1_epi32(l as i32));
+                let got = _mm256_loadu_si256(cell.as_ptr().cast());
+                all &= _mm256_movemask_epi8(_mm256_cmpeq_epi32(got, want));
+            }
+            all == -1
+        }
+    }
+
+    /// Component `C` of eight consecutive nodes' `[f64; 3]` from `p`, as the
+    /// lanes of one register (three loads, two permutations).
+    #[inline(always)]
+    unsafe fn component<const C: usize>(p: *const f64) -> __m512d {
+        // SAFETY: the caller runs where AVX-512F is available, and `p`
+        // points to 24 readable f64 (this function's contract).
+        unsafe {
+            let (a, b, c) = (
+                _mm512_loadu_pd(p),
+                _mm512_loadu_pd(p.add(8)),
+                _mm512_loadu_pd(p.add(16)),
+            );
+            // Element 3 l + C of the 24 for lane l: from `a` and `b` first
+            // (indices 8-15 pick `b`), then the last lanes from `c`.
+            let (first, second) = match C {
+                0 => (
+                    _mm512_setr_epi64(0, 3, 6, 9, 12, 15, 0, 0),
+                    _mm512_setr_epi64(0, 1, 2, 3, 4, 5, 10, 13),
+                ),
+                1 => (
+                    _mm512_setr_epi64(1, 4, 7, 10, 13, 0, 0, 0),
+                    _mm512_setr_epi64(0, 1, 2, 3, 4, 8, 11, 14),
+                ),
+                _ => (
+                    _mm512_setr_epi64(2, 5, 8, 11, 14, 0, 0, 0),
+                    _mm512_setr_epi64(0, 1, 2, 3, 4, 9, 12, 15),
+                ),
+            };
+            _mm512_permutex2var_pd(_mm512_permutex2var_pd(a, first, b), second, c)
+        }
+    }
+
+    /// The three components of eight consecutive nodes from `p`.
+    #[inline(always)]
+    unsafe fn components(p: *const f64) -> V3<F64x8> {
+        // SAFETY: this function's contract is `component`'s.
+        unsafe {
+            [
+                F64x8(component::<0>(p)),
+                F64x8(component::<1>(p)),
+                F64x8(component::<2>(p)),
+            ]
+        }
+    }
+
+    /// The corners of eight cells that lie in one row ([`in_one_row`]): the
+    /// same values as [`gather8_f64`], loaded as runs of nodes.
+    #[inline(always)]
+    pub(super) unsafe fn row_corners(cells: &[[u32; 8]], x: &[[f64; 3]]) -> [V3<F64x8>; 8] {
+        // SAFETY: the caller runs where AVX-512F is available and checked
+        // `in_one_row(cells)`: each corner's nodes are the nine from its
+        // cell 0's, which exist (cell 7's corners are nodes of `x`),
+        // asserted.
+        unsafe {
+            let c0 = cells[0];
+            assert!(c0.iter().all(|&n| n as usize + 8 <= x.len()));
+            let run = |n: u32| x.as_ptr().add(n as usize).cast::<f64>();
+            let mut xl = [[F64x8(_mm512_setzero_pd()); 3]; 8];
+            for (k, xk) in xl.iter_mut().enumerate() {
+                *xk = components(run(c0[k]));
+            }
+            xl
+        }
+    }
+
+    /// The 12 edge stretches of eight cells in one row: the same values as
+    /// [`gather_edges8_f64`].
+    #[inline(always)]
+    pub(super) unsafe fn row_edges(cells: &[[u32; 8]], edges: &[[f64; 3]]) -> [F64x8; 12] {
+        // SAFETY: as `row_corners`.
+        unsafe {
+            let c0 = cells[0];
+            assert!(c0.iter().all(|&n| n as usize + 8 <= edges.len()));
+            let run = |k: usize| edges.as_ptr().add(c0[k] as usize).cast::<f64>();
+            // Edge e runs from corner CELL_EDGES[e].0 along CELL_EDGES[e].2.
+            [
+                F64x8(component::<0>(run(0))),
+                F64x8(component::<0>(run(3))),
+                F64x8(component::<0>(run(4))),
+                F64x8(component::<0>(run(7))),
+                F64x8(component::<1>(run(0))),
+                F64x8(component::<1>(run(1))),
+                F64x8(component::<1>(run(4))),
+                F64x8(component::<1>(run(5))),
+                F64x8(component::<2>(run(0))),
+                F64x8(component::<2>(run(1))),
+                F64x8(component::<2>(run(2))),
+                F64x8(component::<2>(run(3))),
+            ]
+        }
+    }
+
+    /// Eight lanes of `[x, y, z]` as 24 consecutive f64 (three registers).
+    #[inline(always)]
+    unsafe fn interleave(v: &V3<F64x8>) -> [__m512d; 3] {
+        // SAFETY: the caller runs where AVX-512F is available.
+        unsafe {
+            let (x, y, z) = (v[0].0, v[1].0, v[2].0);
+            let xy0 = _mm512_permutex2var_pd(x, _mm512_setr_epi64(0, 8, 0, 1, 9, 0, 2, 10), y);
+            let xy1 = _mm512_permutex2var_pd(x, _mm512_setr_epi64(0, 3, 11, 0, 4, 12, 0, 5), y);
+            let xy2 = _mm512_permutex2var_pd(x, _mm512_setr_epi64(13, 0, 6, 14, 0, 7, 15, 0), y);
+            [
+                _mm512_permutex2var_pd(xy0, _mm512_setr_epi64(0, 1, 8, 3, 4, 9, 6, 7), z),
+                _mm512_permutex2var_pd(xy1, _mm512_setr_epi64(10, 1, 2, 11, 4, 5, 12, 7), z),
+                _mm512_permutex2var_pd(xy2, _mm512_setr_epi64(0, 13, 2, 3, 14, 5, 6, 15), z),
+            ]
+        }
+    }
+
+    /// Adds the corner forces of eight cells in one row ([`in_one_row`])
+    /// into the node sums `nodes`, each node's two contributions of the
+    /// row in cell order (the `+x` corner of the cell before, then the `-x`
+    /// corner of the cell after), as the cell-by-cell sums add them: the
+    /// same bits.
+    ///
+    /// # Safety
+    /// AVX-512F is available; `nodes` points to one `[f64; 3]` per node of
+    /// the lattice, and no other thread accesses those of these cells
+    /// meanwhile.
+    #[inline(always)]
+    pub(super) unsafe fn add_rows(f: &[V3<F64x8>; 8], cells: &[[u32; 8]], nodes: *mut [f64; 3]) {
+        // SAFETY: the function's contract; each run of nine nodes lies in
+        // `nodes` (they are nodes of the lattice, `in_one_row`), the masked
+        // load and store touch only the ninth node's three values.
+        unsafe {
+            let zero = _mm512_setzero_pd();
+            let shift = |hi: __m512d, lo: __m512d| {
+                // Lanes 5-7 of `lo`, then lanes 0-4 of `hi`: the `+x`
+                // corners' values moved one node (three f64) along.
+                _mm512_castsi512_pd(_mm512_alignr_epi64::<5>(
+                    _mm512_castpd_si512(hi),
+                    _mm512_castpd_si512(lo),
+                ))
+            };
+            let c0 = cells[0];
+            for (minus, plus) in [(0, 1), (3, 2), (4, 5), (7, 6)] {
+                let p = nodes.add(c0[minus] as usize).cast::<f64>();
+                let l = interleave(&f[minus]);
+                let r = interleave(&f[plus]);
+                let s = [
+                    shift(r[0], zero),
+                    shift(r[1], r[0]),
+                    shift(r[2], r[1]),
+                    shift(zero, r[2]),
+                ];
+                let d0 =
+                    _mm512_mask_add_pd(_mm512_loadu_pd(p), 0b1111_1000, _mm512_loadu_pd(p), s[0]);
+                let d1 = _mm512_add_pd(_mm512_loadu_pd(p.add(8)), s[1]);
+                let d2 = _mm512_add_pd(_mm512_loadu_pd(p.add(16)), s[2]);
+                let d3 = _mm512_add_pd(_mm512_maskz_loadu_pd(0b111, p.add(24)), s[3]);
+                _mm512_storeu_pd(p, _mm512_add_pd(d0, l[0]));
+                _mm512_storeu_pd(p.add(8), _mm512_add_pd(d1, l[1]));
+                _mm512_storeu_pd(p.add(16), _mm512_add_pd(d2, l[2]));
+                _mm512_mask_storeu_pd(p.add(24), 0b111, d3);
+            }
+        }
+    }
+
     /// `[x, y, z, *]` of node `i` (the fourth value is the next node's `x`,
     /// or 0 for the last node, which has no next).
     #[inline(always)]
@@ -2649,6 +2834,99 @@ fn forces_batch_avx512(
         },
     );
     forces_batch_avx2(p, tail, x, edges, out_tail);
+}
+
+/// [`forces_batch`] and the node sums of its cells in one pass, where the
+/// CPU runs the AVX-512 pass (returns false, having done nothing, where it
+/// does not): eight cells that lie in one row of the lattice
+/// ([`avx2::in_one_row`], most cells of a block or of a voxelized body's
+/// inside) load their corners and edge stretches as runs of consecutive
+/// nodes and add their corner forces into the node sums directly, instead
+/// of gathering each corner and writing 8 corner forces per cell to be
+/// added one by one; other cells go through `buf` and are added cell by
+/// cell. Every node gets its contributions in cell order either way, so
+/// the sums are bitwise those of the cell-by-cell pass.
+///
+/// # Safety
+/// `nodes` points to one `[f64; 3]` per node of `x`, and no other thread
+/// accesses those of the nodes of `cells` meanwhile.
+pub(crate) unsafe fn forces_batch_into_nodes(
+    p: &CellParams,
+    cells: &[[u32; 8]],
+    x: &[[f64; 3]],
+    edges: &[[f64; 3]],
+    buf: &mut [[f64; 4]],
+    nodes: *mut [f64; 3],
+) -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if has_avx512() {
+            // SAFETY: the CPU has AVX-512F, DQ and VL (checked); `nodes` is
+            // this function's contract.
+            unsafe { forces_into_nodes_avx512(p, cells, x, edges, buf, nodes) };
+            return true;
+        }
+    }
+    let _ = (p, cells, x, edges, buf, nodes);
+    false
+}
+
+/// Adds the corner forces `buf` (8 per cell, `[fx, fy, fz, 0]`) of `cells`
+/// into the node sums, cell by cell.
+///
+/// # Safety
+/// As [`forces_batch_into_nodes`].
+#[inline(always)]
+unsafe fn add_cells(cells: &[[u32; 8]], buf: &[[f64; 4]], nodes: *mut [f64; 3]) {
+    for (cell, f) in cells.iter().zip(buf.chunks_exact(8)) {
+        for (&n, f) in cell.iter().zip(f) {
+            // SAFETY: the caller's contract; `n` is a node of the lattice.
+            let o = unsafe { &mut *nodes.add(n as usize) };
+            o[0] += f[0];
+            o[1] += f[1];
+            o[2] += f[2];
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
+unsafe fn forces_into_nodes_avx512(
+    p: &CellParams,
+    cells: &[[u32; 8]],
+    x: &[[f64; 3]],
+    edges: &[[f64; 3]],
+    buf: &mut [[f64; 4]],
+    nodes: *mut [f64; 3],
+) {
+    assert!(buf.len() >= 8 * cells.len());
+    let whole = cells.len() / 8 * 8;
+    for group in cells[..whole].chunks_exact(8) {
+        let mut f = [[avx2::F64x8::cst(0.0); 3]; 8];
+        // SAFETY: this function runs with AVX-512 (its target features);
+        // `nodes` is the caller's contract.
+        unsafe {
+            if avx2::in_one_row(group) {
+                let xl = avx2::row_corners(group, x);
+                let wl = avx2::row_edges(group, edges);
+                cell_forces_with_edges(p, &xl, &wl, &mut f);
+                avx2::add_rows(&f, group, nodes);
+            } else {
+                let xl = avx2::gather8_f64(group, x, ALL_CORNERS);
+                let wl = avx2::gather_edges8_f64(group, edges);
+                cell_forces_with_edges(p, &xl, &wl, &mut f);
+                avx2::scatter8_f64(&f, &mut buf[..64]);
+                add_cells(group, &buf[..64], nodes);
+            }
+        }
+    }
+    let tail = &cells[whole..];
+    if !tail.is_empty() {
+        let out = &mut buf[..8 * tail.len()];
+        forces_batch_avx2(p, tail, x, edges, out);
+        // SAFETY: the caller's contract.
+        unsafe { add_cells(tail, out, nodes) };
+    }
 }
 
 /// Whether this CPU runs the AVX-512 force pass ([`forces_batch_avx512`]):
