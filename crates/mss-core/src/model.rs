@@ -1300,6 +1300,21 @@ impl Model {
                     let mut buf = [[0.0f64; 3]; FORCE_BATCH];
                     for group in chunk.chunks(FORCE_BATCH) {
                         let w = &mut buf[..group.len()];
+                        // SAFETY: as below, each node is corner 0 of one
+                        // cell at most.
+                        if batched
+                            && unsafe {
+                                kernel::edge_stretches_into_nodes(
+                                    rest,
+                                    group,
+                                    xs,
+                                    w,
+                                    shared.0.cast::<[f64; 3]>(),
+                                )
+                            }
+                        {
+                            continue;
+                        }
                         if batched {
                             kernel::edge_stretches_batch(rest, group, xs, w);
                         } else {

@@ -1774,6 +1774,83 @@ fn edge_stretches_avx512(rest: f64, cells: &[[u32; 8]], x: &[[f64; 3]], out: &mu
     edge_stretches_avx2(rest, &cells[whole..], x, out_tail);
 }
 
+/// [`edge_stretches_batch`] written straight into the edge stretches by node
+/// `nodes` (each cell's at its corner 0), where the CPU runs the AVX-512
+/// pass (returns false, having done nothing, where it does not): eight
+/// cells in one row ([`avx2::in_one_row`]) load their four corners as runs
+/// of nodes and store their 24 stretches as one run, instead of gathering
+/// each corner and writing each lane's stretches apart. The same bits.
+///
+/// # Safety
+/// `nodes` points to one `[f64; 3]` per node of `x`, and no other thread
+/// accesses those of the corners 0 of `cells` meanwhile.
+pub(crate) unsafe fn edge_stretches_into_nodes(
+    rest: f64,
+    cells: &[[u32; 8]],
+    x: &[[f64; 3]],
+    buf: &mut [[f64; 3]],
+    nodes: *mut [f64; 3],
+) -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if has_avx512() {
+            // SAFETY: the CPU has AVX-512F, DQ and VL (checked); `nodes` is
+            // this function's contract.
+            unsafe { edge_stretches_into_nodes_avx512(rest, cells, x, buf, nodes) };
+            return true;
+        }
+    }
+    let _ = (rest, cells, x, buf, nodes);
+    false
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
+unsafe fn edge_stretches_into_nodes_avx512(
+    rest: f64,
+    cells: &[[u32; 8]],
+    x: &[[f64; 3]],
+    buf: &mut [[f64; 3]],
+    nodes: *mut [f64; 3],
+) {
+    use std::arch::x86_64::_mm512_storeu_pd;
+    assert!(buf.len() >= cells.len());
+    let write = |cells: &[[u32; 8]], w: &[[f64; 3]]| {
+        for (cell, w) in cells.iter().zip(w) {
+            // SAFETY: the caller's contract; corner 0 is a node of `x`.
+            unsafe { *nodes.add(cell[0] as usize) = *w };
+        }
+    };
+    let whole = cells.len() / 8 * 8;
+    for group in cells[..whole].chunks_exact(8) {
+        // SAFETY: this function runs with AVX-512; in a row, corner `k`'s
+        // eight nodes are `group[0][k]` on (nodes of `x`), and corner 0's
+        // are these cells' alone (the caller's contract).
+        unsafe {
+            if avx2::in_one_row(group) {
+                let c0 = group[0];
+                assert!(c0.iter().all(|&n| n as usize + 8 <= x.len()));
+                let run = |k: usize| avx2::components(x.as_ptr().add(c0[k] as usize).cast());
+                let [origin, ends @ ..] = EDGE_ENDS.map(run);
+                let w = avx2::interleave(&corner_stretches(rest, origin, ends));
+                let o = nodes.add(c0[0] as usize).cast::<f64>();
+                _mm512_storeu_pd(o, w[0]);
+                _mm512_storeu_pd(o.add(8), w[1]);
+                _mm512_storeu_pd(o.add(16), w[2]);
+            } else {
+                edge_stretches_avx512(rest, group, x, &mut buf[..8]);
+                write(group, &buf[..8]);
+            }
+        }
+    }
+    let tail = &cells[whole..];
+    if !tail.is_empty() {
+        let w = &mut buf[..tail.len()];
+        edge_stretches_avx2(rest, tail, x, w);
+        write(tail, w);
+    }
+}
+
 /// [`edge_stretches_batch`] one cell at a time, without SIMD: the same
 /// operations per cell, so the same bits.
 pub(crate) fn edge_stretches_scalar(
@@ -2517,7 +2594,7 @@ mod avx2 {
 
     /// The three components of eight consecutive nodes from `p`.
     #[inline(always)]
-    unsafe fn components(p: *const f64) -> V3<F64x8> {
+    pub(super) unsafe fn components(p: *const f64) -> V3<F64x8> {
         // SAFETY: this function's contract is `component`'s.
         unsafe {
             [
@@ -2577,7 +2654,7 @@ mod avx2 {
 
     /// Eight lanes of `[x, y, z]` as 24 consecutive f64 (three registers).
     #[inline(always)]
-    unsafe fn interleave(v: &V3<F64x8>) -> [__m512d; 3] {
+    pub(super) unsafe fn interleave(v: &V3<F64x8>) -> [__m512d; 3] {
         // SAFETY: the caller runs where AVX-512F is available.
         unsafe {
             let (x, y, z) = (v[0].0, v[1].0, v[2].0);

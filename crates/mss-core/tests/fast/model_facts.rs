@@ -714,7 +714,8 @@ fn simd_and_scalar_paths_agree_bitwise() {
 }
 
 /// The force pass adds eight cells that lie in one row of the lattice into
-/// their nodes as runs of nodes (on CPUs with AVX-512): the same bits as the
+/// their nodes as runs of nodes, and its edge pass stores their stretches
+/// as one run (on CPUs with AVX-512): the same bits as the
 /// portable pass, cell by cell, for rows longer than eight cells, rows cut
 /// by holes and groups that straddle two rows, for every model, and for
 /// any thread count.
