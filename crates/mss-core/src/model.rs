@@ -675,6 +675,23 @@ unsafe fn add_corner(o: *mut Vec3, f: &[f64; 4]) {
     }
 }
 
+/// Adds the corner vectors `values` (8 per cell, `[x, y, z, 0]`) of `cells`
+/// into the node sums `nodes`, cell by cell, corner by corner: the order
+/// every path of the force pass keeps.
+///
+/// # Safety
+/// `nodes` points to one `Vec3` per node of the lattice, and no other
+/// thread accesses those of `cells` meanwhile.
+#[inline(always)]
+unsafe fn add_cells(cells: &[[u32; 8]], values: &[[f64; 4]], nodes: *mut Vec3) {
+    for (cell, f) in cells.iter().zip(values.chunks_exact(8)) {
+        for (&v, fv) in cell.iter().zip(f) {
+            // SAFETY: the caller's contract; `v` is a node of the lattice.
+            unsafe { add_corner(nodes.add(v as usize), fv) };
+        }
+    }
+}
+
 /// Node force sums written from several threads at once, each to nodes no
 /// other thread touches in the same phase (see [`Model::internal_forces_with`]).
 #[derive(Clone, Copy)]
@@ -1433,14 +1450,10 @@ impl Model {
                             first = last;
                             continue;
                         }
-                        for (cell, f) in cells.iter().zip(fc.chunks_exact(8)) {
-                            for (&v, fv) in cell.iter().zip(f) {
-                                // SAFETY: `v` is a node of a layer of this
-                                // phase's parity, which no other task of the
-                                // phase touches; `out` has one entry per node.
-                                unsafe { add_corner(s.0.add(v as usize), fv) };
-                            }
-                        }
+                        // SAFETY: the cells' nodes are of a layer of this
+                        // phase's parity, which no other task of the phase
+                        // touches; `out` has one entry per node.
+                        unsafe { add_cells(cells, fc, s.0) };
                         first = last;
                     }
                 });

@@ -2948,24 +2948,6 @@ pub(crate) unsafe fn forces_batch_into_nodes(
     false
 }
 
-/// Adds the corner forces `buf` (8 per cell, `[fx, fy, fz, 0]`) of `cells`
-/// into the node sums, cell by cell.
-///
-/// # Safety
-/// As [`forces_batch_into_nodes`].
-#[inline(always)]
-unsafe fn add_cells(cells: &[[u32; 8]], buf: &[[f64; 4]], nodes: *mut [f64; 3]) {
-    for (cell, f) in cells.iter().zip(buf.chunks_exact(8)) {
-        for (&n, f) in cell.iter().zip(f) {
-            // SAFETY: the caller's contract; `n` is a node of the lattice.
-            let o = unsafe { &mut *nodes.add(n as usize) };
-            o[0] += f[0];
-            o[1] += f[1];
-            o[2] += f[2];
-        }
-    }
-}
-
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
 unsafe fn forces_into_nodes_avx512(
@@ -2993,7 +2975,7 @@ unsafe fn forces_into_nodes_avx512(
                 let wl = avx2::gather_edges8_f64(group, edges);
                 cell_forces_with_edges(p, &xl, &wl, &mut f);
                 avx2::scatter8_f64(&f, &mut buf[..64]);
-                add_cells(group, &buf[..64], nodes);
+                super::add_cells(group, &buf[..64], nodes.cast());
             }
         }
     }
@@ -3002,7 +2984,7 @@ unsafe fn forces_into_nodes_avx512(
         let out = &mut buf[..8 * tail.len()];
         forces_batch_avx2(p, tail, x, edges, out);
         // SAFETY: the caller's contract.
-        unsafe { add_cells(tail, out, nodes) };
+        unsafe { super::add_cells(tail, out, nodes.cast()) };
     }
 }
 
