@@ -1377,18 +1377,17 @@ impl Model {
                 let params = self.params_of(first);
                 // SAFETY: `nodes` is `add_batches_by_layers`' node sums, of
                 // which this batch's nodes are this task's alone.
-                if precision == Precision::F64
-                    && unsafe {
-                        kernel::forces_batch_into_nodes(
-                            params,
-                            cells,
-                            xs,
-                            edges,
-                            fc,
-                            nodes.0.cast::<[f64; 3]>(),
-                        )
-                    }
-                {
+                if unsafe {
+                    kernel::forces_batch_into_nodes(
+                        precision,
+                        params,
+                        cells,
+                        xs,
+                        edges,
+                        fc,
+                        nodes.0.cast::<[f64; 3]>(),
+                    )
+                } {
                     return true;
                 }
                 batch_kernel(params, cells, xs, edges, fc);

@@ -2718,6 +2718,109 @@ mod avx2 {
         }
     }
 
+    /// The corners of eight cells relative to each one's corner 0, in
+    /// `f32`: loaded as runs of nodes when they lie in one row
+    /// ([`row_corners`]), gathered otherwise ([`gather8_relative`]). The
+    /// same operations per lane either way (the difference in `f64`, then
+    /// rounded), so the same values.
+    #[inline(always)]
+    unsafe fn relative8(cells: &[[u32; 8]], x: &[[f64; 3]], in_row: bool) -> [V3<F32x8>; 8] {
+        // SAFETY: the caller runs where AVX-512F and DQ are available and
+        // says whether the cells lie in one row (`row_corners`' contract).
+        unsafe {
+            if !in_row {
+                return gather8_relative(cells, x);
+            }
+            let xl = row_corners(cells, x);
+            let mut rel = [[F32x8(_mm256_setzero_ps()); 3]; 8];
+            for (r, xk) in rel.iter_mut().zip(&xl) {
+                for c in 0..3 {
+                    r[c] = F32x8(_mm512_cvtpd_ps(_mm512_sub_pd(xk[c].0, xl[0][c].0)));
+                }
+            }
+            rel
+        }
+    }
+
+    /// The 12 edge stretches of eight cells in `f32`, as runs when they lie
+    /// in one row: the values of [`gather_edges8`].
+    #[inline(always)]
+    unsafe fn edges8(cells: &[[u32; 8]], edges: &[[f64; 3]], in_row: bool) -> [F32x8; 12] {
+        // SAFETY: as `relative8`.
+        unsafe {
+            if !in_row {
+                return gather_edges8(cells, edges);
+            }
+            // Loops, not `map`: a closure would not inherit this
+            // function's instruction sets.
+            let wide = row_edges(cells, edges);
+            let mut w = [F32x8(_mm256_setzero_ps()); 12];
+            for (w, wide) in w.iter_mut().zip(wide) {
+                *w = F32x8(_mm512_cvtpd_ps(wide.0));
+            }
+            w
+        }
+    }
+
+    /// The corners and edge stretches of sixteen cells in `f32`, each half
+    /// of eight loaded as runs where it lies in one row ([`in_one_row`],
+    /// said by `rows`): the values of [`gather16_relative`] and
+    /// [`gather_edges16`].
+    #[inline(always)]
+    pub(super) unsafe fn cells16(
+        cells: &[[u32; 8]],
+        x: &[[f64; 3]],
+        edges: &[[f64; 3]],
+        rows: [bool; 2],
+    ) -> ([V3<F32x16>; 8], [F32x16; 12]) {
+        // SAFETY: the caller runs where AVX-512F and DQ are available;
+        // `rows` says `in_one_row` of each half.
+        unsafe {
+            let (a, b) = cells.split_at(8);
+            (
+                join_corners::<F32x16, 8>(relative8(a, x, rows[0]), relative8(b, x, rows[1])),
+                join_edges::<F32x16>(edges8(a, edges, rows[0]), edges8(b, edges, rows[1])),
+            )
+        }
+    }
+
+    /// Adds the corner forces of sixteen cells into the node sums, half
+    /// after half (so in cell order): a half in one row by its runs of
+    /// nodes ([`add_rows`], after widening to `f64`), another through
+    /// `buf` cell by cell, as [`scatter16`] and the cell-by-cell sums
+    /// would add it. The same bits.
+    ///
+    /// # Safety
+    /// AVX-512F and DQ are available; `rows` says `in_one_row` of each
+    /// half; `nodes` is [`add_rows`]' contract.
+    #[inline(always)]
+    pub(super) unsafe fn add16(
+        f: &[V3<F32x16>; 8],
+        cells: &[[u32; 8]],
+        rows: [bool; 2],
+        buf: &mut [[f64; 4]],
+        nodes: *mut [f64; 3],
+    ) {
+        // SAFETY: the function's contract.
+        unsafe {
+            let halves = split_corners(f);
+            for ((half, cells), in_row) in halves.iter().zip(cells.chunks_exact(8)).zip(rows) {
+                if in_row {
+                    let mut wide = [[F64x8(_mm512_setzero_pd()); 3]; 8];
+                    for (w, h) in wide.iter_mut().zip(half) {
+                        for c in 0..3 {
+                            w[c] = F64x8(_mm512_cvtps_pd(h[c].0));
+                        }
+                    }
+                    add_rows(&wide, cells, nodes);
+                } else {
+                    scatter8(half, &mut buf[..64]);
+                    super::super::add_cells(cells, &buf[..64], nodes.cast());
+                }
+            }
+        }
+    }
+
     /// `[x, y, z, *]` of node `i` (the fourth value is the next node's `x`,
     /// or 0 for the last node, which has no next).
     #[inline(always)]
@@ -2913,21 +3016,23 @@ fn forces_batch_avx512(
     forces_batch_avx2(p, tail, x, edges, out_tail);
 }
 
-/// [`forces_batch`] and the node sums of its cells in one pass, where the
-/// CPU runs the AVX-512 pass (returns false, having done nothing, where it
-/// does not): eight cells that lie in one row of the lattice
-/// ([`avx2::in_one_row`], most cells of a block or of a voxelized body's
-/// inside) load their corners and edge stretches as runs of consecutive
-/// nodes and add their corner forces into the node sums directly, instead
-/// of gathering each corner and writing 8 corner forces per cell to be
-/// added one by one; other cells go through `buf` and are added cell by
-/// cell. Every node gets its contributions in cell order either way, so
-/// the sums are bitwise those of the cell-by-cell pass.
+/// [`forces_batch`] (or [`forces_batch_f32`], by `precision`) and the node
+/// sums of its cells in one pass, where the CPU runs the AVX-512 pass
+/// (returns false, having done nothing, where it does not): eight cells
+/// that lie in one row of the lattice ([`avx2::in_one_row`], most cells of
+/// a block or of a voxelized body's inside) load their corners and edge
+/// stretches as runs of consecutive nodes and add their corner forces into
+/// the node sums directly, instead of gathering each corner and writing 8
+/// corner forces per cell to be added one by one; other cells go through
+/// `buf` and are added cell by cell. Every node gets its contributions in
+/// cell order either way, so the sums are bitwise those of the cell-by-cell
+/// pass.
 ///
 /// # Safety
 /// `nodes` points to one `[f64; 3]` per node of `x`, and no other thread
 /// accesses those of the nodes of `cells` meanwhile.
 pub(crate) unsafe fn forces_batch_into_nodes(
+    precision: super::Precision,
     p: &CellParams,
     cells: &[[u32; 8]],
     x: &[[f64; 3]],
@@ -2940,12 +3045,78 @@ pub(crate) unsafe fn forces_batch_into_nodes(
         if has_avx512() {
             // SAFETY: the CPU has AVX-512F, DQ and VL (checked); `nodes` is
             // this function's contract.
-            unsafe { forces_into_nodes_avx512(p, cells, x, edges, buf, nodes) };
+            unsafe {
+                match precision {
+                    super::Precision::F64 => {
+                        forces_into_nodes_avx512(p, cells, x, edges, buf, nodes);
+                    }
+                    super::Precision::F32 => {
+                        forces_into_nodes_f32_avx512(p, cells, x, edges, buf, nodes);
+                    }
+                }
+            }
             return true;
         }
     }
-    let _ = (p, cells, x, edges, buf, nodes);
+    let _ = (precision, p, cells, x, edges, buf, nodes);
     false
+}
+
+/// [`forces_into_nodes_avx512`] in single precision, sixteen cells per pass
+/// (each half of eight in one row or not, [`avx2::cells16`]), the cells
+/// after the last whole sixteen through [`forces_batch_f32_avx2`]: the
+/// values of [`forces_batch_f32_avx512`], added in cell order.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
+unsafe fn forces_into_nodes_f32_avx512(
+    p: &CellParams,
+    cells: &[[u32; 8]],
+    x: &[[f64; 3]],
+    edges: &[[f64; 3]],
+    buf: &mut [[f64; 4]],
+    nodes: *mut [f64; 3],
+) {
+    assert!(buf.len() >= 8 * cells.len());
+    let whole = cells.len() / 16 * 16;
+    for group in cells[..whole].chunks_exact(16) {
+        let mut f = [[avx2::F32x16::cst(0.0); 3]; 8];
+        // SAFETY: this function runs with AVX-512 (its target features);
+        // `rows` is what `cells16` and `add16` are told; `nodes` is the
+        // caller's contract.
+        unsafe {
+            let rows = [avx2::in_one_row(&group[..8]), avx2::in_one_row(&group[8..])];
+            let (xl, wl) = avx2::cells16(group, x, edges, rows);
+            cell_forces_with_edges(p, &xl, &wl, &mut f);
+            avx2::add16(&f, group, rows, buf, nodes);
+        }
+    }
+    // SAFETY: the caller's contract; this function runs with AVX2.
+    unsafe {
+        add_cells_through(&cells[whole..], buf, nodes, |c, o| {
+            forces_batch_f32_avx2(p, c, x, edges, o);
+        });
+    }
+}
+
+/// Adds the forces of `cells`, written into `buf` by `batch`, into the node
+/// sums cell by cell: the cells after a row pass's last whole group.
+///
+/// # Safety
+/// As [`forces_batch_into_nodes`] (`nodes`).
+#[inline(always)]
+unsafe fn add_cells_through(
+    cells: &[[u32; 8]],
+    buf: &mut [[f64; 4]],
+    nodes: *mut [f64; 3],
+    batch: impl FnOnce(&[[u32; 8]], &mut [[f64; 4]]),
+) {
+    if cells.is_empty() {
+        return;
+    }
+    let out = &mut buf[..8 * cells.len()];
+    batch(cells, out);
+    // SAFETY: the caller's contract.
+    unsafe { super::add_cells(cells, out, nodes.cast()) };
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -2979,12 +3150,11 @@ unsafe fn forces_into_nodes_avx512(
             }
         }
     }
-    let tail = &cells[whole..];
-    if !tail.is_empty() {
-        let out = &mut buf[..8 * tail.len()];
-        forces_batch_avx2(p, tail, x, edges, out);
-        // SAFETY: the caller's contract.
-        unsafe { super::add_cells(tail, out, nodes.cast()) };
+    // SAFETY: the caller's contract; this function runs with AVX2.
+    unsafe {
+        add_cells_through(&cells[whole..], buf, nodes, |c, o| {
+            forces_batch_avx2(p, c, x, edges, o);
+        });
     }
 }
 

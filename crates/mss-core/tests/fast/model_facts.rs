@@ -718,7 +718,8 @@ fn simd_and_scalar_paths_agree_bitwise() {
 /// as one run (on CPUs with AVX-512): the same bits as the
 /// portable pass, cell by cell, for rows longer than eight cells, rows cut
 /// by holes and groups that straddle two rows, for every model, and for
-/// any thread count.
+/// any thread count; in `f64` and in `f32` (sixteen cells per pass, each
+/// half of eight in one row or not).
 #[test]
 fn forces_added_by_rows_are_the_cell_by_cell_bits() {
     let block = Lattice::block([19, 3, 2], 0.1, [0.0; 3]).unwrap();
@@ -742,23 +743,29 @@ fn forces_added_by_rows_are_the_cell_by_cell_bits() {
     }) {
         let model = Model::new(l, mat(100.0, 0.3, 1.0), param).unwrap();
         let x = deformed(&model, 5);
-        let mut scalar = vec![Vec3::zeros(); x.len()];
-        model.internal_forces_scalar_with(&x, &mut model.workspace(), &mut scalar);
-        for threads in [1, 2] {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap();
-            let batched = pool.install(|| forces(&model, &x));
-            assert!(
-                batched
-                    .iter()
-                    .zip(&scalar)
-                    .all(|(p, q)| (0..3).all(|d| p[d].to_bits() == q[d].to_bits())),
-                "{} on {} cells, {threads} threads",
-                param.name(),
-                l.num_cells()
-            );
+        for precision in [Precision::F64, Precision::F32] {
+            let mut scalar = vec![Vec3::zeros(); x.len()];
+            model.internal_forces_scalar_in(precision, &x, &mut model.workspace(), &mut scalar);
+            for threads in [1, 2] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                let mut batched = vec![Vec3::zeros(); x.len()];
+                pool.install(|| {
+                    model.internal_forces_in(precision, &x, &mut model.workspace(), &mut batched)
+                });
+                assert!(
+                    batched
+                        .iter()
+                        .zip(&scalar)
+                        .all(|(p, q)| (0..3).all(|d| p[d].to_bits() == q[d].to_bits())),
+                    "{} on {} cells, {}, {threads} threads",
+                    param.name(),
+                    l.num_cells(),
+                    precision.name()
+                );
+            }
         }
     }
 }
