@@ -20,6 +20,22 @@ pub fn as_arrays(v: &[Vec3]) -> &[[f64; 3]] {
     unsafe { std::slice::from_raw_parts(v.as_ptr().cast::<[f64; 3]>(), v.len()) }
 }
 
+/// [`as_arrays`] of a mutable slice.
+pub(crate) fn as_arrays_mut(v: &mut [Vec3]) -> &mut [[f64; 3]] {
+    // SAFETY: as `as_arrays`; the borrow is handed on.
+    unsafe { std::slice::from_raw_parts_mut(v.as_mut_ptr().cast::<[f64; 3]>(), v.len()) }
+}
+
+/// A deterministic pseudo-random number in [-1, 1) (a linear congruential
+/// step of `seed`), for the unit tests' random inputs.
+#[cfg(test)]
+pub(crate) fn noise(seed: &mut u64) -> f64 {
+    *seed = seed
+        .wrapping_mul(6_364_136_223_846_793_005)
+        .wrapping_add(1_442_695_040_888_963_407);
+    (*seed >> 11) as f64 / (1u64 << 52) as f64 - 1.0
+}
+
 /// Runs `f` on a pool of `threads` threads (the unit tests' check that
 /// results do not depend on the thread count).
 #[cfg(test)]

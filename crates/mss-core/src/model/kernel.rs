@@ -3656,13 +3656,7 @@ pub(crate) fn forces_batch_f32(
 mod tests {
     use super::*;
 
-    /// A deterministic pseudo-random number in [-1, 1).
-    fn noise(seed: &mut u64) -> f64 {
-        *seed = seed
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        (*seed >> 11) as f64 / (1u64 << 52) as f64 - 1.0
-    }
+    use crate::noise;
 
     /// The factored spreading of the corner patterns against adding each
     /// pattern to each corner by its signs, with and without the hourglass

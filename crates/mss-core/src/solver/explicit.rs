@@ -60,6 +60,9 @@
 
 use rayon::prelude::*;
 
+mod kick;
+use kick::{ChunkKick, all_finite, drift};
+
 use super::{
     Divergence, EXPLICIT_HINT, Integrator, Problem, SolverError, State, StepInfo,
     inverted_divergence,
@@ -622,11 +625,8 @@ impl Explicit {
                 alpha: d.alpha,
             };
             match extra {
-                Extra::None => kick.apply(vc, |_, force| force),
-                Extra::Contact => {
-                    let fc = &self.f_contact[range];
-                    kick.apply(vc, |k, force| force + fc[k])
-                }
+                Extra::None => kick.apply_with(vc, None),
+                Extra::Contact => kick.apply_with(vc, Some(&self.f_contact[range])),
                 Extra::All => {
                     let start = range.start;
                     kick.apply(vc, |k, mut force| {
@@ -678,12 +678,8 @@ impl Explicit {
                         sx.copy_from_slice(xc);
                         sv.copy_from_slice(vc);
                     }
-                    let mut ok = kick_chunk(ci, vc);
-                    for (xi, vi) in xc.iter_mut().zip(vc.iter()) {
-                        *xi += *vi * dt;
-                        ok &= all_finite(xi);
-                    }
-                    ok
+                    let ok = kick_chunk(ci, vc);
+                    ok & drift(xc, vc, dt)
                 };
             let chunks = state
                 .x
@@ -1269,49 +1265,6 @@ enum Extra {
     Contact,
     /// Contact (when there is any) and stiffness damping.
     All,
-}
-
-/// One chunk's share of a kick.
-struct ChunkKick<'a> {
-    f: &'a [Vec3],
-    masses: &'a [f64],
-    /// `h / m` per node.
-    scale: &'a [f64],
-    held: &'a [u8],
-    alpha: f64,
-}
-
-impl ChunkKick<'_> {
-    /// `v += F (h / m)` on the free components of the chunk's nodes, with
-    /// `F = complete(k, f - alpha m v)` (`k`: index in the chunk). Returns
-    /// false on non-finite values.
-    #[inline(always)]
-    fn apply(&self, v: &mut [Vec3], complete: impl Fn(usize, Vec3) -> Vec3) -> bool {
-        let mut ok = true;
-        let nodes = v.iter_mut().zip(self.f).zip(self.masses).zip(self.held);
-        for (k, ((((vi, &f), &m), &held), &scale)) in nodes.zip(self.scale).enumerate() {
-            let force = complete(k, f - *vi * (self.alpha * m));
-            let dv = force * scale;
-            if held == 0 {
-                *vi += dv;
-            } else {
-                for c in 0..3 {
-                    if held & (1 << c) == 0 {
-                        vi[c] += dv[c];
-                    }
-                }
-            }
-            ok &= all_finite(vi);
-        }
-        ok
-    }
-}
-
-/// Whether all three components are finite, without a branch (a
-/// short-circuiting test per value costs more than the kick it checks).
-#[inline(always)]
-fn all_finite(v: &Vec3) -> bool {
-    v.x.is_finite() & v.y.is_finite() & v.z.is_finite()
 }
 
 /// `out = a v`, rows in parallel (each row summed in a fixed order).
