@@ -103,6 +103,19 @@ pub trait Obstacle: Send + Sync + Debug {
     fn contains(&self, t: f64, p: Vec3) -> bool {
         self.penetration(t, p).is_some()
     }
+    /// Appends to `inside`, in order, the `k` for which `x[nodes[k]]` is
+    /// inside the obstacle at time `t`: exactly those of which
+    /// [`contains`](Self::contains) says so, which is what the default asks.
+    /// The explicit step asks it of all the surface nodes each sub-step;
+    /// obstacles override it to find their placement at `t` once rather than
+    /// per node.
+    fn nodes_inside(&self, t: f64, x: &[Vec3], nodes: &[u32], inside: &mut Vec<u32>) {
+        for (k, &n) in nodes.iter().enumerate() {
+            if self.contains(t, x[n as usize]) {
+                inside.push(k as u32);
+            }
+        }
+    }
     /// Velocity of the obstacle at time `t` (m/s).
     fn velocity(&self, t: f64) -> Vec3 {
         let _ = t;
@@ -453,6 +466,15 @@ impl Obstacle for Plane {
     fn contains(&self, t: f64, p: Vec3) -> bool {
         self.height(t, p) < 0.0
     }
+    fn nodes_inside(&self, t: f64, x: &[Vec3], nodes: &[u32], inside: &mut Vec<u32>) {
+        // `height`'s operations in its order, the offset found once.
+        let offset = self.path.offset(t);
+        for (k, &n) in nodes.iter().enumerate() {
+            if (x[n as usize] - self.point - offset).dot(&self.normal) < 0.0 {
+                inside.push(k as u32);
+            }
+        }
+    }
     path_motion!();
 }
 
@@ -466,6 +488,14 @@ impl Obstacle for Sphere {
     fn contains(&self, t: f64, p: Vec3) -> bool {
         // `ball`'s test: a NaN distance is not inside.
         (p - (self.centre + self.path.offset(t))).norm() < self.radius
+    }
+    fn nodes_inside(&self, t: f64, x: &[Vec3], nodes: &[u32], inside: &mut Vec<u32>) {
+        let centre = self.centre + self.path.offset(t);
+        for (k, &n) in nodes.iter().enumerate() {
+            if (x[n as usize] - centre).norm() < self.radius {
+                inside.push(k as u32);
+            }
+        }
     }
     path_motion!();
 }
@@ -726,6 +756,8 @@ pub struct Contact {
     node_omega_sq_per_stiffness: f64,
     /// Points that are nodes.
     node_points: Vec<u32>,
+    /// The node of each of `node_points`, in their order.
+    node_point_nodes: Vec<u32>,
     /// Points that are surface vertices.
     surface_points: Vec<u32>,
     /// Contact between the model's bodies (and of a body with itself).
@@ -829,8 +861,12 @@ impl Contact {
         let omega_sq_per_stiffness = bound(|_| true);
         let surface_omega_sq_per_stiffness = bound(|p| p.len > 1);
         let node_omega_sq_per_stiffness = bound(|p| p.len == 1);
-        let (node_points, surface_points) =
+        let (node_points, surface_points): (Vec<u32>, Vec<u32>) =
             (0..points.len() as u32).partition(|&i| points[i as usize].len == 1);
+        let node_point_nodes = node_points
+            .iter()
+            .map(|&i: &u32| points[i as usize].nodes[0])
+            .collect();
         Self {
             obstacles: obstacles
                 .into_iter()
@@ -841,6 +877,7 @@ impl Contact {
             surface_omega_sq_per_stiffness,
             node_omega_sq_per_stiffness,
             node_points,
+            node_point_nodes,
             surface_points,
             bodies: None,
         }
@@ -1199,6 +1236,20 @@ impl Contact {
         &self.node_points
     }
 
+    /// Appends to `inside` the node points (indices into the points, as
+    /// [`Contact::node_points`] gives them) inside any obstacle at time `t`
+    /// at positions `x`, obstacle by obstacle ([`Obstacle::nodes_inside`]):
+    /// a point inside two obstacles is listed twice.
+    pub fn node_points_inside(&self, t: f64, x: &[Vec3], inside: &mut Vec<u32>) {
+        for (o, _) in &self.obstacles {
+            let from = inside.len();
+            o.nodes_inside(t, x, &self.node_point_nodes, inside);
+            for k in &mut inside[from..] {
+                *k = self.node_points[*k as usize];
+            }
+        }
+    }
+
     /// Indices of the points that are embedded-surface vertices (integrated
     /// explicitly: they share their force among 8 nodes).
     pub fn surface_points(&self) -> &[u32] {
@@ -1492,6 +1543,19 @@ impl Obstacle for Placed {
     fn contains(&self, t: f64, p: Vec3) -> bool {
         self.inner.contains(t, p - self.shift())
     }
+    fn nodes_inside(&self, t: f64, x: &[Vec3], nodes: &[u32], inside: &mut Vec<u32>) {
+        let shift = self.shift();
+        if shift == Vec3::zeros() {
+            // `p - 0` is `p`: the inner obstacle's own scan says the same.
+            self.inner.nodes_inside(t, x, nodes, inside);
+            return;
+        }
+        for (k, &n) in nodes.iter().enumerate() {
+            if self.inner.contains(t, x[n as usize] - shift) {
+                inside.push(k as u32);
+            }
+        }
+    }
     fn velocity(&self, t: f64) -> Vec3 {
         self.inner.velocity(t)
     }
@@ -1577,7 +1641,65 @@ impl Obstacle for Steered {
 
 #[cfg(test)]
 mod tests {
-    use super::normal_force;
+    use super::*;
+
+    /// Every obstacle's scan of nodes says what `contains` says of each
+    /// node, in order: planes and spheres (their own scans) moving along a
+    /// path, a box (the default scan), each also shifted as a static
+    /// solve's insertion shifts it; points on the surface, inside, outside,
+    /// and NaN.
+    #[test]
+    fn the_scan_of_nodes_is_contains_of_each() {
+        let path = Path::new(vec![(0.0, Vec3::zeros()), (1.0, Vec3::new(0.1, -0.2, 0.3))]).unwrap();
+        let shapes: Vec<Box<dyn Obstacle>> = vec![
+            Box::new(Plane::new(Vec3::new(0.0, 0.0, 0.1), Vec3::new(0.2, 0.1, 1.0)).unwrap()),
+            Box::new(
+                Plane::new(Vec3::zeros(), Vec3::z())
+                    .unwrap()
+                    .moving(path.clone()),
+            ),
+            Box::new(
+                Sphere::new(Vec3::new(0.3, 0.2, 0.1), 0.25)
+                    .unwrap()
+                    .moving(path.clone()),
+            ),
+            Box::new(Cuboid::new(Vec3::zeros(), Vec3::new(0.4, 0.3, 0.2)).unwrap()),
+        ];
+        let mut seed = 5u64;
+        let mut x: Vec<Vec3> = (0..400)
+            .map(|_| {
+                Vec3::new(
+                    crate::noise(&mut seed),
+                    crate::noise(&mut seed),
+                    crate::noise(&mut seed),
+                ) * 0.6
+            })
+            .collect();
+        x.push(Vec3::new(f64::NAN, 0.0, 0.0));
+        x.push(Vec3::new(0.0, 0.0, 0.1));
+        let nodes: Vec<u32> = (0..x.len() as u32).rev().step_by(2).collect();
+        for shape in shapes {
+            let placed = Placed::new(shape);
+            for shift in [Vec3::zeros(), Vec3::new(0.05, 0.0, -0.1)] {
+                placed.set_shift(shift);
+                for t in [0.0, 0.4, 2.0] {
+                    let want: Vec<u32> = (0..nodes.len() as u32)
+                        .filter(|&k| placed.contains(t, x[nodes[k as usize] as usize]))
+                        .collect();
+                    let mut got = vec![7];
+                    placed.nodes_inside(t, &x, &nodes, &mut got);
+                    assert_eq!(got[0], 7, "appended");
+                    assert_eq!(
+                        got[1..],
+                        want[..],
+                        "{} at {t}, shift {shift:?}",
+                        placed.name()
+                    );
+                    assert!(!want.is_empty() && want.len() < nodes.len());
+                }
+            }
+        }
+    }
 
     /// The normal force starts from zero as a point enters, however fast
     /// (the damping is capped by the elastic force), never pulls, and its

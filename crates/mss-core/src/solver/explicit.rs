@@ -264,6 +264,9 @@ pub struct Explicit {
     candidates: Vec<u32>,
     /// Their contact forces at the start of the sub-step.
     g_start: Vec<Vec3>,
+    /// The node points inside an obstacle at the end of a sub-step
+    /// ([`Contact::node_points_inside`]).
+    inside: Vec<u32>,
     /// `mark[i] == stamp` marks the points in `candidates`.
     mark: Vec<u32>,
     stamp: u32,
@@ -383,6 +386,10 @@ impl Explicit {
             last_strain: 0.0,
             candidates: Vec::with_capacity(node_points),
             g_start: Vec::with_capacity(node_points),
+            // Every node point may be inside every obstacle at once.
+            inside: Vec::with_capacity(
+                node_points * problem.contact().map_or(0, |c| c.obstacles().count()),
+            ),
             mark: vec![0; problem.contact().map_or(0, Contact::num_points)],
             stamp: 0,
             contact_fresh: true,
@@ -836,13 +843,13 @@ impl Explicit {
         };
         let t1 = t0 + dt;
         let started = self.candidates.len();
-        for &i in contact.node_points() {
-            if self.mark[i as usize] == self.stamp {
-                continue;
-            }
-            let n = contact.point_node(i) as usize;
-            let inside = contact.obstacles().any(|(o, _)| o.contains(t1, state.x[n]));
-            if inside {
+        self.inside.clear();
+        contact.node_points_inside(t1, &state.x, &mut self.inside);
+        for &i in &self.inside {
+            // Marked: a candidate already (from the start, or inside an
+            // obstacle listed before).
+            if self.mark[i as usize] != self.stamp {
+                self.mark[i as usize] = self.stamp;
                 self.candidates.push(i);
                 self.g_start.push(Vec3::zeros());
             }
