@@ -474,14 +474,10 @@ pub enum CellMeasure {
     CorrectionForce,
 }
 
-/// Scratch memory of [`Model::internal_forces_with`]. The force pass
-/// writes each cell's corner forces straight into the nodes' sums (see
-/// [`Model::internal_forces_with`]), so it holds nothing today; it stays in
-/// the signature so that a future pass may keep scratch without an API change.
 /// The floating-point precision of the internal force pass.
 ///
 /// `F32` runs the cell kernel in single precision, 8 cells per AVX2 pass
-/// instead of 4, for interactive use; positions, velocities and the force
+/// instead of 4 (16 per AVX-512 pass instead of 8), for interactive use; positions, velocities and the force
 /// sums stay in `f64` (a sub-step moves a node by far less than the `f32`
 /// spacing of its coordinates, which `f32` positions would lose), and each
 /// cell's corners are taken relative to its corner 0 before rounding, so a

@@ -12,6 +12,7 @@ use crate::Vec3;
 pub(super) struct ChunkKick<'a> {
     /// The conservative force per node.
     pub f: &'a [Vec3],
+    /// The lumped mass per node (for mass damping).
     pub masses: &'a [f64],
     /// `h / m` per node.
     pub scale: &'a [f64],
