@@ -219,7 +219,12 @@ impl Plane {
     /// The signed height of `p` over the plane at time `t` (negative
     /// inside).
     fn height(&self, t: f64, p: Vec3) -> f64 {
-        (p - self.point - self.path.offset(t)).dot(&self.normal)
+        self.height_at(self.path.offset(t), p)
+    }
+
+    /// [`Plane::height`] with the path's offset at the time given.
+    fn height_at(&self, offset: Vec3, p: Vec3) -> f64 {
+        (p - self.point - offset).dot(&self.normal)
     }
 }
 
@@ -467,15 +472,23 @@ impl Obstacle for Plane {
         self.height(t, p) < 0.0
     }
     fn nodes_inside(&self, t: f64, x: &[Vec3], nodes: &[u32], inside: &mut Vec<u32>) {
-        // `height`'s operations in its order, the offset found once.
+        // The offset found once.
         let offset = self.path.offset(t);
         for (k, &n) in nodes.iter().enumerate() {
-            if (x[n as usize] - self.point - offset).dot(&self.normal) < 0.0 {
+            if self.height_at(offset, x[n as usize]) < 0.0 {
                 inside.push(k as u32);
             }
         }
     }
     path_motion!();
+}
+
+impl Sphere {
+    /// Whether `p` is inside the ball when its centre is at `centre`
+    /// (`ball`'s test: a NaN distance is not inside).
+    fn contains_around(&self, centre: Vec3, p: Vec3) -> bool {
+        (p - centre).norm() < self.radius
+    }
 }
 
 impl Obstacle for Sphere {
@@ -486,13 +499,12 @@ impl Obstacle for Sphere {
         ball(self.centre + self.path.offset(t), self.radius, p, None)
     }
     fn contains(&self, t: f64, p: Vec3) -> bool {
-        // `ball`'s test: a NaN distance is not inside.
-        (p - (self.centre + self.path.offset(t))).norm() < self.radius
+        self.contains_around(self.centre + self.path.offset(t), p)
     }
     fn nodes_inside(&self, t: f64, x: &[Vec3], nodes: &[u32], inside: &mut Vec<u32>) {
         let centre = self.centre + self.path.offset(t);
         for (k, &n) in nodes.iter().enumerate() {
-            if (x[n as usize] - centre).norm() < self.radius {
+            if self.contains_around(centre, x[n as usize]) {
                 inside.push(k as u32);
             }
         }

@@ -3119,6 +3119,8 @@ unsafe fn add_cells_through(
     unsafe { super::add_cells(cells, out, nodes.cast()) };
 }
 
+/// The AVX-512 `f64` pass of [`forces_batch_into_nodes`]: eight cells per
+/// pass, by runs where they lie in one row, the rest through `buf`.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
 unsafe fn forces_into_nodes_avx512(
