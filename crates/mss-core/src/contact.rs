@@ -736,6 +736,12 @@ impl Point {
             .map(|(&n, &w)| (n as usize, w))
     }
     fn position(&self, x: &[Vec3]) -> Vec3 {
+        if self.len == 1 && self.weights[0] == 1.0 {
+            // A node point is its node: the same bits as the node's own
+            // coordinates (a sum from zero would turn -0 into +0), as the
+            // explicit step's node updates read them.
+            return x[self.nodes[0] as usize];
+        }
         self.bound().map(|(n, w)| x[n] * w).sum()
     }
 }
@@ -1448,14 +1454,40 @@ impl Contact {
         v: &[Vec3],
         anchors: &mut Vec<Option<Vec3>>,
     ) {
+        self.update_anchors_keeping(which, t, x, v, anchors, |_, _| {});
+    }
+
+    /// [`Contact::update_anchors_of`], calling `kept(i, force)` for each
+    /// point `i` of `which` that touches and whose anchors on the obstacles
+    /// it touches all stay where they were (it sticks): `force` is its total
+    /// contact force with the updated anchors, for a node point (as
+    /// [`Contact::node_points`] gives them) what
+    /// [`Contact::node_point_force`] gives at the same `t`, `x` and `v`
+    /// (without the Jacobian), bit for bit, as those anchors are the ones it
+    /// was just evaluated with. The explicit step starts its next sub-step
+    /// with these forces instead of evaluating them again.
+    pub fn update_anchors_keeping(
+        &self,
+        which: &[u32],
+        t: f64,
+        x: &[Vec3],
+        v: &[Vec3],
+        anchors: &mut Vec<Option<Vec3>>,
+        mut kept: impl FnMut(u32, Vec3),
+    ) {
         if anchors.len() != self.num_anchors() {
             *anchors = vec![None; self.num_anchors()];
         }
         for &i in which {
-            self.update_point_anchors(i as usize, t, x, v, anchors);
+            if let Some(force) = self.update_point_anchors(i as usize, t, x, v, anchors) {
+                kept(i, force);
+            }
         }
     }
 
+    /// Updates point `i`'s anchors; returns its total force (summed over
+    /// the obstacles as [`Contact::node_point_force`] sums it) when it
+    /// touches and none of the anchors its force used moved.
     fn update_point_anchors(
         &self,
         i: usize,
@@ -1463,15 +1495,22 @@ impl Contact {
         x: &[Vec3],
         v: &[Vec3],
         anchors: &mut [Option<Vec3>],
-    ) {
+    ) -> Option<Vec3> {
         let nobs = self.obstacles.len();
         let point = &self.points[i];
         let (xp, vp) = (point.position(x), point.position(v));
+        let mut total: Option<Vec3> = None;
+        let mut anchors_stay = true;
         for j in 0..nobs {
             let k = i * nobs + j;
             let offset = self.obstacles[j].0.offset(t);
             let anchor = Self::anchor_of(anchors, k);
-            anchors[k] = match self.touch(i, j, t, xp, vp, anchor) {
+            let touch = self.touch(i, j, t, xp, vp, anchor);
+            if let Some((touch, _)) = &touch {
+                *total.get_or_insert(Vec3::zeros()) += touch.force;
+                anchors_stay &= anchor.is_some() && !touch.sliding;
+            }
+            anchors[k] = match touch {
                 None => None,
                 Some(_) if anchor.is_none() => Some(xp - offset),
                 Some((touch, _)) if touch.sliding => {
@@ -1490,6 +1529,7 @@ impl Contact {
                 Some(_) => anchors[k],
             };
         }
+        total.filter(|_| anchors_stay)
     }
 
     /// Contact force per node (N) at a state (for output).

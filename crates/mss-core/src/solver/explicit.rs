@@ -270,6 +270,13 @@ pub struct Explicit {
     /// `mark[i] == stamp` marks the points in `candidates`.
     mark: Vec<u32>,
     stamp: u32,
+    /// `kept_force[i]`, where `kept_at[i]` is the stamp of the sub-step
+    /// just ended: node point `i`'s contact force at that sub-step's end,
+    /// found by its anchors' update with anchors that stayed (it sticks),
+    /// which the next sub-step of the same call starts with instead of
+    /// evaluating it again ([`Contact::update_anchors_keeping`]).
+    kept_force: Vec<Vec3>,
+    kept_at: Vec<u32>,
     /// Whether the anchors may not tell which node points touch (a new call
     /// of [`Integrator::step`]: obstacles may have been moved by hand, or
     /// the state changed).
@@ -392,6 +399,8 @@ impl Explicit {
             ),
             mark: vec![0; problem.contact().map_or(0, Contact::num_points)],
             stamp: 0,
+            kept_force: vec![Vec3::zeros(); problem.contact().map_or(0, Contact::num_points)],
+            kept_at: vec![0; problem.contact().map_or(0, Contact::num_points)],
             contact_fresh: true,
             step_pairs: None,
             cache_key: 0,
@@ -779,9 +788,11 @@ impl Explicit {
             return;
         };
         self.clear_contact_forces();
+        let ended = self.stamp;
         self.stamp = self.stamp.wrapping_add(1);
         if self.stamp == 0 {
             self.mark.fill(0);
+            self.kept_at.fill(0);
             self.stamp = 1;
         }
         self.candidates.clear();
@@ -799,19 +810,29 @@ impl Explicit {
                 continue;
             }
             let n = contact.point_node(i) as usize;
-            let force = contact.node_point_force(
-                i,
-                state.time,
-                state.x[n],
-                state.v[n],
-                0.0,
-                &state.contact,
-                false,
-            );
-            if force.is_none() && !anchored {
-                continue;
-            }
-            let g = force.map_or(Vec3::zeros(), |(g, _)| g);
+            let g = if anchored && !verlet {
+                // Symplectic Euler's node contact is all implicit: the
+                // start's force is not used, and an anchored point is a
+                // candidate whether it touches or not.
+                Vec3::zeros()
+            } else if anchors_tell && self.kept_at[i as usize] == ended {
+                // The last sub-step's end, the same state, found it.
+                self.kept_force[i as usize]
+            } else {
+                let force = contact.node_point_force(
+                    i,
+                    state.time,
+                    state.x[n],
+                    state.v[n],
+                    0.0,
+                    &state.contact,
+                    false,
+                );
+                if force.is_none() && !anchored {
+                    continue;
+                }
+                force.map_or(Vec3::zeros(), |(g, _)| g)
+            };
             self.candidates.push(i);
             self.g_start.push(g);
             self.mark[i as usize] = self.stamp;
@@ -948,7 +969,18 @@ impl Explicit {
             return;
         };
         let (t, x, v) = (state.time, &state.x, &state.v);
-        contact.update_anchors_of(&self.candidates, t, x, v, &mut state.contact);
+        let (kept_force, kept_at, stamp) = (&mut self.kept_force, &mut self.kept_at, self.stamp);
+        contact.update_anchors_keeping(
+            &self.candidates,
+            t,
+            x,
+            v,
+            &mut state.contact,
+            |i, force| {
+                kept_force[i as usize] = force;
+                kept_at[i as usize] = stamp;
+            },
+        );
         contact.update_anchors_of(contact.surface_points(), t, x, v, &mut state.contact);
         match self.step_pairs.take() {
             Some(found) => contact.update_body_anchors_with(found, x, v, &mut state.contact),

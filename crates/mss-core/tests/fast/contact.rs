@@ -896,3 +896,81 @@ fn contains_is_exactly_penetration_is_some() {
     assert!(!obstacles[0].contains(0.0, Vec3::new(f64::NAN, 0.0, 0.0)));
     assert!(!obstacles[2].contains(0.0, Vec3::new(f64::NAN, 0.0, 0.0)));
 }
+
+/// The anchors' update of node points reports, for the points that stick,
+/// the force `node_point_force` gives after it, bit for bit (the explicit
+/// step starts its next sub-step with it), updates the anchors as
+/// `update_anchors_of` does, and reports no point that slides or leaves:
+/// a block sliding on a slope into a sphere, two obstacles at once, some
+/// points sticking, some sliding, some touching both.
+#[test]
+fn the_anchors_update_reports_the_force_of_the_points_that_stick() {
+    let mu = 0.5;
+    let a = 0.6f64.atan();
+    let g = Vec3::new(0.0, G * a.sin(), -G * a.cos());
+    let sphere = || Sphere::new(Vec3::new(0.05, 0.12, 0.0), 0.03).unwrap();
+    let model = block(0.0);
+    let s = ContactSettings::for_model(&model);
+    let friction = ContactSettings {
+        friction_static: mu,
+        friction_kinetic: 0.8 * mu,
+        ..s
+    };
+    let obstacles: Vec<(Box<dyn Obstacle>, ContactSettings)> =
+        vec![(ground(), friction), (Box::new(sphere()), friction)];
+    let contact = Contact::new(&model, obstacles);
+    let p = Problem::from_specs(
+        model,
+        &[],
+        &[LoadSpec::Gravity { g: g.into() }],
+        Damping::NONE,
+    )
+    .unwrap()
+    .with_contact(contact);
+    let contact = p.contact().unwrap();
+    let mut it = Explicit::new(&p, ExplicitOptions::default()).unwrap();
+    let mut s = State::at_rest(p.model());
+    let (mut stuck, mut slid, mut both) = (0, 0, 0);
+    while s.time < 0.15 {
+        // The anchors of the step's start against its end: some stay,
+        // some slide, some are new.
+        let anchors = s.contact.clone();
+        it.step(&p, &mut s).unwrap();
+        let after_step = std::mem::replace(&mut s.contact, anchors);
+        let nodes = contact.node_points();
+        let mut want = s.contact.clone();
+        contact.update_anchors_of(nodes, s.time, &s.x, &s.v, &mut want);
+        let mut got = s.contact.clone();
+        let mut kept = Vec::new();
+        contact.update_anchors_keeping(nodes, s.time, &s.x, &s.v, &mut got, |i, f| {
+            kept.push((i, f));
+        });
+        assert_eq!(got, want, "the same anchors at {}", s.time);
+        let mut k = 0;
+        for &i in nodes {
+            let n = contact.point_node(i) as usize;
+            let before =
+                contact.node_point_force(i, s.time, s.x[n], s.v[n], 0.0, &s.contact, false);
+            let after = contact.node_point_force(i, s.time, s.x[n], s.v[n], 0.0, &got, false);
+            if kept.get(k).is_some_and(|&(j, _)| j == i) {
+                let f = kept[k].1;
+                k += 1;
+                let after = after.expect("a kept point touches").0;
+                assert_eq!(f.map(f64::to_bits), after.map(f64::to_bits), "point {i}");
+                assert_eq!(before.map(|b| b.0), Some(f), "its anchors stayed");
+                stuck += 1;
+                let x = s.x[n];
+                both += usize::from(sphere().contains(s.time, x) && x.z < 0.0);
+            } else if after.is_some() && before.map(|b| b.0) != after.map(|a| a.0) {
+                slid += 1;
+            }
+        }
+        assert_eq!(k, kept.len(), "reported in the order asked");
+        s.contact = after_step;
+    }
+    assert!(
+        stuck > 0 && slid > 0,
+        "{stuck} stuck, {slid} slid or touched anew"
+    );
+    assert!(both > 0, "no point sticks on both obstacles");
+}

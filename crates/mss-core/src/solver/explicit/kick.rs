@@ -137,8 +137,27 @@ impl ChunkKick<'_> {
 }
 
 /// `x += dt v` over a chunk; false if a position is not finite. A flat
-/// loop over the components, which the compiler vectorizes.
+/// loop over the components, which the compiler vectorizes: eight at a
+/// time where the CPU has AVX-512 (compiled for the baseline, it took two,
+/// and a fifth of the sub-step's node passes), the same operations per
+/// component either way.
 pub(super) fn drift(x: &mut [Vec3], v: &[Vec3], dt: f64) -> bool {
+    #[cfg(target_arch = "x86_64")]
+    if crate::model::kernel::has_avx512() {
+        // SAFETY: the CPU has AVX-512F (checked just above).
+        return unsafe { drift_avx512(x, v, dt) };
+    }
+    drift_flat(x, v, dt)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+fn drift_avx512(x: &mut [Vec3], v: &[Vec3], dt: f64) -> bool {
+    drift_flat(x, v, dt)
+}
+
+#[inline(always)]
+fn drift_flat(x: &mut [Vec3], v: &[Vec3], dt: f64) -> bool {
     let xs = crate::as_arrays_mut(x).as_flattened_mut();
     let vs = crate::as_arrays(v).as_flattened();
     let mut finite = true;
