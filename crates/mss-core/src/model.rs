@@ -644,6 +644,122 @@ fn fill_cells(values: &mut [[f64; 4]], first: usize, per_cell: impl Fn(usize) ->
     }
 }
 
+/// `K v` of one cell (its 8 corners' `[x, y, z]`) with the 24 x 24 matrix
+/// `k`, each row summed in column order from its first product.
+fn rest_product(k: &[[f64; 24]; 24], cell: &[u32; 8], v: &[[f64; 3]]) -> [[f64; 3]; 8] {
+    let mut local = [0.0f64; 24];
+    for (a, &n) in cell.iter().enumerate() {
+        local[3 * a..3 * a + 3].copy_from_slice(&v[n as usize]);
+    }
+    let mut out = [[0.0f64; 3]; 8];
+    for (r, row) in k.iter().enumerate() {
+        let mut acc = row[0] * local[0];
+        for (kj, lj) in row.iter().zip(&local).skip(1) {
+            acc += kj * lj;
+        }
+        out[r / 3][r % 3] = acc;
+    }
+    out
+}
+
+/// [`rest_product`] of each cell of `cells`, all with the matrix `k`, into
+/// `out` (8 `[x, y, z, 0]` per cell): eight cells per pass on AVX-512, four
+/// on AVX2 and elsewhere, one cell per lane, every lane summing its rows in
+/// [`rest_product`]'s order (no fused multiply-add), so the same bits. The
+/// explicit step's frequency estimate takes tens of these products; cell by
+/// cell they were a 24-term dependent sum per row, and a twentieth of an
+/// interactive session's first minute of frames.
+fn rest_products(k: &[[f64; 24]; 24], cells: &[[u32; 8]], v: &[[f64; 3]], out: &mut [[f64; 4]]) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if kernel::has_avx512() {
+            // SAFETY: the CPU has AVX-512F (checked just above).
+            unsafe { rest_products_avx512(k, cells, v, out) };
+            return;
+        }
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2 (checked just above).
+            unsafe { rest_products_avx2(k, cells, v, out) };
+            return;
+        }
+    }
+    rest_products_lanes::<4>(k, cells, v, out);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+fn rest_products_avx512(
+    k: &[[f64; 24]; 24],
+    cells: &[[u32; 8]],
+    v: &[[f64; 3]],
+    out: &mut [[f64; 4]],
+) {
+    rest_products_lanes::<8>(k, cells, v, out);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn rest_products_avx2(
+    k: &[[f64; 24]; 24],
+    cells: &[[u32; 8]],
+    v: &[[f64; 3]],
+    out: &mut [[f64; 4]],
+) {
+    rest_products_lanes::<4>(k, cells, v, out);
+}
+
+/// [`rest_products`] with `L` cells per pass. Plain loops over the lanes,
+/// which the compiler turns into vector operations; no closures, which would
+/// not inherit the caller's target features.
+#[inline(always)]
+fn rest_products_lanes<const L: usize>(
+    k: &[[f64; 24]; 24],
+    cells: &[[u32; 8]],
+    v: &[[f64; 3]],
+    out: &mut [[f64; 4]],
+) {
+    assert_eq!(out.len(), 8 * cells.len(), "eight corners per cell");
+    let whole = cells.len() / L * L;
+    for (group, o) in cells[..whole]
+        .chunks_exact(L)
+        .zip(out.chunks_exact_mut(8 * L))
+    {
+        let mut local = [[0.0f64; L]; 24];
+        for (l, cell) in group.iter().enumerate() {
+            for (a, &n) in cell.iter().enumerate() {
+                for (d, c) in v[n as usize].iter().enumerate() {
+                    local[3 * a + d][l] = *c;
+                }
+            }
+        }
+        for (r, row) in k.iter().enumerate() {
+            let mut acc = [0.0f64; L];
+            for (acc, lj) in acc.iter_mut().zip(&local[0]) {
+                *acc = row[0] * lj;
+            }
+            for (kj, lj) in row.iter().zip(&local).skip(1) {
+                for (acc, lj) in acc.iter_mut().zip(lj) {
+                    *acc += kj * lj;
+                }
+            }
+            for (l, acc) in acc.iter().enumerate() {
+                o[8 * l + r / 3][r % 3] = *acc;
+            }
+        }
+        for corner in o.iter_mut() {
+            corner[3] = 0.0;
+        }
+    }
+    for (cell, o) in cells[whole..]
+        .iter()
+        .zip(out[8 * whole..].chunks_exact_mut(8))
+    {
+        for (o, p) in o.iter_mut().zip(rest_product(k, cell, v)) {
+            *o = [p[0], p[1], p[2], 0.0];
+        }
+    }
+}
+
 /// `*o += [f[0], f[1], f[2]]`, the same three additions on every path:
 /// x and y as one two-lane SSE2 addition where the target has it (all of
 /// x86_64), which halves the loads and stores of the force pass's node sums.
@@ -1677,24 +1793,19 @@ impl Model {
 
     /// `out = K0 v` with the rest stiffness of [`Model::rest_cell_matrices`],
     /// matrix-free, in the force pass's layer order (the same bits for any
-    /// thread count).
+    /// thread count); cells of one material several per SIMD pass
+    /// ([`rest_products`]), the same bits as cell by cell.
     fn rest_stiffness_mul(&self, mats: &[[[f64; 24]; 24]], v: &[Vec3], out: &mut [Vec3]) {
-        self.add_batches_by_layers(out, false, |first, _, fc, _| {
-            fill_cells(fc, first, |cell| {
-                let k = &mats[self.param_index(cell)];
-                let mut local = [0.0f64; 24];
-                for (a, &n) in self.cells[cell].iter().enumerate() {
-                    let p = &v[n as usize];
-                    local[3 * a] = p.x;
-                    local[3 * a + 1] = p.y;
-                    local[3 * a + 2] = p.z;
-                }
-                std::array::from_fn(|a| {
-                    std::array::from_fn(|d| {
-                        k[3 * a + d].iter().zip(&local).map(|(x, y)| x * y).sum()
-                    })
-                })
-            });
+        let vs = crate::as_arrays(v);
+        self.add_batches_by_layers(out, true, |first, uniform, fc, _| {
+            if uniform {
+                let cells = &self.cells[first..first + fc.len() / 8];
+                rest_products(&mats[self.param_index(first)], cells, vs, fc);
+            } else {
+                fill_cells(fc, first, |cell| {
+                    rest_product(&mats[self.param_index(cell)], &self.cells[cell], vs)
+                });
+            }
             false
         });
     }
@@ -2174,6 +2285,61 @@ impl CellBlocks<'_> {
         match self {
             CellBlocks::Rest(blocks) => blocks[b][a],
             CellBlocks::Deformed(jac) => symmetric_block(jac, b, a),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    use crate::noise;
+
+    /// The rest stiffness products several cells per pass are the cell by
+    /// cell products' bits, on every lane count and with a tail of fewer
+    /// cells than a pass; and `K0 v` is minus the tangent's action at rest
+    /// (its symmetric part there), whatever the thread count.
+    #[test]
+    fn rest_stiffness_products_are_the_cell_by_cell_bits() {
+        let lattice = hexmesh::Lattice::block([5, 3, 3], 0.01, [0.0; 3]).unwrap();
+        let param = HourglassControl::new(Box::new(VolumetricBarrier), 1.0).unwrap();
+        let model =
+            Model::new(&lattice, Material::new(3.0e4, 0.3, 1000.0).unwrap(), &param).unwrap();
+        let mut seed = 11u64;
+        let v: Vec<Vec3> = (0..model.num_nodes())
+            .map(|_| Vec3::new(noise(&mut seed), noise(&mut seed), noise(&mut seed)))
+            .collect();
+        let vs = crate::as_arrays(&v);
+        let mats = model.rest_cell_matrices();
+        let k = &mats[0];
+        let cells = &model.cells[..model.num_cells() - 2];
+        let want: Vec<[f64; 4]> = cells
+            .iter()
+            .flat_map(|c| rest_product(k, c, vs).map(|p| [p[0], p[1], p[2], 0.0]))
+            .collect();
+        let bits =
+            |o: &[[f64; 4]]| -> Vec<u64> { o.as_flattened().iter().map(|x| x.to_bits()).collect() };
+        let mut got = vec![[1.0; 4]; want.len()];
+        rest_products(k, cells, vs, &mut got);
+        assert_eq!(bits(&got), bits(&want));
+        rest_products_lanes::<8>(k, cells, vs, &mut got);
+        assert_eq!(bits(&got), bits(&want));
+        rest_products_lanes::<4>(k, cells, vs, &mut got);
+        assert_eq!(bits(&got), bits(&want));
+        let product = |threads| {
+            crate::on_threads(threads, || {
+                let mut out = vec![Vec3::zeros(); v.len()];
+                model.rest_stiffness_mul(&mats, &v, &mut out);
+                out
+            })
+        };
+        let (one, two) = (product(1), product(2));
+        assert_eq!(one, two);
+        let mut tangent = vec![Vec3::zeros(); v.len()];
+        model.tangent_mul(model.rest_positions(), &v, &mut tangent);
+        let scale = one.iter().map(|p| p.norm()).fold(0.0, f64::max);
+        for (k0v, tv) in one.iter().zip(&tangent) {
+            assert!((k0v + tv).norm() <= 1e-10 * scale, "{k0v:?} vs {tv:?}");
         }
     }
 }
