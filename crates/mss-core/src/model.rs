@@ -750,14 +750,9 @@ fn rest_products_lanes<const L: usize>(
             corner[3] = 0.0;
         }
     }
-    for (cell, o) in cells[whole..]
-        .iter()
-        .zip(out[8 * whole..].chunks_exact_mut(8))
-    {
-        for (o, p) in o.iter_mut().zip(rest_product(k, cell, v)) {
-            *o = [p[0], p[1], p[2], 0.0];
-        }
-    }
+    fill_cells(&mut out[8 * whole..], whole, |c| {
+        rest_product(k, &cells[c], v)
+    });
 }
 
 /// `*o += [f[0], f[1], f[2]]`, the same three additions on every path:

@@ -361,6 +361,7 @@ impl Explicit {
         };
         let n = problem.model().num_nodes();
         let node_points = problem.contact().map_or(0, |c| c.node_points().len());
+        let points = problem.contact().map_or(0, Contact::num_points);
         Ok(Self {
             opts,
             dt,
@@ -397,10 +398,10 @@ impl Explicit {
             inside: Vec::with_capacity(
                 node_points * problem.contact().map_or(0, |c| c.obstacles().count()),
             ),
-            mark: vec![0; problem.contact().map_or(0, Contact::num_points)],
+            mark: vec![0; points],
             stamp: 0,
-            kept_force: vec![Vec3::zeros(); problem.contact().map_or(0, Contact::num_points)],
-            kept_at: vec![0; problem.contact().map_or(0, Contact::num_points)],
+            kept_force: vec![Vec3::zeros(); points],
+            kept_at: vec![0; points],
             contact_fresh: true,
             step_pairs: None,
             cache_key: 0,
