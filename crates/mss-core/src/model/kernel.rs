@@ -1774,6 +1774,36 @@ fn edge_stretches_avx512(rest: f64, cells: &[[u32; 8]], x: &[[f64; 3]], out: &mu
     edge_stretches_avx2(rest, &cells[whole..], x, out_tail);
 }
 
+/// `out[i]` = the [`stretch`] of an edge along `d[i]` resting at `rest[i]`,
+/// the same operations per edge as [`stretch`] (so the same bits), several
+/// edges per SIMD operation where the CPU has AVX-512: the force pass's
+/// edges on the lattice's `+` faces, which no cell has at its corner 0.
+pub(crate) fn stretches(rest: &[f64], d: &[[f64; 3]], out: &mut [f64]) {
+    assert!(rest.len() == d.len() && d.len() == out.len());
+    #[cfg(target_arch = "x86_64")]
+    {
+        if has_avx512() {
+            // SAFETY: the CPU has AVX-512F, DQ and VL (checked just above).
+            unsafe { stretches_avx512(rest, d, out) };
+            return;
+        }
+    }
+    stretches_body(rest, d, out);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
+unsafe fn stretches_avx512(rest: &[f64], d: &[[f64; 3]], out: &mut [f64]) {
+    stretches_body(rest, d, out);
+}
+
+#[inline(always)]
+fn stretches_body(rest: &[f64], d: &[[f64; 3]], out: &mut [f64]) {
+    for ((o, d), rest) in out.iter_mut().zip(d).zip(rest) {
+        *o = stretch(*rest, *d);
+    }
+}
+
 /// [`edge_stretches_batch`] written straight into the edge stretches by node
 /// `nodes` (each cell's at its corner 0), where the CPU runs the AVX-512
 /// pass (returns false, having done nothing, where it does not): eight
@@ -2941,7 +2971,6 @@ fn forces_batch_body<P: Pack, G, W, S>(
         gather,
         gather_edges: gather_w,
         scatter,
-        tail,
     } = moves;
     let width = P::WIDTH;
     let groups = cells.len() / width;
@@ -2955,29 +2984,35 @@ fn forces_batch_body<P: Pack, G, W, S>(
         cell_forces_with_edges(p, &xl, &wl, &mut f);
         scatter(&f, og);
     }
-    for (c, o) in cells[groups * width..]
-        .iter()
-        .zip(out[8 * groups * width..].chunks_exact_mut(8))
-    {
-        let f = tail(p, c, x, edges);
-        for (o, f) in o.iter_mut().zip(f) {
-            *o = [f[0], f[1], f[2], 0.0];
-        }
-    }
+    let rest = &cells[groups * width..];
+    let Some(last) = rest.last() else {
+        return;
+    };
+    // The cells after the last whole pack take one more pack, its spare
+    // lanes filled with copies of the last cell: a lane computes what the
+    // one-cell kernel does (the same operations, so the same bits), and a
+    // pack costs about what two cells one at a time do.
+    assert!(width <= MAX_PACK_WIDTH, "a pack of {width} cells");
+    let mut padded = [*last; MAX_PACK_WIDTH];
+    padded[..rest.len()].copy_from_slice(rest);
+    let padded = &padded[..width];
+    let mut f = [[P::cst(0.0); 3]; 8];
+    cell_forces_with_edges(p, &gather(padded, x), &gather_w(padded, edges), &mut f);
+    let mut spill = [[0.0; 4]; 8 * MAX_PACK_WIDTH];
+    scatter(&f, &mut spill[..8 * width]);
+    out[8 * groups * width..].copy_from_slice(&spill[..8 * rest.len()]);
 }
 
+/// The widest pack of [`forces_batch_body`] (sixteen `f32` of AVX-512).
+const MAX_PACK_WIDTH: usize = 16;
+
 /// How the batched kernel moves a batch's values into packs and out:
-/// corners, edge stretches, corner forces; and the kernel of the cells left
-/// over after the last whole pack.
+/// corners, edge stretches, corner forces.
 struct Moves<G, W, S> {
     gather: G,
     gather_edges: W,
     scatter: S,
-    tail: CellKernel,
 }
-
-/// The forces of one cell given the edge stretches by node.
-type CellKernel = fn(&CellParams, &[u32; 8], &[[f64; 3]], &[[f64; 3]]) -> [[f64; 3]; 8];
 
 /// [`forces_batch_avx2`] eight cells per pass in AVX-512 registers (twice
 /// the cells per instruction, and 32 registers instead of 16), the cells
@@ -3010,7 +3045,6 @@ fn forces_batch_avx512(
             scatter: |f: &[V3<avx2::F64x8>; 8], o: &mut [[f64; 4]]| unsafe {
                 avx2::scatter8_f64(f, o)
             },
-            tail: cell_forces_from_edges,
         },
     );
     forces_batch_avx2(p, tail, x, edges, out_tail);
@@ -3202,7 +3236,6 @@ fn forces_batch_avx2(
             gather: |c: &[[u32; 8]], x: &[[f64; 3]]| unsafe { avx2::gather4(c, x, ALL_CORNERS) },
             gather_edges: |c: &[[u32; 8]], e: &[[f64; 3]]| unsafe { avx2::gather_edges4(c, e) },
             scatter: |f: &[V3<avx2::F64x4>; 8], o: &mut [[f64; 4]]| unsafe { avx2::scatter4(f, o) },
-            tail: cell_forces_from_edges,
         },
     );
 }
@@ -3243,7 +3276,6 @@ pub(crate) fn forces_batch(
             gather: gather_corners::<LANES>,
             gather_edges: gather_edges::<f64, LANES>,
             scatter: scatter_corners::<f64, LANES>,
-            tail: cell_forces_from_edges,
         },
     );
 }
@@ -3584,7 +3616,6 @@ fn forces_batch_f32_avx512(
             scatter: |f: &[V3<avx2::F32x16>; 8], o: &mut [[f64; 4]]| unsafe {
                 avx2::scatter16(f, o)
             },
-            tail: cell_forces_from_edges_f32,
         },
     );
     forces_batch_f32_avx2(p, &cells[whole..], x, edges, out_tail);
@@ -3610,7 +3641,6 @@ fn forces_batch_f32_avx2(
             gather: |c: &[[u32; 8]], x: &[[f64; 3]]| unsafe { avx2::gather8_relative(c, x) },
             gather_edges: |c: &[[u32; 8]], e: &[[f64; 3]]| unsafe { avx2::gather_edges8(c, e) },
             scatter: |f: &[V3<avx2::F32x8>; 8], o: &mut [[f64; 4]]| unsafe { avx2::scatter8(f, o) },
-            tail: cell_forces_from_edges_f32,
         },
     );
 }
@@ -3649,7 +3679,6 @@ pub(crate) fn forces_batch_f32(
             gather: gather_corners_f32::<LANES_F32>,
             gather_edges: gather_edges::<f32, LANES_F32>,
             scatter: scatter_corners::<f32, LANES_F32>,
-            tail: cell_forces_from_edges_f32,
         },
     );
 }
@@ -3956,12 +3985,17 @@ mod tests {
         }
     }
 
+    /// A one-cell force kernel ([`cell_forces_from_edges`] and its `f32` twin).
+    type OneCell = fn(&CellParams, &[u32; 8], &[[f64; 3]], &[[f64; 3]]) -> [[f64; 3]; 8];
+
     /// Every instruction set's force pass and tangent action give the
     /// portable lanes' bits, cell by cell: AVX2 (4 cells per pass) and
     /// AVX-512 (8 per pass, the rest 4 at a time), where this CPU has them,
     /// and so does the `f32` force pass (8 and 16 per pass), for every
     /// term, on 37 cells (two sixteens, a four and a tail of one) distorted
-    /// into the corner barrier.
+    /// into the corner barrier; and the portable lanes give the one-cell
+    /// kernels' bits, those of the cells after the last whole pack too
+    /// (computed in a pack padded with copies of the last cell).
     #[test]
     fn every_instruction_set_gives_the_portable_bits() {
         let h = 0.01;
@@ -4016,7 +4050,6 @@ mod tests {
                     gather: gather_corners::<LANES>,
                     gather_edges: gather_edges::<f64, LANES>,
                     scatter: scatter_corners::<f64, LANES>,
-                    tail: cell_forces_from_edges,
                 },
             );
             let mut portable_tangent = vec![[0.0; 4]; 8 * n];
@@ -4040,8 +4073,27 @@ mod tests {
                     gather: gather_corners_f32::<LANES_F32>,
                     gather_edges: gather_edges::<f32, LANES_F32>,
                     scatter: scatter_corners::<f32, LANES_F32>,
-                    tail: cell_forces_from_edges_f32,
                 },
+            );
+            // Every cell, those of the last pack's spare lanes too, is what
+            // the one-cell kernel gives.
+            let cell_by_cell = |kernel: OneCell| -> Vec<u64> {
+                cells
+                    .iter()
+                    .flat_map(|c| kernel(p, c, &x, &edges))
+                    .flat_map(|f| [f[0], f[1], f[2], 0.0])
+                    .map(f64::to_bits)
+                    .collect()
+            };
+            assert_eq!(
+                bits(&portable),
+                cell_by_cell(cell_forces_from_edges),
+                "{p:?}"
+            );
+            assert_eq!(
+                bits(&portable_f32),
+                cell_by_cell(cell_forces_from_edges_f32),
+                "{p:?}"
             );
             let mut paths = 0;
             #[cfg(target_arch = "x86_64")]
