@@ -3480,7 +3480,15 @@ fn survey_avx512(
         x,
         parts,
         out_head,
-        |c: &[[u32; 8]], x: &[[f64; 3]]| unsafe { avx2::gather8_f64(c, x, ALL_CORNERS) },
+        // Cells in one row load their corners as runs of nodes (the same
+        // values as gathered, with a third of the loads).
+        |c: &[[u32; 8]], x: &[[f64; 3]]| unsafe {
+            if avx2::in_one_row(c) {
+                avx2::row_corners(c, x)
+            } else {
+                avx2::gather8_f64(c, x, ALL_CORNERS)
+            }
+        },
     );
     survey_avx2(p, &cells[whole..], x, parts, out_tail);
 }
