@@ -692,8 +692,8 @@ impl Explicit {
                  vc: &mut [Vec3],
                  saved: Option<(&mut [Vec3], &mut [Vec3])>| {
                     if let Some((sx, sv)) = saved {
-                        sx.copy_from_slice(xc);
-                        sv.copy_from_slice(vc);
+                        kick::copy_past_caches(sx, xc);
+                        kick::copy_past_caches(sv, vc);
                     }
                     let ok = kick_chunk(ci, vc);
                     ok & drift(xc, vc, dt)
