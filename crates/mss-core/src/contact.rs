@@ -54,9 +54,10 @@ use crate::{BlockCsr, Mat3, Model, Vec3};
 
 mod bodies;
 mod pair_tangent;
+pub(crate) use bodies::StepPairs;
 pub use bodies::{
     BodyContact, BodyContactError, DEFAULT_BODY_FREQUENCY_FRACTION, DEPTH_LIMIT, PERSIST_LIMIT,
-    SELF_EXCLUSION, StepPairs, TRIANGLE_PREFERENCE,
+    SELF_EXCLUSION, TRIANGLE_PREFERENCE,
 };
 
 /// The `velocity` and `offset` of an obstacle that follows its `path`.
@@ -942,9 +943,30 @@ impl Contact {
         f: &mut [Vec3],
         touched: &mut Vec<u32>,
     ) {
+        self.add_explicit_forces_with(None, t, x, v, anchors, f, touched);
+    }
+
+    /// [`Contact::add_explicit_forces`], with the body contact's pairs that
+    /// the last sub-step's end found at these positions, when the caller
+    /// vouches for them (see [`BodyContact::add_forces_with`]).
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn add_explicit_forces_with(
+        &self,
+        found: Option<&StepPairs>,
+        t: f64,
+        x: &[Vec3],
+        v: &[Vec3],
+        anchors: &[Option<Vec3>],
+        f: &mut [Vec3],
+        touched: &mut Vec<u32>,
+    ) {
         self.add_surface_point_forces(t, x, v, anchors, f, touched);
         if let Some(b) = &self.bodies {
-            b.add_forces_noting(x, v, self.body_anchors(anchors), f, touched);
+            let anchors = self.body_anchors(anchors);
+            match found {
+                Some(found) => b.add_forces_with(found, x, v, anchors, f, touched),
+                None => b.add_forces_noting(x, v, anchors, f, touched),
+            }
         }
     }
 
@@ -1048,7 +1070,7 @@ impl Contact {
     /// [`Contact::add_explicit_forces`] at the same time and positions,
     /// with one search of the body contact's pairs for both; returns those
     /// pairs for [`Contact::update_body_anchors_with`] after the step.
-    pub fn anchor_explicit_and_add_forces(
+    pub(crate) fn anchor_explicit_and_add_forces(
         &self,
         t1: f64,
         x: &[Vec3],
@@ -1071,11 +1093,12 @@ impl Contact {
     }
 
     /// [`Contact::update_body_anchors`] with the pairs
-    /// [`Contact::anchor_explicit_and_add_forces`] found at the same
-    /// positions and anchors (searched again at others).
-    pub fn update_body_anchors_with(
+    /// [`Contact::anchor_explicit_and_add_forces`] found at the positions
+    /// `x`, which the caller vouches for (see
+    /// [`BodyContact::update_anchors_with`]).
+    pub(crate) fn update_body_anchors_with(
         &self,
-        found: StepPairs,
+        found: &StepPairs,
         x: &[Vec3],
         v: &[Vec3],
         anchors: &mut Vec<Option<Vec3>>,

@@ -166,20 +166,25 @@ struct Entry {
 /// near it needs: its grown box, its plane, and the vectors whose dot
 /// products with `p - a` are the barycentric coordinates of `p`'s
 /// projection (computed once per search, not once per point).
+///
+/// Laid out so that what a point projecting inside needs (the plane, the
+/// barycentric vectors, the first corner) fills the first two cache lines
+/// of the record: a search reads thousands, from the second-level cache.
 #[derive(Debug, Clone, Copy, Default)]
+#[repr(C, align(64))]
 struct Geometry {
     triangle: u32,
     /// How far from the triangle a point still touches it (m): the depth
     /// limit in its body's cells; its box is grown by as much.
     reach: f64,
-    lo: Vec3,
-    hi: Vec3,
-    corners: [Vec3; 3],
     normal: Vec3,
     /// `(e2 x n) / |e1 x e2|`: `beta_b = (p - a) . to_b`.
     to_b: Vec3,
     /// `(n x e1) / |e1 x e2|`: `beta_c = (p - a) . to_c`.
     to_c: Vec3,
+    corners: [Vec3; 3],
+    lo: Vec3,
+    hi: Vec3,
 }
 
 impl Geometry {
@@ -226,6 +231,7 @@ impl Geometry {
 
     /// Where `p` is against the triangle, unless it is certainly no nearer
     /// than `beyond` (its distance is at least its gap to the plane).
+    #[inline(always)]
     fn closest(&self, p: Vec3, beyond: f64) -> Option<Closest> {
         let gap = self.normal.dot(&(p - self.corners[0]));
         let beta = self.barycentric(p);
@@ -261,14 +267,7 @@ impl Geometry {
         // to no point inside the third edge); at a corner of 90 degrees or
         // less, their common corner, but past an obtuse corner, inside
         // either edge.
-        let edge = |i: usize, j: usize| {
-            let e = t[j] - t[i];
-            let s = ((p - t[i]).dot(&e) / e.norm_squared()).clamp(0.0, 1.0);
-            let mut w = [0.0; 3];
-            w[i] = 1.0 - s;
-            w[j] = s;
-            ((p - (t[i] + e * s)).norm_squared(), w)
-        };
+        let edge = |i: usize, j: usize| closest_on_edge(t, p, i, j);
         // The nearer of two edges, the first of equals (in the order
         // (0, 1), (1, 2), (2, 0), as the tangent takes them).
         let nearer = |a: (f64, [f64; 3]), b: (f64, [f64; 3])| if b.0 < a.0 { b } else { a };
@@ -289,6 +288,19 @@ impl Geometry {
             normal: self.normal,
         })
     }
+}
+
+/// The squared distance from `p` to the edge from corner `i` to corner `j`
+/// of `t`, and the weights of its closest point. Inlined: returned through
+/// memory, the pair cost a store and a reload per edge on the search's path.
+#[inline(always)]
+fn closest_on_edge(t: &[Vec3; 3], p: Vec3, i: usize, j: usize) -> (f64, [f64; 3]) {
+    let e = t[j] - t[i];
+    let s = ((p - t[i]).dot(&e) / e.norm_squared()).clamp(0.0, 1.0);
+    let mut w = [0.0; 3];
+    w[i] = 1.0 - s;
+    w[j] = s;
+    ((p - (t[i] + e * s)).norm_squared(), w)
 }
 
 /// A triangle's normal times twice its area: summed over a point's own
@@ -457,12 +469,20 @@ struct Pair {
 
 /// The pairs an explicit step's end found
 /// ([`BodyContact::anchor_at_step_start_and_add_forces`]), kept for the
-/// anchors' update after the step ([`BodyContact::update_anchors_with`]):
-/// one search and one pass over the anchors fewer per step.
+/// anchors' update after the step ([`BodyContact::update_anchors_with`])
+/// and the forces the next sub-step starts with
+/// ([`BodyContact::add_forces_with`]): one search, one pass over the
+/// anchors and three keys of the positions fewer per step.
 #[derive(Debug, Clone)]
-pub struct StepPairs {
-    /// The positions' key they were found at.
+pub(crate) struct StepPairs {
+    /// The positions' key they were found at (checked in debug builds:
+    /// the explicit step hands them on only while it knows the positions
+    /// are those).
     key: u64,
+    /// What the search found at those positions, before the anchors had
+    /// their say ([`BodyContact::with_persisting`]).
+    searched: std::sync::Arc<Vec<Pair>>,
+    /// The pairs, with the anchors at the step's end.
     pairs: std::sync::Arc<Vec<Pair>>,
 }
 
@@ -1061,16 +1081,21 @@ impl BodyContact {
     /// The points the search finds inside a body at `x` (cached: a step
     /// asks two or three times at the same positions).
     fn searched(&self, x: &[Vec3]) -> std::sync::Arc<Vec<Pair>> {
+        self.searched_keyed(x).1
+    }
+
+    /// [`BodyContact::searched`], with the positions' key.
+    fn searched_keyed(&self, x: &[Vec3]) -> (u64, std::sync::Arc<Vec<Pair>>) {
         let key = self.positions_key(x);
         let mut cache = self.cache.lock();
         if let Some((k, pairs)) = cache.as_ref()
             && *k == key
         {
-            return pairs.clone();
+            return (key, pairs.clone());
         }
         let pairs = std::sync::Arc::new(self.pairs_of_candidates(x));
         *cache = Some((key, pairs.clone()));
-        pairs
+        (key, pairs)
     }
 
     /// `found` (in point order, deeper than `-margin` cells) with each
@@ -1445,7 +1470,8 @@ impl BodyContact {
                 continue;
             }
             let normal = area_normal(corners);
-            if !(normal.norm() > 0.0 && normal.norm().is_finite()) {
+            let square = normal.norm_squared();
+            if !(square > 0.0 && square.is_finite()) {
                 continue;
             }
             for &k in corner_near {
@@ -1548,6 +1574,30 @@ impl BodyContact {
     ) {
         let (x, v) = (self.carried(x), self.carried(v));
         let pairs = self.pairs(&x, anchors);
+        self.add_pair_forces(&pairs, &x, &v, anchors, f, touched);
+    }
+
+    /// [`BodyContact::add_forces_noting`] at the positions `x` where the
+    /// last sub-step's end found `found`, which the caller vouches for (the
+    /// next sub-step of the same call starts there; debug builds check the
+    /// key): what the search found there, with `anchors` (updated since)
+    /// having their say.
+    pub(crate) fn add_forces_with(
+        &self,
+        found: &StepPairs,
+        x: &[Vec3],
+        v: &[Vec3],
+        anchors: &[Option<Vec3>],
+        f: &mut [Vec3],
+        touched: &mut Vec<u32>,
+    ) {
+        let (x, v) = (self.carried(x), self.carried(v));
+        debug_assert_eq!(
+            found.key,
+            self.positions_key(&x),
+            "pairs of other positions"
+        );
+        let pairs = self.with_persisting(found.searched.clone(), &x, anchors, 0.0);
         self.add_pair_forces(&pairs, &x, &v, anchors, f, touched);
     }
 
@@ -1746,7 +1796,7 @@ impl BodyContact {
     /// pairs for [`BodyContact::update_anchors_with`] after the step.
     /// `anchors` holds one entry per point ([`BodyContact::num_points`]);
     /// of another length nothing is anchored.
-    pub fn anchor_at_step_start_and_add_forces(
+    pub(crate) fn anchor_at_step_start_and_add_forces(
         &self,
         x: &[Vec3],
         v: &[Vec3],
@@ -1755,7 +1805,8 @@ impl BodyContact {
         forces: Option<(&mut [Vec3], &mut Vec<u32>)>,
     ) -> StepPairs {
         let (xc, vc) = (self.carried(x), self.carried(v));
-        let pairs = self.pairs(&xc, anchors);
+        let (key, searched) = self.searched_keyed(&xc);
+        let pairs = self.with_persisting(searched.clone(), &xc, anchors, 0.0);
         if anchors.len() == self.points.len() {
             self.anchor_pairs_at_step_start(&pairs, &xc, &vc, dt, anchors);
         }
@@ -1763,7 +1814,8 @@ impl BodyContact {
             self.add_pair_forces(&pairs, &xc, &vc, anchors, f, touched);
         }
         StepPairs {
-            key: self.positions_key(&xc),
+            key,
+            searched,
             pairs,
         }
     }
@@ -1812,18 +1864,24 @@ impl BodyContact {
     }
 
     /// [`BodyContact::update_anchors`] with the pairs an explicit step's
-    /// end found ([`BodyContact::anchor_at_step_start_and_add_forces`]):
-    /// at the same positions and anchors, they are the pairs (searched
-    /// again when the positions differ).
-    pub fn update_anchors_with(
+    /// end found ([`BodyContact::anchor_at_step_start_and_add_forces`]) at
+    /// the positions `x`, which the caller vouches for (the kick after the
+    /// drift moves velocities only; debug builds check the key): at the
+    /// same positions and anchors, they are the pairs.
+    pub(crate) fn update_anchors_with(
         &self,
-        found: StepPairs,
+        found: &StepPairs,
         x: &[Vec3],
         v: &[Vec3],
         anchors: &mut [Option<Vec3>],
     ) {
         let (xc, vc) = (self.carried(x), self.carried(v));
-        if anchors.len() != self.points.len() || found.key != self.positions_key(&xc) {
+        debug_assert_eq!(
+            found.key,
+            self.positions_key(&xc),
+            "pairs of other positions"
+        );
+        if anchors.len() != self.points.len() {
             self.update_anchors(x, v, anchors);
             return;
         }
@@ -1982,6 +2040,24 @@ mod tests {
         .unwrap()
     }
 
+    /// `rest` with the nodes `upper` (a cube above another) moved down 2 mm
+    /// into the lower cube over 60 steps, across by 0.3 mm and turned by
+    /// 2 mrad about z per step: positions at step `s`.
+    fn sunk_and_turned(rest: &[Vec3], upper: std::ops::Range<usize>, s: f64) -> Vec<Vec3> {
+        let (dz, dx, angle) = (-0.002 * (s / 60.0).min(1.0), 3e-4 * s, 0.002 * s);
+        let (c, sn) = (angle.cos(), angle.sin());
+        let mut x = rest.to_vec();
+        for n in upper {
+            let p = rest[n] - Vec3::new(0.06, 0.05, 0.0);
+            x[n] = Vec3::new(
+                c * p.x - sn * p.y + 0.06 + dx,
+                sn * p.x + c * p.y + 0.05,
+                p.z + dz,
+            );
+        }
+        x
+    }
+
     fn same(a: &[Pair], b: &[Pair]) -> bool {
         a.len() == b.len()
             && a.iter().zip(b).all(|(p, q)| {
@@ -2062,19 +2138,7 @@ mod tests {
             let upper_nodes = model.bodies()[1].nodes.clone();
             let (mut rebuilt, mut kept, mut touching) = (0, 0, 0);
             for step in 0..120 {
-                let s = step as f64;
-                // Down 2 mm into the lower cube, across 3 cm, a turn about z.
-                let (dz, dx, angle) = (-0.002 * (s / 60.0).min(1.0), 3e-4 * s, 0.002 * s);
-                let (c, sn) = (angle.cos(), angle.sin());
-                let mut x = rest.clone();
-                for n in upper_nodes.clone() {
-                    let p = rest[n] - Vec3::new(0.06, 0.05, 0.0);
-                    x[n] = Vec3::new(
-                        c * p.x - sn * p.y + 0.06 + dx,
-                        sn * p.x + c * p.y + 0.05,
-                        p.z + dz,
-                    );
-                }
+                let x = sunk_and_turned(&rest, upper_nodes.clone(), step as f64);
                 let held = contact
                     .candidates
                     .lock()
@@ -2099,6 +2163,66 @@ mod tests {
             assert!(kept > 10 && rebuilt > 2, "kept {kept}, made {rebuilt}");
         }
     }
+    /// What the explicit step hands on from a sub-step's end (the search's
+    /// pairs, `StepPairs`) gives the anchors' update and the next
+    /// sub-step's start forces that a search of their own gives, bit for
+    /// bit: a cube sinking into another, sliding across it and turning
+    /// (new contacts, sticking and sliding ones, points kept on their
+    /// anchor's triangle), with friction and damping.
+    #[test]
+    fn the_pairs_handed_on_give_what_a_search_gives() {
+        let lower = cube(4, 0.025, [0.0, 0.0, 0.0]);
+        let upper = cube(5, 0.016, [0.02, 0.01, 0.1]);
+        let model = Model::union(&[lower, upper]).unwrap();
+        let contact =
+            BodyContact::new(&model, ContactSettings::for_bodies(&model), &[false, false]).unwrap();
+        let rest = model.rest_positions().to_vec();
+        let upper_nodes = model.bodies()[1].nodes.clone();
+        let dt = 1e-3;
+        // Then back the other way.
+        let placed = |s: f64| {
+            let s = if s < 80.0 { s } else { 160.0 - s };
+            sunk_and_turned(&rest, upper_nodes.clone(), s)
+        };
+        let mut anchors = vec![None; contact.num_points()];
+        let (mut touching, mut sliding_steps) = (0, 0);
+        for step in 1..140 {
+            let x = placed(step as f64);
+            let before = placed(step as f64 - 1.0);
+            let v: Vec<Vec3> = x.iter().zip(&before).map(|(a, b)| (a - b) / dt).collect();
+            let mut f = vec![Vec3::zeros(); x.len()];
+            let mut touched = Vec::new();
+            let found = contact.anchor_at_step_start_and_add_forces(
+                &x,
+                &v,
+                dt,
+                &mut anchors,
+                Some((&mut f, &mut touched)),
+            );
+            let mut searched_anchors = anchors.clone();
+            contact.update_anchors(&x, &v, &mut searched_anchors);
+            let kept_before = anchors.clone();
+            contact.update_anchors_with(&found, &x, &v, &mut anchors);
+            assert_eq!(anchors, searched_anchors, "step {step}: anchors");
+            sliding_steps += usize::from(
+                anchors
+                    .iter()
+                    .zip(&kept_before)
+                    .any(|(a, b)| a.is_some() && b.is_some() && a != b),
+            );
+            let (mut f_searched, mut f_handed) =
+                (vec![Vec3::zeros(); x.len()], vec![Vec3::zeros(); x.len()]);
+            let (mut t_searched, mut t_handed) = (Vec::new(), Vec::new());
+            contact.add_forces_noting(&x, &v, &anchors, &mut f_searched, &mut t_searched);
+            contact.add_forces_with(&found, &x, &v, &anchors, &mut f_handed, &mut t_handed);
+            assert_eq!(f_searched, f_handed, "step {step}: forces");
+            assert_eq!(t_searched, t_handed, "step {step}: nodes noted");
+            touching += usize::from(!found.pairs.is_empty());
+        }
+        assert!(touching > 100, "{touching}");
+        assert!(sliding_steps > 20, "{sliding_steps}");
+    }
+
     /// The tangent of body contact is the exact derivative of its forces:
     /// with friction (points sticking and sliding, anchored on the
     /// triangle they touch or on its neighbour), with damping (velocities

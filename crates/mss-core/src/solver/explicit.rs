@@ -282,7 +282,9 @@ pub struct Explicit {
     /// the state changed).
     contact_fresh: bool,
     /// The body contact's pairs at a sub-step's end, for its anchors'
-    /// update (one search fewer).
+    /// update and, when the next sub-step starts from those positions
+    /// (`cache_valid`), its start forces (one search and three keys of the
+    /// positions fewer).
     step_pairs: Option<crate::contact::StepPairs>,
     cache_key: u64,
     cache_time: f64,
@@ -741,7 +743,7 @@ impl Explicit {
                 if !cached {
                     self.conservative_forces(problem, state);
                 }
-                self.contact_start(problem, state, true);
+                self.contact_start(problem, state, true, cached);
                 self.damping_product(problem, &state.v);
                 let mut ok = self.kick_and_drift(problem, state, 0.5 * dt, dt, t1);
                 ok &= self.contact_end(problem, state, dt, t0, true);
@@ -759,7 +761,7 @@ impl Explicit {
                 if !cached {
                     self.conservative_forces(problem, state);
                 }
-                self.contact_start(problem, state, false);
+                self.contact_start(problem, state, false, cached);
                 self.damping_product(problem, &state.v);
                 let mut ok = self.kick_and_drift(problem, state, dt, dt, t1);
                 ok &= self.contact_end(problem, state, dt, t0, false);
@@ -783,8 +785,9 @@ impl Explicit {
     /// At the start of a sub-step: finds the node points that touch or are
     /// anchored, with their forces (into the first kick's contact forces
     /// when `verlet`: symplectic Euler's node contact is all implicit), and
-    /// the surface points' explicit forces.
-    fn contact_start(&mut self, problem: &Problem, state: &State, verlet: bool) {
+    /// the surface points' explicit forces. `cached`: the state is the last
+    /// sub-step's end, where its body contact's pairs were found.
+    fn contact_start(&mut self, problem: &Problem, state: &State, verlet: bool, cached: bool) {
         let Some(contact) = problem.contact() else {
             return;
         };
@@ -844,7 +847,9 @@ impl Explicit {
         }
         if contact.has_explicit_part() {
             let (f, touched) = (&mut self.f_contact, &mut self.contact_touched);
-            contact.add_explicit_forces(state.time, &state.x, &state.v, &state.contact, f, touched);
+            let found = self.step_pairs.as_ref().filter(|_| cached);
+            let (t, x, v) = (state.time, &state.x, &state.v);
+            contact.add_explicit_forces_with(found, t, x, v, &state.contact, f, touched);
         }
     }
 
@@ -983,7 +988,7 @@ impl Explicit {
             },
         );
         contact.update_anchors_of(contact.surface_points(), t, x, v, &mut state.contact);
-        match self.step_pairs.take() {
+        match self.step_pairs.as_ref() {
             Some(found) => contact.update_body_anchors_with(found, x, v, &mut state.contact),
             None => contact.update_body_anchors(x, v, &mut state.contact),
         }
@@ -1176,6 +1181,9 @@ impl Integrator for Explicit {
             .ok_or_else(|| bad("check interval"))?;
         self.good_valid = good_valid != 0;
         self.cache_valid = cache_valid;
+        // The pairs belong to this integrator's last sub-step, not to the
+        // restored one's.
+        self.step_pairs = None;
         self.last_time = f64::from_bits(last_time);
         self.cache_time = f64::from_bits(cache_time);
         self.cache_key = cache_key;
@@ -1206,6 +1214,7 @@ impl Explicit {
         {
             // The state was changed from outside since the forces were cached.
             self.cache_valid = false;
+            self.step_pairs = None;
         }
         if !self.good_valid || self.last_time != state.time {
             // A new or externally changed state: it is the reference to fall
