@@ -251,6 +251,12 @@ pub struct Explicit {
     f_contact: Vec<Vec3>,
     /// Nodes whose entry of `f_contact` may be non-zero.
     contact_touched: Vec<u32>,
+    /// Per chunk of [`CHUNK`] nodes, whether `contact_touched` has a node
+    /// in it ([`Explicit::mark_contact_chunks`]): the kicks read
+    /// `f_contact` there only. Contact touches a body's surface, a few
+    /// chunks of its nodes; reading the whole array in every kick cost the
+    /// two bodies of `bodies_contact` 2 % of their step.
+    contact_chunks: Vec<bool>,
     /// Entries of `contact_touched` after the last sub-step: more after a
     /// sub-step means something new touched (an impact), and the step is
     /// checked at once, as an impact can crush cells within a few sub-steps.
@@ -391,6 +397,11 @@ impl Explicit {
             },
             // Every node point may touch at once: no growth while stepping.
             contact_touched: Vec::with_capacity(node_points),
+            contact_chunks: if problem.contact().is_some() {
+                vec![false; n.div_ceil(CHUNK)]
+            } else {
+                Vec::new()
+            },
             touching: 0,
             start_touching: 0,
             last_strain: 0.0,
@@ -643,14 +654,17 @@ impl Explicit {
                 held: &held[range.clone()],
                 alpha: d.alpha,
             };
+            // Where no contact force is, adding its zeros is adding nothing.
+            let contact_here = self.contact_chunks.get(ci).copied().unwrap_or(false);
             match extra {
                 Extra::None => kick.apply_with(vc, None),
+                Extra::Contact if !contact_here => kick.apply_with(vc, None),
                 Extra::Contact => kick.apply_with(vc, Some(&self.f_contact[range])),
                 Extra::All => {
                     let start = range.start;
                     kick.apply(vc, |k, mut force| {
                         let i = start + k;
-                        if !self.f_contact.is_empty() {
+                        if contact_here {
                             force += self.f_contact[i];
                         }
                         if !self.kv.is_empty() {
@@ -745,11 +759,13 @@ impl Explicit {
                 }
                 self.contact_start(problem, state, true, cached);
                 self.damping_product(problem, &state.v);
+                self.mark_contact_chunks();
                 let mut ok = self.kick_and_drift(problem, state, 0.5 * dt, dt, t1);
                 ok &= self.contact_end(problem, state, dt, t0, true);
                 state.time = t1;
                 self.conservative_forces(problem, state);
                 self.damping_product(problem, &state.v);
+                self.mark_contact_chunks();
                 ok &= self.kick(problem, &mut state.v, 0.5 * dt);
                 self.cache_time = t1;
                 self.cache_valid = ok;
@@ -763,6 +779,7 @@ impl Explicit {
                 }
                 self.contact_start(problem, state, false, cached);
                 self.damping_product(problem, &state.v);
+                self.mark_contact_chunks();
                 let mut ok = self.kick_and_drift(problem, state, dt, dt, t1);
                 ok &= self.contact_end(problem, state, dt, t0, false);
                 state.time = t1;
@@ -770,6 +787,15 @@ impl Explicit {
                 self.update_anchors(problem, state);
                 ok
             }
+        }
+    }
+
+    /// Notes which chunks of nodes the kicks' contact forces touch (before
+    /// each kick: between them the contact adds forces).
+    fn mark_contact_chunks(&mut self) {
+        self.contact_chunks.fill(false);
+        for &n in &self.contact_touched {
+            self.contact_chunks[n as usize / CHUNK] = true;
         }
     }
 
