@@ -1089,7 +1089,7 @@ impl Contact {
         });
         let b = self.bodies.as_ref()?;
         let start = self.num_obstacle_anchors();
-        Some(b.anchor_at_step_start_and_add_forces(x, v, dt, &mut anchors[start..], forces))
+        Some(b.anchor_at_step_start_and_add_forces(x, v, dt, &mut anchors[start..], forces, false))
     }
 
     /// [`Contact::update_body_anchors`] with the pairs

@@ -163,41 +163,44 @@ struct Entry {
 }
 
 /// A candidate triangle at the current positions, with what every point
-/// near it needs: its grown box, its plane, and the vectors whose dot
-/// products with `p - a` are the barycentric coordinates of `p`'s
-/// projection (computed once per search, not once per point).
+/// near it needs: its plane, and the vectors whose dot products with
+/// `p - a` are the barycentric coordinates of `p`'s projection (computed
+/// once per search, not once per point).
 ///
-/// Laid out so that what a point projecting inside needs (the plane, the
-/// barycentric vectors, the first corner) fills the first two cache lines
-/// of the record: a search reads thousands, from the second-level cache.
+/// Two cache lines: what a point projecting inside needs (the plane, the
+/// barycentric vectors, the first corner), and nothing else. A search
+/// makes and reads thousands, and the step's own data should keep the
+/// second-level cache: a point beside the triangle reads its other corners
+/// from the positions.
 #[derive(Debug, Clone, Copy, Default)]
 #[repr(C, align(64))]
 struct Geometry {
     triangle: u32,
     /// How far from the triangle a point still touches it (m): the depth
-    /// limit in its body's cells; its box is grown by as much.
+    /// limit in its body's cells.
     reach: f64,
     normal: Vec3,
     /// `(e2 x n) / |e1 x e2|`: `beta_b = (p - a) . to_b`.
     to_b: Vec3,
     /// `(n x e1) / |e1 x e2|`: `beta_c = (p - a) . to_c`.
     to_c: Vec3,
-    corners: [Vec3; 3],
-    lo: Vec3,
-    hi: Vec3,
+    /// The first corner, `a`.
+    origin: Vec3,
+    /// `|e1 x e2|`, twice the area.
+    double_area: f64,
 }
 
 impl Geometry {
-    /// The triangle's geometry at `corners`, its box grown by `grow` (m,
-    /// its reach); `None` when it has no area.
+    /// The triangle's geometry at `corners`, within reach `grow` (m);
+    /// `None` when it has no area.
     fn new(triangle: u32, corners: [Vec3; 3], grow: f64) -> Option<Self> {
         let mut g = Self::default();
         g.set(triangle, corners, grow).then_some(g)
     }
 
     /// Makes `self` [`Geometry::new`]'s, in place (a search makes
-    /// thousands: built elsewhere and moved, each cost two copies of its
-    /// 200 bytes); false when the triangle has no area.
+    /// thousands: built elsewhere and moved, each cost two copies); false
+    /// when the triangle has no area.
     #[inline]
     fn set(&mut self, triangle: u32, corners: [Vec3; 3], grow: f64) -> bool {
         let [a, b, c] = corners;
@@ -212,9 +215,8 @@ impl Geometry {
         let normal = cross * inverse;
         self.triangle = triangle;
         self.reach = grow;
-        self.lo = a.inf(&b).inf(&c).add_scalar(-grow);
-        self.hi = a.sup(&b).sup(&c).add_scalar(grow);
-        self.corners = corners;
+        self.origin = a;
+        self.double_area = area2;
         self.normal = normal;
         self.to_b = e2.cross(&normal) * inverse;
         self.to_c = normal.cross(&e1) * inverse;
@@ -224,16 +226,23 @@ impl Geometry {
     /// The barycentric coordinates of `p`'s projection onto the plane
     /// (outside `[0, 1]` where it falls outside the triangle).
     fn barycentric(&self, p: Vec3) -> [f64; 3] {
-        let w = p - self.corners[0];
+        let w = p - self.origin;
         let (beta_b, beta_c) = (w.dot(&self.to_b), w.dot(&self.to_c));
         [1.0 - beta_b - beta_c, beta_b, beta_c]
     }
 
     /// Where `p` is against the triangle, unless it is certainly no nearer
-    /// than `beyond` (its distance is at least its gap to the plane).
+    /// than `beyond` (its distance is at least its gap to the plane);
+    /// `corners` gives the triangle's corners, asked for only when `p`
+    /// projects outside it.
     #[inline(always)]
-    fn closest(&self, p: Vec3, beyond: f64) -> Option<Closest> {
-        let gap = self.normal.dot(&(p - self.corners[0]));
+    fn closest(
+        &self,
+        p: Vec3,
+        beyond: f64,
+        corners: impl FnOnce() -> [Vec3; 3],
+    ) -> Option<Closest> {
+        let gap = self.normal.dot(&(p - self.origin));
         let beta = self.barycentric(p);
         if beta.iter().all(|&w| w >= 0.0) {
             return Some(Closest {
@@ -246,19 +255,7 @@ impl Geometry {
         if gap.abs() >= beyond {
             return None;
         }
-        let t = &self.corners;
-        // The distance to the corners' box is a lower bound of the
-        // distance to the triangle: most triangles near a point lie beside
-        // the one it projects onto, and are left here without their edges
-        // (a little margin for rounding keeps the pick the same).
-        let (lo, hi) = (
-            self.lo.add_scalar(self.reach),
-            self.hi.add_scalar(-self.reach),
-        );
-        let outside = Vec3::from_fn(|k, _| (lo[k] - p[k]).max(p[k] - hi[k]).max(0.0));
-        if outside.norm_squared() > beyond * beyond * (1.0 + 1e-9) {
-            return None;
-        }
+        let t = &corners();
         // Outside. Beyond the line of one edge only (the opposite
         // corner's weight negative), `p` lies in the cone from that corner
         // through the edge, so the segment from it to that corner crosses
@@ -303,10 +300,12 @@ fn closest_on_edge(t: &[Vec3; 3], p: Vec3, i: usize, j: usize) -> (f64, [f64; 3]
     ((p - (t[i] + e * s)).norm_squared(), w)
 }
 
-/// A triangle's normal times twice its area: summed over a point's own
-/// triangles, its outward direction.
-fn area_normal([a, b, c]: [Vec3; 3]) -> Vec3 {
-    (b - a).cross(&(c - a))
+impl Geometry {
+    /// The triangle's normal times twice its area: summed over a point's
+    /// own triangles, its outward direction.
+    fn area_normal(&self) -> Vec3 {
+        self.normal * self.double_area
+    }
 }
 
 /// The broad phase's grid: its entries bucketed by a hash of their grid
@@ -317,13 +316,20 @@ struct Grid {
     starts: Vec<u32>,
     entries: Vec<Entry>,
     geometry: Vec<Geometry>,
+    /// Per geometry, its corners' box grown by its reach.
+    boxes: Vec<(Vec3, Vec3)>,
     /// Per point, the sum of its own triangles' area-weighted normals at
     /// the positions searched (zero for points far from other bodies).
     point_normals: Vec<Vec3>,
 }
 
 impl Grid {
-    fn new(unsorted: Vec<Entry>, geometry: Vec<Geometry>, point_normals: Vec<Vec3>) -> Self {
+    fn new(
+        unsorted: Vec<Entry>,
+        geometry: Vec<Geometry>,
+        boxes: Vec<(Vec3, Vec3)>,
+        point_normals: Vec<Vec3>,
+    ) -> Self {
         let size = (2 * unsorted.len()).next_power_of_two().max(1);
         let mask = size as u64 - 1;
         let mut starts = vec![0u32; size + 1];
@@ -353,6 +359,7 @@ impl Grid {
             starts,
             entries,
             geometry,
+            boxes,
             point_normals,
         }
     }
@@ -392,9 +399,10 @@ struct Candidates {
     /// builds.
     needed: Vec<u32>,
     /// Every triangle with a corner among the near points (ascending),
-    /// with the index in `near` of each corner (`u32::MAX` for a corner
-    /// that is no near point): the near points' outward normals.
-    own: Vec<(u32, [u32; 3])>,
+    /// with its index in `needed` (`u32::MAX` for none: its geometry is
+    /// made apart) and the index in `near` of each corner (`u32::MAX` for a
+    /// corner that is no near point): the near points' outward normals.
+    own: Vec<(u32, u32, [u32; 3])>,
     /// The needed triangles' geometry at the last positions searched
     /// (kept to reuse its memory), and whether each has any (an area).
     geometry: Vec<Geometry>,
@@ -986,6 +994,7 @@ impl BodyContact {
         let size = self.grid_size;
         let mut entries = Vec::new();
         let mut geometry = Vec::new();
+        let mut boxes = Vec::new();
         let mut point_normals = vec![Vec3::zeros(); self.points.len()];
         for (t, tri) in self.triangles.iter().enumerate() {
             if !tri.nodes.iter().any(|&n| near[n as usize]) {
@@ -1016,7 +1025,7 @@ impl BodyContact {
                 continue;
             };
             // Every triangle of a near point is here: its normal is whole.
-            let normal = area_normal(corners);
+            let normal = g.area_normal();
             for &n in &tri.nodes {
                 if let Some(sum) = point_normals.get_mut(self.point_of_node[n as usize] as usize) {
                     *sum += normal;
@@ -1024,6 +1033,10 @@ impl BodyContact {
             }
             let index = geometry.len() as u32;
             geometry.push(g);
+            boxes.push((
+                a.inf(&b).inf(&c).add_scalar(-grow),
+                a.sup(&b).sup(&c).add_scalar(grow),
+            ));
             for i in first[0]..=last[0] {
                 for j in first[1]..=last[1] {
                     for k in first[2]..=last[2] {
@@ -1036,7 +1049,7 @@ impl BodyContact {
                 }
             }
         }
-        Grid::new(entries, geometry, point_normals)
+        Grid::new(entries, geometry, boxes, point_normals)
     }
 
     /// The points that may touch at `x` (inside another body's box, or of a
@@ -1170,8 +1183,9 @@ impl BodyContact {
         {
             return None;
         }
+        let corners = tri.nodes.map(|n| x[n as usize]);
         let mut g = Geometry::default();
-        if !g.set(t, tri.nodes.map(|n| x[n as usize]), 0.0) {
+        if !g.set(t, corners, 0.0) {
             return None;
         }
         let p = x[self.points[i] as usize];
@@ -1179,7 +1193,7 @@ impl BodyContact {
         if beyond.is_nan() || beyond < -TRIANGLE_PREFERENCE {
             return None;
         }
-        let near = g.closest(p, f64::INFINITY)?;
+        let near = g.closest(p, f64::INFINITY, || corners)?;
         let h = self.body_h[tri.body as usize];
         Some((-near.gap > -margin * h).then_some(Pair {
             point: pair.point,
@@ -1198,11 +1212,12 @@ impl BodyContact {
     fn persisting(&self, i: usize, p: Vec3, x: &[Vec3], anchors: &[Option<Vec3>]) -> Option<Pair> {
         let (t, _, _) = Self::anchor_of(anchors, i)?;
         let tri = self.triangles.get(t as usize)?;
+        let corners = tri.nodes.map(|n| x[n as usize]);
         let mut g = Geometry::default();
-        if !g.set(t, tri.nodes.map(|n| x[n as usize]), 0.0) {
+        if !g.set(t, corners, 0.0) {
             return None;
         }
-        let near = g.closest(p, f64::INFINITY)?;
+        let near = g.closest(p, f64::INFINITY, || corners)?;
         let limit = PERSIST_LIMIT * self.body_h[tri.body as usize];
         (near.gap < 0.0 && -near.gap < limit).then_some(Pair {
             point: i as u32,
@@ -1249,7 +1264,7 @@ impl BodyContact {
                 for &i in chunk {
                     let i = i as usize;
                     let p = x[self.points[i] as usize];
-                    if let Some(pair) = self.nearest(i, p, &keys) {
+                    if let Some(pair) = self.nearest(i, p, x, &keys) {
                         let h = self.body_h[self.triangles[pair.triangle as usize].body as usize];
                         if pair.depth > -margin * h {
                             out.push(pair);
@@ -1264,7 +1279,7 @@ impl BodyContact {
 
     /// The nearest triangle that point `i` at `p` projects onto, within the
     /// depth limit on either side (its depth may be negative: outside).
-    fn nearest(&self, i: usize, p: Vec3, keys: &Grid) -> Option<Pair> {
+    fn nearest(&self, i: usize, p: Vec3, x: &[Vec3], keys: &Grid) -> Option<Pair> {
         if !p.iter().all(|v| v.is_finite()) {
             return None;
         }
@@ -1278,35 +1293,46 @@ impl BodyContact {
         for key in cells.map(grid_key) {
             for e in keys.bucket(key) {
                 if e.key == key {
-                    self.consider(&mut best, p, e.body, &keys.geometry[e.geometry as usize]);
+                    let g = e.geometry as usize;
+                    self.consider(&mut best, p, x, e.body, &keys.geometry[g], keys.boxes[g]);
                 }
             }
         }
         best.pair()
     }
 
-    /// Counts triangle `g` (of body `body`) in `best`, the search of the
-    /// nearest triangle that `best`'s point at `p` projects onto.
-    fn consider(&self, best: &mut Nearest, p: Vec3, body: u32, g: &Geometry) {
+    /// Counts triangle `g` (of body `body`, its grown box `(lo, hi)`) in
+    /// `best`, the search of the nearest triangle that `best`'s point at
+    /// `p` projects onto (the positions `x`).
+    fn consider(
+        &self,
+        best: &mut Nearest,
+        p: Vec3,
+        x: &[Vec3],
+        body: u32,
+        g: &Geometry,
+        (lo, hi): (Vec3, Vec3),
+    ) {
         let i = best.point;
         let own = self.point_body[i];
         if body == own && !self.self_contact[own as usize] {
             return;
         }
-        if (0..3).any(|k| p[k] < g.lo[k] || p[k] > g.hi[k]) {
+        if (0..3).any(|k| p[k] < lo[k] || p[k] > hi[k]) {
             return;
         }
         if self.excluded(i, &self.triangles[g.triangle as usize]) {
             return;
         }
-        Self::weigh(best, p, g);
+        self.weigh(best, p, g, x);
     }
 
     /// Counts triangle `g`, which may touch `best`'s point at `p`, in
     /// `best`: [`BodyContact::consider`] past its checks, which a
     /// candidate list passed when it was made (its box check is implied by
     /// the distance within reach).
-    fn weigh(best: &mut Nearest, p: Vec3, g: &Geometry) {
+    #[inline(always)]
+    fn weigh(&self, best: &mut Nearest, p: Vec3, g: &Geometry, x: &[Vec3]) {
         let t = g.triangle;
         let faces = best.outward == Vec3::zeros() || best.outward.dot(&g.normal) < -FACING_COSINE;
         let slot = if faces {
@@ -1315,7 +1341,8 @@ impl BodyContact {
             &mut best.other
         };
         let beyond = slot.as_ref().map_or(f64::INFINITY, |(d, _)| *d);
-        let Some(near) = g.closest(p, beyond) else {
+        let corners = || self.triangles[t as usize].nodes.map(|n| x[n as usize]);
+        let Some(near) = g.closest(p, beyond, corners) else {
             return;
         };
         if near.distance >= g.reach {
@@ -1371,8 +1398,9 @@ impl BodyContact {
                                 let key = grid_key([a, b, c]);
                                 for e in keys.bucket(key) {
                                     let g = &keys.geometry[e.geometry as usize];
+                                    let (lo, hi) = keys.boxes[e.geometry as usize];
                                     let inside = (0..3)
-                                        .all(|k| p[k] >= g.lo[k] - skin && p[k] <= g.hi[k] + skin);
+                                        .all(|k| p[k] >= lo[k] - skin && p[k] <= hi[k] + skin);
                                     // Within reach plus the skin: a point and the
                                     // corners each move less than half the skin
                                     // while the lists hold, so a triangle farther
@@ -1380,8 +1408,12 @@ impl BodyContact {
                                     if e.key == key
                                         && inside
                                         && !self.excluded(i, &self.triangles[g.triangle as usize])
-                                        && g.closest(p, f64::INFINITY)
-                                            .is_some_and(|c| c.distance < g.reach + skin)
+                                        && g.closest(p, f64::INFINITY, || {
+                                            self.triangles[g.triangle as usize]
+                                                .nodes
+                                                .map(|n| x[n as usize])
+                                        })
+                                        .is_some_and(|c| c.distance < g.reach + skin)
                                     {
                                         list.push(g.triangle);
                                     }
@@ -1415,7 +1447,7 @@ impl BodyContact {
             }
             let corners = tri.nodes.map(|n| near_of_node[n as usize]);
             if corners.iter().any(|&k| k != u32::MAX) {
-                own.push((t as u32, corners));
+                own.push((t as u32, slot_of[t], corners));
             }
         }
         let mut offsets = Vec::with_capacity(near.len() + 1);
@@ -1462,19 +1494,26 @@ impl BodyContact {
                 corners.iter().all(|p| p.iter().all(|v| v.is_finite())) && g.set(t, corners, grow);
         }
         c.normals.fill(Vec3::zeros());
-        for (t, corner_near) in &c.own {
-            let tri = &self.triangles[*t as usize];
-            let corners = tri.nodes.map(|n| x[n as usize]);
-            // As the broad phase: a triangle it leaves out counts nowhere.
-            if !corners.iter().all(|p| p.iter().all(|v| v.is_finite())) {
-                continue;
-            }
-            let normal = area_normal(corners);
-            let square = normal.norm_squared();
-            if !(square > 0.0 && square.is_finite()) {
-                continue;
-            }
-            for &k in corner_near {
+        for &(t, slot, corner_near) in &c.own {
+            // As the broad phase: a triangle it leaves out (not finite, no
+            // area) counts nowhere.
+            let normal = if let Some(g) = c.geometry.get(slot as usize) {
+                if !c.valid[slot as usize] {
+                    continue;
+                }
+                g.area_normal()
+            } else {
+                let tri = &self.triangles[t as usize];
+                let corners = tri.nodes.map(|n| x[n as usize]);
+                if !corners.iter().all(|p| p.iter().all(|v| v.is_finite())) {
+                    continue;
+                }
+                let Some(g) = Geometry::new(t, corners, 0.0) else {
+                    continue;
+                };
+                g.area_normal()
+            };
+            for k in corner_near {
                 if let Some(sum) = c.normals.get_mut(k as usize) {
                     *sum += normal;
                 }
@@ -1496,7 +1535,7 @@ impl BodyContact {
                     let list = &c.slots[c.offsets[k] as usize..c.offsets[k + 1] as usize];
                     for &slot in list {
                         if c.valid[slot as usize] {
-                            Self::weigh(&mut best, p, &c.geometry[slot as usize]);
+                            self.weigh(&mut best, p, &c.geometry[slot as usize], x);
                         }
                     }
                     // Inside only (a point just outside is a candidate,
@@ -1786,7 +1825,7 @@ impl BodyContact {
         dt: f64,
         anchors: &mut [Option<Vec3>],
     ) {
-        self.anchor_at_step_start_and_add_forces(x, v, dt, anchors, None);
+        self.anchor_at_step_start_and_add_forces(x, v, dt, anchors, None, true);
     }
 
     /// [`BodyContact::anchor_at_step_start`], then
@@ -1795,7 +1834,12 @@ impl BodyContact {
     /// contact on the triangle it touches changes no pair); returns those
     /// pairs for [`BodyContact::update_anchors_with`] after the step.
     /// `anchors` holds one entry per point ([`BodyContact::num_points`]);
-    /// of another length nothing is anchored.
+    /// of another length nothing is anchored. With `cached`, the search
+    /// goes through the cache of the last positions searched; without, it
+    /// is made afresh and not kept: the explicit step, which hands the
+    /// pairs on itself, saves a key of the positions per step (the key of
+    /// the pairs handed on is then made in debug builds only, which check
+    /// it).
     pub(crate) fn anchor_at_step_start_and_add_forces(
         &self,
         x: &[Vec3],
@@ -1803,9 +1847,19 @@ impl BodyContact {
         dt: f64,
         anchors: &mut [Option<Vec3>],
         forces: Option<(&mut [Vec3], &mut Vec<u32>)>,
+        cached: bool,
     ) -> StepPairs {
         let (xc, vc) = (self.carried(x), self.carried(v));
-        let (key, searched) = self.searched_keyed(&xc);
+        let (key, searched) = if cached {
+            self.searched_keyed(&xc)
+        } else {
+            let key = if cfg!(debug_assertions) {
+                self.positions_key(&xc)
+            } else {
+                0
+            };
+            (key, std::sync::Arc::new(self.pairs_of_candidates(&xc)))
+        };
         let pairs = self.with_persisting(searched.clone(), &xc, anchors, 0.0);
         if anchors.len() == self.points.len() {
             self.anchor_pairs_at_step_start(&pairs, &xc, &vc, dt, anchors);
@@ -1959,7 +2013,7 @@ impl BodyContact {
         let keys = self.broad_phase(x, &self.near_points(x).1);
         (0..self.points.len())
             .map(|i| {
-                let pair = self.nearest(i, x[self.points[i] as usize], &keys)?;
+                let pair = self.nearest(i, x[self.points[i] as usize], x, &keys)?;
                 Some(Vec3::new(
                     f64::from(pair.triangle),
                     pair.beta[1],
@@ -2090,7 +2144,7 @@ mod tests {
                 continue;
             };
             let p = Vec3::new(2.0 * next(), 2.0 * next(), next());
-            let near = g.closest(p, f64::INFINITY).unwrap();
+            let near = g.closest(p, f64::INFINITY, || corners).unwrap();
             let q: Vec3 = (0..3).map(|k| corners[k] * near.beta[k]).sum();
             // The brute force: the projection if inside, else every edge.
             let beta = g.barycentric(p);
@@ -2198,6 +2252,8 @@ mod tests {
                 dt,
                 &mut anchors,
                 Some((&mut f, &mut touched)),
+                // Through the search's cache or not: the same pairs.
+                step % 2 == 0,
             );
             let mut searched_anchors = anchors.clone();
             contact.update_anchors(&x, &v, &mut searched_anchors);
