@@ -223,6 +223,12 @@ impl Geometry {
         true
     }
 
+    /// The triangle's normal times twice its area: summed over a point's
+    /// own triangles, its outward direction.
+    fn area_normal(&self) -> Vec3 {
+        self.normal * self.double_area
+    }
+
     /// The barycentric coordinates of `p`'s projection onto the plane
     /// (outside `[0, 1]` where it falls outside the triangle).
     fn barycentric(&self, p: Vec3) -> [f64; 3] {
@@ -298,14 +304,6 @@ fn closest_on_edge(t: &[Vec3; 3], p: Vec3, i: usize, j: usize) -> (f64, [f64; 3]
     w[i] = 1.0 - s;
     w[j] = s;
     ((p - (t[i] + e * s)).norm_squared(), w)
-}
-
-impl Geometry {
-    /// The triangle's normal times twice its area: summed over a point's
-    /// own triangles, its outward direction.
-    fn area_normal(&self) -> Vec3 {
-        self.normal * self.double_area
-    }
 }
 
 /// The broad phase's grid: its entries bucketed by a hash of their grid
@@ -1484,7 +1482,7 @@ impl BodyContact {
         }
         let c = held.as_mut().expect("made above");
         // The candidates' geometry now (in place: a search makes thousands
-        // and each is 200 bytes), and the near points' normals from all
+        // and each is two cache lines), and the near points' normals from all
         // their own triangles, as the broad phase makes them.
         for ((&t, g), valid) in c.needed.iter().zip(&mut c.geometry).zip(&mut c.valid) {
             let tri = &self.triangles[t as usize];
