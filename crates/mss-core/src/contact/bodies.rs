@@ -405,6 +405,13 @@ struct Candidates {
     /// (kept to reuse its memory), and whether each has any (an area).
     geometry: Vec<Geometry>,
     valid: Vec<bool>,
+    /// Per needed triangle, whether the last search wanted its geometry
+    /// (a point whose anchor decides it weighs none of its candidates).
+    wanted: Vec<bool>,
+    /// Per near point, its pair where its anchor decided it at the last
+    /// search ([`BodyContact::anchored_pair`]), `None` where it was
+    /// searched (empty: every point was).
+    decided: Vec<Option<Pair>>,
     /// Per near point, the sum of its own triangles' area-weighted normals
     /// at the last positions searched.
     normals: Vec<Vec3>,
@@ -1104,7 +1111,7 @@ impl BodyContact {
         {
             return (key, pairs.clone());
         }
-        let pairs = std::sync::Arc::new(self.pairs_of_candidates(x));
+        let pairs = std::sync::Arc::new(self.pairs_of_candidates(x, &[]));
         *cache = Some((key, pairs.clone()));
         (key, pairs)
     }
@@ -1208,18 +1215,33 @@ impl BodyContact {
     /// deeper than half a cell in one step (a fast impact) is still pushed
     /// back out of the side it came in through, not through the body.
     fn persisting(&self, i: usize, p: Vec3, x: &[Vec3], anchors: &[Option<Vec3>]) -> Option<Pair> {
+        let (g, corners) = self.anchor_geometry(i, x, anchors)?;
+        self.behind(i, p, &g, corners)
+    }
+
+    /// The geometry (grown by nothing) and corners at `x` of the triangle
+    /// point `i` is anchored to.
+    fn anchor_geometry(
+        &self,
+        i: usize,
+        x: &[Vec3],
+        anchors: &[Option<Vec3>],
+    ) -> Option<(Geometry, [Vec3; 3])> {
         let (t, _, _) = Self::anchor_of(anchors, i)?;
         let tri = self.triangles.get(t as usize)?;
         let corners = tri.nodes.map(|n| x[n as usize]);
-        let mut g = Geometry::default();
-        if !g.set(t, corners, 0.0) {
-            return None;
-        }
+        Some((Geometry::new(t, corners, 0.0)?, corners))
+    }
+
+    /// Point `i` at `p` against triangle `g` (at `corners`), when it is
+    /// behind its plane by less than [`PERSIST_LIMIT`] of that body's cells.
+    fn behind(&self, i: usize, p: Vec3, g: &Geometry, corners: [Vec3; 3]) -> Option<Pair> {
         let near = g.closest(p, f64::INFINITY, || corners)?;
-        let limit = PERSIST_LIMIT * self.body_h[tri.body as usize];
+        let body = self.triangles[g.triangle as usize].body;
+        let limit = PERSIST_LIMIT * self.body_h[body as usize];
         (near.gap < 0.0 && -near.gap < limit).then_some(Pair {
             point: i as u32,
-            triangle: t,
+            triangle: g.triangle,
             beta: near.beta,
             normal: near.normal,
             depth: -near.gap,
@@ -1462,6 +1484,8 @@ impl BodyContact {
             slots,
             geometry: vec![Geometry::default(); needed.len()],
             valid: vec![false; needed.len()],
+            wanted: vec![false; needed.len()],
+            decided: Vec::with_capacity(near.len()),
             normals: vec![Vec3::zeros(); near.len()],
             near,
             needed,
@@ -1472,7 +1496,15 @@ impl BodyContact {
     /// The points inside a body at `x` (as [`BodyContact::pairs_within`]
     /// with no margin finds them), from the candidate lists, made again
     /// when a point has moved more than half their skin.
-    fn pairs_of_candidates(&self, x: &[Vec3]) -> Vec<Pair> {
+    ///
+    /// With `anchors` (this contact's part of the state's; empty for none),
+    /// a point that its anchor decides ([`BodyContact::anchored_pair`])
+    /// is not searched: it comes as its anchor's pair, which is what
+    /// [`BodyContact::with_persisting`] makes of whatever a search finds
+    /// for it, at these anchors and at those the anchors' update leaves
+    /// (anchored on the same triangle). The result is then no search's,
+    /// but `with_persisting` turns it into the same pairs, bit for bit.
+    fn pairs_of_candidates(&self, x: &[Vec3], anchors: &[Option<Vec3>]) -> Vec<Pair> {
         if self.points.is_empty() {
             return Vec::new();
         }
@@ -1481,10 +1513,44 @@ impl BodyContact {
             *held = Some(self.build_candidates(x));
         }
         let c = held.as_mut().expect("made above");
+        // Which near points their anchors decide (in contact, most: they
+        // touched their anchor's triangle at the last sub-step's end).
+        let decided = &mut c.decided;
+        decided.clear();
+        let mut searched = 0;
+        if !anchors.is_empty() {
+            let (near, points) = (&c.near, &self.points);
+            decided.par_extend(near.par_iter().with_min_len(POINT_CHUNK).map(|&i| {
+                let p = x[points[i as usize] as usize];
+                self.anchored_pair(i as usize, p, x, anchors)
+            }));
+            searched = decided.iter().filter(|d| d.is_none()).count();
+        }
+        let every = decided.is_empty() || searched == decided.len();
+        if !every {
+            // Only the lists of the points left are weighed.
+            c.wanted.fill(false);
+            for (k, d) in decided.iter().enumerate() {
+                if d.is_none() {
+                    let list = &c.slots[c.offsets[k] as usize..c.offsets[k + 1] as usize];
+                    list.iter().for_each(|&slot| c.wanted[slot as usize] = true);
+                }
+            }
+        }
+        let wanted = |slot: usize| every || c.wanted[slot];
         // The candidates' geometry now (in place: a search makes thousands
         // and each is two cache lines), and the near points' normals from all
         // their own triangles, as the broad phase makes them.
-        for ((&t, g), valid) in c.needed.iter().zip(&mut c.geometry).zip(&mut c.valid) {
+        for (slot, ((&t, g), valid)) in c
+            .needed
+            .iter()
+            .zip(&mut c.geometry)
+            .zip(&mut c.valid)
+            .enumerate()
+        {
+            if !wanted(slot) {
+                continue;
+            }
             let tri = &self.triangles[t as usize];
             let corners = tri.nodes.map(|n| x[n as usize]);
             let grow = DEPTH_LIMIT * self.body_h[tri.body as usize];
@@ -1492,10 +1558,16 @@ impl BodyContact {
                 corners.iter().all(|p| p.iter().all(|v| v.is_finite())) && g.set(t, corners, grow);
         }
         c.normals.fill(Vec3::zeros());
+        let searches = |k: u32| every || decided.get(k as usize).is_some_and(Option::is_none);
         for &(t, slot, corner_near) in &c.own {
+            if !corner_near.iter().any(|&k| k != u32::MAX && searches(k)) {
+                continue;
+            }
             // As the broad phase: a triangle it leaves out (not finite, no
             // area) counts nowhere.
-            let normal = if let Some(g) = c.geometry.get(slot as usize) {
+            let normal = if let Some(g) = c.geometry.get(slot as usize)
+                && wanted(slot as usize)
+            {
                 if !c.valid[slot as usize] {
                     continue;
                 }
@@ -1524,6 +1596,10 @@ impl BodyContact {
             .map(|start| {
                 let mut out = Vec::new();
                 for k in start..(start + POINT_CHUNK).min(c.near.len()) {
+                    if let Some(Some(pair)) = c.decided.get(k) {
+                        out.push(*pair);
+                        continue;
+                    }
                     let i = c.near[k] as usize;
                     let p = x[self.points[i] as usize];
                     if !p.iter().all(|v| v.is_finite()) {
@@ -1544,6 +1620,38 @@ impl BodyContact {
             })
             .collect();
         per_chunk.into_iter().flatten().collect()
+    }
+
+    /// Point `i` at `p` against the triangle it is anchored to, when that
+    /// decides its pair whatever a search finds: it projects onto the
+    /// triangle within [`TRIANGLE_PREFERENCE`] (so a pair found elsewhere
+    /// gives way to it, [`BodyContact::preferred`]) and lies behind it by
+    /// less than [`PERSIST_LIMIT`] cells (so with no pair found it is kept,
+    /// [`BodyContact::persisting`]). `None` where the search has its say:
+    /// outside the band, in front of the plane (a pair found elsewhere
+    /// would be dropped, but the anchors' update forgets the anchor and
+    /// the next sub-step's start takes the search's pair), too deep, or
+    /// an anchor on the point's own body without self-contact.
+    fn anchored_pair(
+        &self,
+        i: usize,
+        p: Vec3,
+        x: &[Vec3],
+        anchors: &[Option<Vec3>],
+    ) -> Option<Pair> {
+        if !p.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+        let (g, corners) = self.anchor_geometry(i, x, anchors)?;
+        let body = self.triangles[g.triangle as usize].body;
+        if body == self.point_body[i] && !self.self_contact[body as usize] {
+            return None;
+        }
+        let beyond = g.barycentric(p).into_iter().fold(f64::INFINITY, f64::min);
+        if beyond.is_nan() || beyond < -TRIANGLE_PREFERENCE {
+            return None;
+        }
+        self.behind(i, p, &g, corners)
     }
 
     fn anchor_of(anchors: &[Option<Vec3>], i: usize) -> Option<(u32, f64, f64)> {
@@ -1856,7 +1964,10 @@ impl BodyContact {
             } else {
                 0
             };
-            (key, std::sync::Arc::new(self.pairs_of_candidates(&xc)))
+            (
+                key,
+                std::sync::Arc::new(self.pairs_of_candidates(&xc, anchors)),
+            )
         };
         let pairs = self.with_persisting(searched.clone(), &xc, anchors, 0.0);
         if anchors.len() == self.points.len() {
@@ -2202,7 +2313,7 @@ mod tests {
                     rebuilt += 1;
                 }
                 let grid = contact.pairs_within(&x, 0.0);
-                let lists = contact.pairs_of_candidates(&x);
+                let lists = contact.pairs_of_candidates(&x, &[]);
                 assert!(
                     same(&grid, &lists),
                     "step {step}: {} vs {} pairs",
@@ -2220,7 +2331,9 @@ mod tests {
     /// sub-step's start forces that a search of their own gives, bit for
     /// bit: a cube sinking into another, sliding across it and turning
     /// (new contacts, sticking and sliding ones, points kept on their
-    /// anchor's triangle), with friction and damping.
+    /// anchor's triangle), with friction and damping. Without the cache,
+    /// the points their anchors decide are not searched
+    /// (`BodyContact::anchored_pair`): the pairs are still a search's.
     #[test]
     fn the_pairs_handed_on_give_what_a_search_gives() {
         let lower = cube(4, 0.025, [0.0, 0.0, 0.0]);
@@ -2238,6 +2351,9 @@ mod tests {
         };
         let mut anchors = vec![None; contact.num_points()];
         let (mut touching, mut sliding_steps) = (0, 0);
+        // Points the search left to their anchors, and points searched
+        // beside them (in steps that do both).
+        let (mut decided, mut mixed) = (0, 0);
         for step in 1..140 {
             let x = placed(step as f64);
             let before = placed(step as f64 - 1.0);
@@ -2253,6 +2369,13 @@ mod tests {
                 // Through the search's cache or not: the same pairs.
                 step % 2 == 0,
             );
+            if let Some(c) = contact.candidates.lock().as_ref()
+                && step % 2 == 1
+            {
+                let by_anchor = c.decided.iter().filter(|d| d.is_some()).count();
+                decided += by_anchor;
+                mixed += usize::from(by_anchor > 0 && by_anchor < c.decided.len());
+            }
             let mut searched_anchors = anchors.clone();
             contact.update_anchors(&x, &v, &mut searched_anchors);
             let kept_before = anchors.clone();
@@ -2275,6 +2398,10 @@ mod tests {
         }
         assert!(touching > 100, "{touching}");
         assert!(sliding_steps > 20, "{sliding_steps}");
+        assert!(
+            decided > 1000 && mixed > 50,
+            "{decided} decided, {mixed} mixed"
+        );
     }
 
     /// The tangent of body contact is the exact derivative of its forces:
