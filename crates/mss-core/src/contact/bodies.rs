@@ -129,6 +129,13 @@ pub const FACING_COSINE: f64 = 0.25;
 /// runs that stopped); at half a triangle, none.
 pub const TRIANGLE_PREFERENCE: f64 = 0.5;
 
+/// Whether `p` projects onto triangle `g` within [`TRIANGLE_PREFERENCE`]
+/// (false for a position with no projection, NaN).
+fn projects_within_preference(g: &Geometry, p: Vec3) -> bool {
+    let beyond = g.barycentric(p).into_iter().fold(f64::INFINITY, f64::min);
+    beyond >= -TRIANGLE_PREFERENCE
+}
+
 /// Grid cells a lattice face's box may cover in the broad phase (see
 /// [`BodyContact`]'s `span_limit`).
 const LATTICE_SPAN_LIMIT: i64 = 64;
@@ -1012,10 +1019,8 @@ impl BodyContact {
             if !corners.iter().all(|p| p.iter().all(|v| v.is_finite())) {
                 continue;
             }
-            let (first, last) = (
-                grid_cell(a.inf(&b).inf(&c), size),
-                grid_cell(a.sup(&b).sup(&c), size),
-            );
+            let (lo, hi) = (a.inf(&b).inf(&c), a.sup(&b).sup(&c));
+            let (first, last) = (grid_cell(lo, size), grid_cell(hi, size));
             let span = (0..3).try_fold(1i64, |n, k| {
                 last[k]
                     .checked_sub(first[k])
@@ -1038,10 +1043,7 @@ impl BodyContact {
             }
             let index = geometry.len() as u32;
             geometry.push(g);
-            boxes.push((
-                a.inf(&b).inf(&c).add_scalar(-grow),
-                a.sup(&b).sup(&c).add_scalar(grow),
-            ));
+            boxes.push((lo.add_scalar(-grow), hi.add_scalar(grow)));
             for i in first[0]..=last[0] {
                 for j in first[1]..=last[1] {
                     for k in first[2]..=last[2] {
@@ -1183,19 +1185,12 @@ impl BodyContact {
         let i = pair.point as usize;
         let (t, _, _) = Self::anchor_of(anchors, i)?;
         let tri = self.triangles.get(t as usize)?;
-        if t == pair.triangle
-            || tri.body == self.point_body[i] && !self.self_contact[tri.body as usize]
-        {
+        if t == pair.triangle || !self.point_may_meet(i, tri.body) {
             return None;
         }
-        let corners = tri.nodes.map(|n| x[n as usize]);
-        let mut g = Geometry::default();
-        if !g.set(t, corners, 0.0) {
-            return None;
-        }
+        let (g, corners) = self.anchor_geometry(i, x, anchors)?;
         let p = x[self.points[i] as usize];
-        let beyond = g.barycentric(p).into_iter().fold(f64::INFINITY, f64::min);
-        if beyond.is_nan() || beyond < -TRIANGLE_PREFERENCE {
+        if !projects_within_preference(&g, p) {
             return None;
         }
         let near = g.closest(p, f64::INFINITY, || corners)?;
@@ -1334,8 +1329,7 @@ impl BodyContact {
         (lo, hi): (Vec3, Vec3),
     ) {
         let i = best.point;
-        let own = self.point_body[i];
-        if body == own && !self.self_contact[own as usize] {
+        if !self.point_may_meet(i, body) {
             return;
         }
         if (0..3).any(|k| p[k] < lo[k] || p[k] > hi[k]) {
@@ -1644,14 +1638,17 @@ impl BodyContact {
         }
         let (g, corners) = self.anchor_geometry(i, x, anchors)?;
         let body = self.triangles[g.triangle as usize].body;
-        if body == self.point_body[i] && !self.self_contact[body as usize] {
-            return None;
-        }
-        let beyond = g.barycentric(p).into_iter().fold(f64::INFINITY, f64::min);
-        if beyond.is_nan() || beyond < -TRIANGLE_PREFERENCE {
+        if !self.point_may_meet(i, body) || !projects_within_preference(&g, p) {
             return None;
         }
         self.behind(i, p, &g, corners)
+    }
+
+    /// Whether point `i` may touch a triangle of `body`: any other body's,
+    /// its own only where that body touches itself.
+    #[inline]
+    fn point_may_meet(&self, i: usize, body: u32) -> bool {
+        body != self.point_body[i] || self.self_contact[body as usize]
     }
 
     fn anchor_of(anchors: &[Option<Vec3>], i: usize) -> Option<(u32, f64, f64)> {
