@@ -1416,8 +1416,29 @@ impl Model {
 
     /// The stretch of every lattice edge at `xs`, into `edges` by the node it
     /// starts from and its axis: the cells' corner-0 edges in parallel, then
-    /// the leftovers. Each value is computed as [`kernel::cell_forces`] does.
-    fn edge_pass(&self, xs: &[[f64; 3]], edges: &mut [[f64; 3]], batched: bool) {
+    /// the leftovers. Each value is computed as [`kernel::cell_forces`] does
+    /// in `f64`; in `f32`, as [`kernel::seeded_stretch`] does.
+    fn edge_pass(
+        &self,
+        xs: &[[f64; 3]],
+        edges: &mut [[f64; 3]],
+        batched: bool,
+        precision: Precision,
+    ) {
+        match precision {
+            Precision::F64 => self.edge_pass_as::<false>(xs, edges, batched),
+            Precision::F32 => self.edge_pass_as::<true>(xs, edges, batched),
+        }
+    }
+
+    /// [`Model::edge_pass`]; `SEED`: the single-precision pass's stretches
+    /// ([`kernel::seeded_stretch`]).
+    fn edge_pass_as<const SEED: bool>(
+        &self,
+        xs: &[[f64; 3]],
+        edges: &mut [[f64; 3]],
+        batched: bool,
+    ) {
         let shared = SharedEdges(edges.as_mut_ptr());
         for body in &self.bodies {
             // The cells of a body all rest at its cell size.
@@ -1432,7 +1453,7 @@ impl Model {
                         // cell at most.
                         if batched
                             && unsafe {
-                                kernel::edge_stretches_into_nodes(
+                                kernel::edge_stretches_into_nodes::<SEED>(
                                     rest,
                                     group,
                                     xs,
@@ -1444,9 +1465,9 @@ impl Model {
                             continue;
                         }
                         if batched {
-                            kernel::edge_stretches_batch(rest, group, xs, w);
+                            kernel::edge_stretches_batch::<SEED>(rest, group, xs, w);
                         } else {
-                            kernel::edge_stretches_scalar(rest, group, xs, w);
+                            kernel::edge_stretches_scalar::<SEED>(rest, group, xs, w);
                         }
                         let s = shared;
                         for (cell, w) in group.iter().zip(w.iter()) {
@@ -1471,7 +1492,7 @@ impl Model {
                 *d = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
                 *rest = e.rest;
             }
-            kernel::stretches(&rest[..n], &d[..n], &mut stretches[..n]);
+            kernel::stretches::<SEED>(&rest[..n], &d[..n], &mut stretches[..n]);
             for (e, w) in batch.iter().zip(stretches) {
                 edges[e.node as usize][e.axis as usize] = w;
             }
@@ -1494,7 +1515,7 @@ impl Model {
         assert_eq!(out.len(), self.num_nodes(), "forces: one per node");
         let xs = crate::as_arrays(x);
         ws.edge_stretch.resize(self.num_nodes(), [0.0; 3]);
-        self.edge_pass(xs, &mut ws.edge_stretch, batched);
+        self.edge_pass(xs, &mut ws.edge_stretch, batched, precision);
         let edges = &ws.edge_stretch;
         self.add_batches_by_layers(out, batched, |first, uniform, fc, nodes| {
             let cells = &self.cells[first..first + fc.len() / 8];

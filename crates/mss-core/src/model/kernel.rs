@@ -431,6 +431,22 @@ pub(crate) fn stretch<T: Scalar>(rest: f64, d: V3<T>) -> T {
     T::cst(1.0) - T::cst(rest) / l
 }
 
+/// [`stretch`] of an edge resting at `rest` whose squared length is `q`,
+/// for the single-precision force pass: `1 / sqrt(q)` seeded in single
+/// precision ([`InverseSqrtSeed`]) and refined by one Newton step in double
+/// precision, `y (3/2 - q y^2 / 2)`, which squares the seed's relative
+/// error (about 1e-7) to about 1e-14; no division or square root in double
+/// precision, which bound the edge pass (a quarter of the single-precision
+/// force pass's time on AVX-512). The difference from [`stretch`], about
+/// 1e-14 in absolute terms, is far below the single precision in which the
+/// force kernel then uses the stretch (6e-8 of it).
+#[inline(always)]
+pub(crate) fn seeded_stretch<T: InverseSqrtSeed>(rest: f64, q: T) -> T {
+    let y = q.inverse_sqrt_seed();
+    let y = y * (T::cst(1.5) - q.scale(0.5) * y * y);
+    T::cst(1.0) - y.scale(rest)
+}
+
 /// Adds the forces `k w d` on `a` and `-k w d` on `b` of a spring along
 /// `d = x_b - x_a` with stretch `w` ([`stretch`]).
 #[inline(always)]
@@ -1515,6 +1531,33 @@ pub(crate) trait Pack: Scalar {
     fn pick_where_greater(self, other: Self, if_greater: Self, otherwise: Self) -> Self;
 }
 
+/// What the single-precision force pass's edge stretches need of a number
+/// type ([`seeded_stretch`]).
+pub(crate) trait InverseSqrtSeed: Scalar {
+    /// `1 / sqrt(self)` in single precision, per value: `self` rounded to
+    /// `f32`, its square root, one over it, back to `f64` (every step
+    /// rounded as IEEE says, so every number type gives the same bits).
+    fn inverse_sqrt_seed(self) -> Self;
+}
+
+impl InverseSqrtSeed for f64 {
+    #[inline(always)]
+    fn inverse_sqrt_seed(self) -> Self {
+        f64::from(1.0f32 / (self as f32).sqrt())
+    }
+}
+
+impl<E: Element, const L: usize> InverseSqrtSeed for Lanes<E, L> {
+    #[inline(always)]
+    fn inverse_sqrt_seed(self) -> Self {
+        let mut out = self;
+        for v in &mut out.0 {
+            *v = E::from_f64(v.to_f64().inverse_sqrt_seed());
+        }
+        out
+    }
+}
+
 impl<E: Element, const L: usize> Pack for Lanes<E, L> {
     const WIDTH: usize = L;
     #[inline(always)]
@@ -1682,7 +1725,7 @@ pub(crate) const CORNER_EDGES: [(usize, usize); 3] = [(1, 0), (3, 1), (4, 2)];
 /// `cells`, `L` cells per pass, into `out` (one `[x, y, z]` per cell); the
 /// lanes are filled by `gather` (corners 0, 1, 3 and 4 of `L` cells).
 #[inline(always)]
-fn edge_stretches_body<P: Pack>(
+fn edge_stretches_body<P: Pack + InverseSqrtSeed, const SEED: bool>(
     rest: f64,
     cells: &[[u32; 8]],
     x: &[[f64; 3]],
@@ -1695,7 +1738,7 @@ fn edge_stretches_body<P: Pack>(
         .zip(out.chunks_exact_mut(P::WIDTH))
     {
         let [origin, ends @ ..] = gather(cg, x);
-        let w = corner_stretches(rest, origin, ends);
+        let w = corner_stretches::<_, SEED>(rest, origin, ends);
         for (l, o) in og.iter_mut().enumerate() {
             *o = [w[0].lane(l), w[1].lane(l), w[2].lane(l)];
         }
@@ -1708,14 +1751,26 @@ fn edge_stretches_body<P: Pack>(
         for (e, &(corner, _)) in ends.iter_mut().zip(&CORNER_EDGES) {
             *e = x[c[corner] as usize];
         }
-        *o = corner_stretches(rest, x[c[0] as usize], ends);
+        *o = corner_stretches::<_, SEED>(rest, x[c[0] as usize], ends);
     }
 }
 
 /// The stretches of the three edges from `origin` to `ends` (along x, y, z),
 /// with one division for the three ([`inverses3`]).
 #[inline(always)]
-fn corner_stretches<T: Scalar>(rest: f64, origin: V3<T>, ends: [V3<T>; 3]) -> [T; 3] {
+fn corner_stretches<T: InverseSqrtSeed, const SEED: bool>(
+    rest: f64,
+    origin: V3<T>,
+    ends: [V3<T>; 3],
+) -> [T; 3] {
+    if SEED {
+        let mut w = [T::cst(0.0); 3];
+        for (w, e) in w.iter_mut().zip(ends) {
+            let d = sub(e, origin);
+            *w = seeded_stretch(rest, dot(d, d));
+        }
+        return w;
+    }
     let mut len = [T::cst(0.0); 3];
     for (l, e) in len.iter_mut().zip(ends) {
         let d = sub(e, origin);
@@ -1751,10 +1806,15 @@ fn gather_edge_ends<const L: usize>(cells: &[[u32; 8]], x: &[[f64; 3]]) -> [V3<L
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn edge_stretches_avx2(rest: f64, cells: &[[u32; 8]], x: &[[f64; 3]], out: &mut [[f64; 3]]) {
+fn edge_stretches_avx2<const SEED: bool>(
+    rest: f64,
+    cells: &[[u32; 8]],
+    x: &[[f64; 3]],
+    out: &mut [[f64; 3]],
+) {
     // The closure inherits this function's AVX2, so may call the AVX2
     // helpers safely.
-    edge_stretches_body(rest, cells, x, out, |c, x| {
+    edge_stretches_body::<_, SEED>(rest, cells, x, out, |c, x| {
         // SAFETY: this closure runs inside an AVX2 function.
         unsafe { avx2::gather4(c, x, EDGE_ENDS) }
     });
@@ -1764,43 +1824,52 @@ fn edge_stretches_avx2(rest: f64, cells: &[[u32; 8]], x: &[[f64; 3]], out: &mut 
 /// cells after the last whole eight four per pass (the same bits).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
-fn edge_stretches_avx512(rest: f64, cells: &[[u32; 8]], x: &[[f64; 3]], out: &mut [[f64; 3]]) {
+fn edge_stretches_avx512<const SEED: bool>(
+    rest: f64,
+    cells: &[[u32; 8]],
+    x: &[[f64; 3]],
+    out: &mut [[f64; 3]],
+) {
     let whole = cells.len() / 8 * 8;
     let (out_head, out_tail) = out.split_at_mut(whole);
     // SAFETY (the closure): it runs inside this AVX-512 function.
-    edge_stretches_body(rest, &cells[..whole], x, out_head, |c, x| unsafe {
+    edge_stretches_body::<_, SEED>(rest, &cells[..whole], x, out_head, |c, x| unsafe {
         avx2::gather8_f64(c, x, EDGE_ENDS)
     });
-    edge_stretches_avx2(rest, &cells[whole..], x, out_tail);
+    edge_stretches_avx2::<SEED>(rest, &cells[whole..], x, out_tail);
 }
 
 /// `out[i]` = the [`stretch`] of an edge along `d[i]` resting at `rest[i]`,
 /// the same operations per edge as [`stretch`] (so the same bits), several
 /// edges per SIMD operation where the CPU has AVX-512: the force pass's
 /// edges on the lattice's `+` faces, which no cell has at its corner 0.
-pub(crate) fn stretches(rest: &[f64], d: &[[f64; 3]], out: &mut [f64]) {
+pub(crate) fn stretches<const SEED: bool>(rest: &[f64], d: &[[f64; 3]], out: &mut [f64]) {
     assert!(rest.len() == d.len() && d.len() == out.len());
     #[cfg(target_arch = "x86_64")]
     {
         if has_avx512() {
             // SAFETY: the CPU has AVX-512F, DQ and VL (checked just above).
-            unsafe { stretches_avx512(rest, d, out) };
+            unsafe { stretches_avx512::<SEED>(rest, d, out) };
             return;
         }
     }
-    stretches_body(rest, d, out);
+    stretches_body::<SEED>(rest, d, out);
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
-unsafe fn stretches_avx512(rest: &[f64], d: &[[f64; 3]], out: &mut [f64]) {
-    stretches_body(rest, d, out);
+unsafe fn stretches_avx512<const SEED: bool>(rest: &[f64], d: &[[f64; 3]], out: &mut [f64]) {
+    stretches_body::<SEED>(rest, d, out);
 }
 
 #[inline(always)]
-fn stretches_body(rest: &[f64], d: &[[f64; 3]], out: &mut [f64]) {
+fn stretches_body<const SEED: bool>(rest: &[f64], d: &[[f64; 3]], out: &mut [f64]) {
     for ((o, d), rest) in out.iter_mut().zip(d).zip(rest) {
-        *o = stretch(*rest, *d);
+        *o = if SEED {
+            seeded_stretch(*rest, dot(*d, *d))
+        } else {
+            stretch(*rest, *d)
+        };
     }
 }
 
@@ -1814,7 +1883,7 @@ fn stretches_body(rest: &[f64], d: &[[f64; 3]], out: &mut [f64]) {
 /// # Safety
 /// `nodes` points to one `[f64; 3]` per node of `x`, and no other thread
 /// accesses those of the corners 0 of `cells` meanwhile.
-pub(crate) unsafe fn edge_stretches_into_nodes(
+pub(crate) unsafe fn edge_stretches_into_nodes<const SEED: bool>(
     rest: f64,
     cells: &[[u32; 8]],
     x: &[[f64; 3]],
@@ -1826,7 +1895,7 @@ pub(crate) unsafe fn edge_stretches_into_nodes(
         if has_avx512() {
             // SAFETY: the CPU has AVX-512F, DQ and VL (checked); `nodes` is
             // this function's contract.
-            unsafe { edge_stretches_into_nodes_avx512(rest, cells, x, buf, nodes) };
+            unsafe { edge_stretches_into_nodes_avx512::<SEED>(rest, cells, x, buf, nodes) };
             return true;
         }
     }
@@ -1836,7 +1905,7 @@ pub(crate) unsafe fn edge_stretches_into_nodes(
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,avx512f,avx512dq,avx512vl")]
-unsafe fn edge_stretches_into_nodes_avx512(
+unsafe fn edge_stretches_into_nodes_avx512<const SEED: bool>(
     rest: f64,
     cells: &[[u32; 8]],
     x: &[[f64; 3]],
@@ -1862,13 +1931,13 @@ unsafe fn edge_stretches_into_nodes_avx512(
                 assert!(c0.iter().all(|&n| n as usize + 8 <= x.len()));
                 let run = |k: usize| avx2::components(x.as_ptr().add(c0[k] as usize).cast());
                 let [origin, ends @ ..] = EDGE_ENDS.map(run);
-                let w = avx2::interleave(&corner_stretches(rest, origin, ends));
+                let w = avx2::interleave(&corner_stretches::<_, SEED>(rest, origin, ends));
                 let o = nodes.add(c0[0] as usize).cast::<f64>();
                 _mm512_storeu_pd(o, w[0]);
                 _mm512_storeu_pd(o.add(8), w[1]);
                 _mm512_storeu_pd(o.add(16), w[2]);
             } else {
-                edge_stretches_avx512(rest, group, x, &mut buf[..8]);
+                edge_stretches_avx512::<SEED>(rest, group, x, &mut buf[..8]);
                 write(group, &buf[..8]);
             }
         }
@@ -1876,26 +1945,26 @@ unsafe fn edge_stretches_into_nodes_avx512(
     let tail = &cells[whole..];
     if !tail.is_empty() {
         let w = &mut buf[..tail.len()];
-        edge_stretches_avx2(rest, tail, x, w);
+        edge_stretches_avx2::<SEED>(rest, tail, x, w);
         write(tail, w);
     }
 }
 
 /// [`edge_stretches_batch`] one cell at a time, without SIMD: the same
 /// operations per cell, so the same bits.
-pub(crate) fn edge_stretches_scalar(
+pub(crate) fn edge_stretches_scalar<const SEED: bool>(
     rest: f64,
     cells: &[[u32; 8]],
     x: &[[f64; 3]],
     out: &mut [[f64; 3]],
 ) {
-    edge_stretches_body(rest, cells, x, out, gather_edge_ends::<1>);
+    edge_stretches_body::<_, SEED>(rest, cells, x, out, gather_edge_ends::<1>);
 }
 
 /// The stretches of the edges at corner 0 of consecutive cells whose edges
 /// rest at `rest`, several cells per SIMD pass (AVX2 when the CPU has it):
 /// bitwise what [`cell_forces`] computes for the same edges.
-pub(crate) fn edge_stretches_batch(
+pub(crate) fn edge_stretches_batch<const SEED: bool>(
     rest: f64,
     cells: &[[u32; 8]],
     x: &[[f64; 3]],
@@ -1906,16 +1975,16 @@ pub(crate) fn edge_stretches_batch(
         if has_avx512() {
             // SAFETY: the CPU supports AVX-512F, DQ and VL (checked just
             // above), and with them AVX2.
-            unsafe { edge_stretches_avx512(rest, cells, x, out) };
+            unsafe { edge_stretches_avx512::<SEED>(rest, cells, x, out) };
             return;
         }
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU supports AVX2 (checked just above).
-            unsafe { edge_stretches_avx2(rest, cells, x, out) };
+            unsafe { edge_stretches_avx2::<SEED>(rest, cells, x, out) };
             return;
         }
     }
-    edge_stretches_body(rest, cells, x, out, gather_edge_ends::<LANES>);
+    edge_stretches_body::<_, SEED>(rest, cells, x, out, gather_edge_ends::<LANES>);
 }
 
 /// Gathers the 8 corners of `L` cells into lanes (portable path).
@@ -2171,6 +2240,31 @@ mod avx2 {
         load _mm512_loadu_ps, store _mm512_storeu_ps, max _mm512_max_ps, split split_f32x16,
         cmp cmp_f32x16, movemask mask_bits16, blend blend_f32x16
     );
+
+    // The inverse square root's seed: four or eight lanes converted to
+    // single precision, their root and reciprocal taken there (a quarter of
+    // the double-precision root's cost per lane on AVX-512), and widened.
+    impl super::InverseSqrtSeed for F64x4 {
+        #[inline(always)]
+        fn inverse_sqrt_seed(self) -> Self {
+            // SAFETY: AVX is available (see `avx_vector`).
+            unsafe {
+                let root = _mm_sqrt_ps(_mm256_cvtpd_ps(self.0));
+                Self(_mm256_cvtps_pd(_mm_div_ps(_mm_set1_ps(1.0), root)))
+            }
+        }
+    }
+
+    impl super::InverseSqrtSeed for F64x8 {
+        #[inline(always)]
+        fn inverse_sqrt_seed(self) -> Self {
+            // SAFETY: AVX-512F is available (F64x8 is made only where it is).
+            unsafe {
+                let root = _mm256_sqrt_ps(_mm512_cvtpd_ps(self.0));
+                Self(_mm512_cvtps_pd(_mm256_div_ps(_mm256_set1_ps(1.0), root)))
+            }
+        }
+    }
 
     /// An AVX-512 register made of two AVX2 ones: the moves of its cells
     /// in and out are those of each half's cells.
@@ -4142,7 +4236,7 @@ mod tests {
         let ebits =
             |o: &[[f64; 3]]| -> Vec<u64> { o.iter().flatten().map(|v| v.to_bits()).collect() };
         let mut expected = vec![[0.0; 3]; n];
-        edge_stretches_scalar(h, &cells, &x, &mut expected);
+        edge_stretches_scalar::<false>(h, &cells, &x, &mut expected);
         for (c, w) in cells.iter().zip(&expected) {
             for (ax, w) in w.iter().enumerate() {
                 let exact = edges[c[0] as usize][ax];
@@ -4152,22 +4246,66 @@ mod tests {
                 );
             }
         }
-        let mut out = vec![[0.0; 3]; n];
-        edge_stretches_body(h, &cells, &x, &mut out, gather_edge_ends::<LANES>);
-        assert_eq!(ebits(&out), ebits(&expected), "portable edge pass");
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::arch::is_x86_feature_detected!("avx2") {
-                // SAFETY: the CPU supports AVX2 (checked just above).
-                unsafe { edge_stretches_avx2(h, &cells, &x, &mut out) };
-                assert_eq!(ebits(&out), ebits(&expected), "AVX2 edge pass");
-            }
-            if has_avx512() {
-                // SAFETY: the CPU supports AVX-512F, DQ and VL.
-                unsafe { edge_stretches_avx512(h, &cells, &x, &mut out) };
-                assert_eq!(ebits(&out), ebits(&expected), "AVX-512 edge pass");
+        // The single-precision pass's seeded stretches: the exact stretch
+        // to the Newton step's 1e-14, far closer than the single precision
+        // (6e-8 of the stretch) the kernel then uses.
+        let mut seeded = vec![[0.0; 3]; n];
+        edge_stretches_scalar::<true>(h, &cells, &x, &mut seeded);
+        let mut worst = 0.0f64;
+        for (c, w) in cells.iter().zip(&seeded) {
+            for (ax, w) in w.iter().enumerate() {
+                let exact = edges[c[0] as usize][ax];
+                worst = worst.max((w - exact).abs());
             }
         }
+        assert!(worst <= 1e-13, "seeded stretches off by {worst:e}");
+        assert_ne!(
+            ebits(&seeded),
+            ebits(&expected),
+            "the seeded pass is another"
+        );
+        /// Every path of the edge pass gives the scalar path's bits.
+        fn same_on_every_path<const SEED: bool>(
+            h: f64,
+            cells: &[[u32; 8]],
+            x: &[[f64; 3]],
+            scalar: &[[f64; 3]],
+        ) {
+            let ebits =
+                |o: &[[f64; 3]]| -> Vec<u64> { o.iter().flatten().map(|v| v.to_bits()).collect() };
+            let mut out = vec![[0.0; 3]; cells.len()];
+            edge_stretches_body::<_, SEED>(h, cells, x, &mut out, gather_edge_ends::<LANES>);
+            assert_eq!(ebits(&out), ebits(scalar), "portable edge pass, {SEED}");
+            edge_stretches_batch::<SEED>(h, cells, x, &mut out);
+            assert_eq!(ebits(&out), ebits(scalar), "dispatched edge pass, {SEED}");
+            #[cfg(target_arch = "x86_64")]
+            {
+                if std::arch::is_x86_feature_detected!("avx2") {
+                    // SAFETY: the CPU supports AVX2 (checked just above).
+                    unsafe { edge_stretches_avx2::<SEED>(h, cells, x, &mut out) };
+                    assert_eq!(ebits(&out), ebits(scalar), "AVX2 edge pass, {SEED}");
+                }
+                if has_avx512() {
+                    // SAFETY: the CPU supports AVX-512F, DQ and VL.
+                    unsafe { edge_stretches_avx512::<SEED>(h, cells, x, &mut out) };
+                    assert_eq!(ebits(&out), ebits(scalar), "AVX-512 edge pass, {SEED}");
+                }
+            }
+        }
+        same_on_every_path::<false>(h, &cells, &x, &expected);
+        same_on_every_path::<true>(h, &cells, &x, &seeded);
+        let d: Vec<[f64; 3]> = cells
+            .iter()
+            .flat_map(|c| CORNER_EDGES.map(|(end, _)| sub(x[c[end] as usize], x[c[0] as usize])))
+            .collect();
+        let rests = vec![h; d.len()];
+        let mut w = vec![0.0; d.len()];
+        stretches::<true>(&rests, &d, &mut w);
+        let flat: Vec<f64> = seeded.iter().flatten().copied().collect();
+        assert!(
+            w.iter().zip(&flat).all(|(a, b)| a.to_bits() == b.to_bits()),
+            "leftover edges"
+        );
     }
 
     /// The explicit step's cell survey, on packs (portable lanes, the
