@@ -8,8 +8,9 @@
 //! Verlet at the stable step, one sub-step), on 1 and 2 threads, as the
 //! minimum over REPEATS timings (noise only adds time; CPU time on one
 //! thread, wall time on two), with the ratio to
-//! the baseline measured in the same run: a merged-spring scatter loop (each
-//! lattice edge and body diagonal once, 7 springs per cell, f64). The second
+//! the baseline timed beside it (each model's timings alternate with the
+//! baseline's): a merged-spring scatter loop (each lattice edge and body
+//! diagonal once, 7 springs per cell, f64, one thread). The second
 //! ratio is to the bandwidth bound: the bytes a step's arrays move, divided
 //! by the copy bandwidth measured here.
 //!
@@ -58,6 +59,34 @@ fn best(repeats: usize, mut f: impl FnMut()) -> f64 {
             }
         })
         .fold(f64::INFINITY, f64::min)
+}
+
+/// [`best`] of `f` and of `g` (the baseline), timed alternately:
+/// `f, g, f, g, ...`. On a shared machine whose speed drifts by 10-15 %
+/// within a run, a baseline timed minutes before the model it is compared
+/// with moved the ratio by as much; timed beside it, both see the same
+/// machine. `g` must be serial work (it is timed like `f`: CPU time on one
+/// thread, wall time otherwise, which for serial work is its own time).
+fn best_beside(repeats: usize, mut f: impl FnMut(), mut g: impl FnMut()) -> (f64, f64) {
+    let one_thread = rayon::current_num_threads() == 1;
+    let time = |h: &mut dyn FnMut()| {
+        let wall = Instant::now();
+        let cpu = cpu_seconds();
+        h();
+        if one_thread {
+            cpu_seconds() - cpu
+        } else {
+            wall.elapsed().as_secs_f64()
+        }
+    };
+    f();
+    g();
+    let (mut best_f, mut best_g) = (f64::INFINITY, f64::INFINITY);
+    for _ in 0..repeats {
+        best_f = best_f.min(time(&mut f));
+        best_g = best_g.min(time(&mut g));
+    }
+    (best_f, best_g)
 }
 
 /// [`best`] of single-threaded work (the baseline, the copy).
@@ -125,9 +154,9 @@ fn main() {
             precision.name()
         );
     }
-    // (threads, model, precision) -> step time (s), and the baseline.
-    let mut steps: Vec<(usize, &str, Precision, f64)> = Vec::new();
-    let mut baseline_one_thread = f64::NAN;
+    // (threads, model, precision) -> step time (s) and the baseline timed
+    // beside it (s).
+    let mut steps: Vec<(usize, &str, Precision, f64, f64)> = Vec::new();
     for threads in [1usize, 2] {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
@@ -136,22 +165,20 @@ fn main() {
         pool.install(|| {
             let base_model = Model::new(&lattice, material, &SpringsOnly).expect("model");
             let springs = merged_springs(&lattice, &base_model);
-            let x = perturbed(&base_model);
+            let x_base = perturbed(&base_model);
             let mut f = vec![Vec3::zeros(); nodes];
-            let baseline = best_serial(repeats, || spring_loop(&springs, &x, &mut f));
-            if threads == 1 {
-                baseline_one_thread = baseline;
-            }
+            let baseline = best_serial(repeats, || spring_loop(&springs, &x_base, &mut f));
             println!(
                 "\n{threads} thread(s): baseline (naive merged springs, {} springs, 1 thread) {:.2} ms \
-                 = {:.0} Mcell/s",
+                 = {:.0} Mcell/s; each ratio below is to the baseline timed beside its model \
+                 (alternately), the last column",
                 springs.len(),
                 baseline * 1e3,
                 cells as f64 / baseline / 1e6
             );
             println!(
-                "{:<26} {:>10} {:>10} {:>10} {:>10} {:>12}",
-                "model", "force ms", "/baseline", "step ms", "/baseline", "/bandwidth"
+                "{:<26} {:>10} {:>10} {:>10} {:>10} {:>12} {:>12}",
+                "model", "force ms", "/baseline", "step ms", "/baseline", "/bandwidth", "baseline ms"
             );
             let runs = models.iter().flat_map(|(name, param)| {
                 [Precision::F64, Precision::F32].map(|precision| (*name, param, precision))
@@ -161,9 +188,13 @@ fn main() {
                 let x = perturbed(&model);
                 let mut ws = model.workspace();
                 let mut f = vec![Vec3::zeros(); nodes];
-                let force = best(repeats, || {
-                    model.internal_forces_in(precision, &x, &mut ws, &mut f)
-                });
+                let mut f_base = vec![Vec3::zeros(); nodes];
+                let base_loop = || spring_loop(&springs, &x_base, &mut f_base);
+                let (force, base_force) = best_beside(
+                    repeats,
+                    || model.internal_forces_in(precision, &x, &mut ws, &mut f),
+                    base_loop,
+                );
                 let problem = Problem::new(model);
                 let options = ExplicitOptions {
                     precision,
@@ -172,35 +203,47 @@ fn main() {
                 let mut integ = Explicit::new(&problem, options).expect("explicit");
                 let mut state = State::at_rest(problem.model());
                 state.x = x.clone();
-                let step = best(repeats, || {
-                    integ.step(&problem, &mut state).expect("step");
-                }) / f64::from(integ.substeps());
-                steps.push((threads, name, precision, step));
+                let mut f_base = vec![Vec3::zeros(); nodes];
+                let (step, base_step) = best_beside(
+                    repeats,
+                    || {
+                        integ.step(&problem, &mut state).expect("step");
+                    },
+                    || spring_loop(&springs, &x_base, &mut f_base),
+                );
+                let step = step / f64::from(integ.substeps());
+                steps.push((threads, name, precision, step, base_step));
                 println!(
-                    "{:<26} {:>10.2} {:>10.2} {:>10.2} {:>10.2} {:>12.2}",
+                    "{:<26} {:>10.2} {:>10.2} {:>10.2} {:>10.2} {:>12.2} {:>12.2}",
                     format!("{name} {}", precision.name()),
                     force * 1e3,
-                    force / baseline,
+                    force / base_force,
                     step * 1e3,
-                    step / baseline,
-                    step / bound
+                    step / base_step,
+                    step / bound,
+                    base_step * 1e3
                 );
             }
         });
     }
 
-    frame_table(n, cells, &steps, baseline_one_thread);
+    frame_table(n, cells, &steps);
 }
 
 /// The interactive and haptic frames on one thread, and the figures the
 /// speed issue sets targets for, all from this run.
-fn frame_table(n: u32, cells: usize, steps: &[(usize, &str, Precision, f64)], baseline: f64) {
-    let step = |threads: usize, name: &str, precision: Precision| {
+fn frame_table(n: u32, cells: usize, steps: &[(usize, &str, Precision, f64, f64)]) {
+    let find = |threads: usize, name: &str, precision: Precision| {
         steps
             .iter()
             .find(|s| s.0 == threads && s.1 == name && s.2 == precision)
-            .map_or(f64::NAN, |s| s.3)
     };
+    let step = |threads: usize, name: &str, precision: Precision| {
+        find(threads, name, precision).map_or(f64::NAN, |s| s.3)
+    };
+    // The one-thread step over the baseline timed beside it.
+    let ratio =
+        |name: &str, precision: Precision| find(1, name, precision).map_or(f64::NAN, |s| s.3 / s.4);
     let one = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .build()
@@ -220,8 +263,8 @@ fn frame_table(n: u32, cells: usize, steps: &[(usize, &str, Precision, f64)], ba
             format!("{n}^3 step / baseline, paper f64 (f32)"),
             format!(
                 "{:.2} ({:.2})",
-                step(1, "paper", Precision::F64) / baseline,
-                step(1, "paper", Precision::F32) / baseline
+                ratio("paper", Precision::F64),
+                ratio("paper", Precision::F32)
             ),
             "<= 1.0",
         ),
@@ -229,8 +272,8 @@ fn frame_table(n: u32, cells: usize, steps: &[(usize, &str, Precision, f64)], ba
             format!("{n}^3 step / baseline, default model f64 (f32)"),
             format!(
                 "{:.2} ({:.2})",
-                step(1, default, Precision::F64) / baseline,
-                step(1, default, Precision::F32) / baseline
+                ratio(default, Precision::F64),
+                ratio(default, Precision::F32)
             ),
             "<= 1.3",
         ),
