@@ -40,24 +40,26 @@ fn cpu_seconds() -> f64 {
     t.tv_sec as f64 + 1e-9 * t.tv_nsec as f64
 }
 
-/// Minimum over `repeats` runs of `f` (s): of the process CPU time when
-/// one thread works (time the process did not run, on a shared machine, is
-/// not counted), of the wall time otherwise (idle pool threads spin, which
-/// CPU time would count).
+/// One run of `f` (s): the process CPU time when one thread works (time
+/// the process did not run, on a shared machine, is not counted), the wall
+/// time otherwise (idle pool threads spin, which CPU time would count).
+fn time_once(f: &mut dyn FnMut()) -> f64 {
+    let wall = Instant::now();
+    let cpu = cpu_seconds();
+    f();
+    if rayon::current_num_threads() == 1 {
+        cpu_seconds() - cpu
+    } else {
+        wall.elapsed().as_secs_f64()
+    }
+}
+
+/// Minimum over `repeats` runs of `f` (s), timed by [`time_once`], after
+/// one run that warms the caches.
 fn best(repeats: usize, mut f: impl FnMut()) -> f64 {
-    let one_thread = rayon::current_num_threads() == 1;
     f();
     (0..repeats)
-        .map(|_| {
-            let wall = Instant::now();
-            let cpu = cpu_seconds();
-            f();
-            if one_thread {
-                cpu_seconds() - cpu
-            } else {
-                wall.elapsed().as_secs_f64()
-            }
-        })
+        .map(|_| time_once(&mut f))
         .fold(f64::INFINITY, f64::min)
 }
 
@@ -68,23 +70,12 @@ fn best(repeats: usize, mut f: impl FnMut()) -> f64 {
 /// machine. `g` must be serial work (it is timed like `f`: CPU time on one
 /// thread, wall time otherwise, which for serial work is its own time).
 fn best_beside(repeats: usize, mut f: impl FnMut(), mut g: impl FnMut()) -> (f64, f64) {
-    let one_thread = rayon::current_num_threads() == 1;
-    let time = |h: &mut dyn FnMut()| {
-        let wall = Instant::now();
-        let cpu = cpu_seconds();
-        h();
-        if one_thread {
-            cpu_seconds() - cpu
-        } else {
-            wall.elapsed().as_secs_f64()
-        }
-    };
     f();
     g();
     let (mut best_f, mut best_g) = (f64::INFINITY, f64::INFINITY);
     for _ in 0..repeats {
-        best_f = best_f.min(time(&mut f));
-        best_g = best_g.min(time(&mut g));
+        best_f = best_f.min(time_once(&mut f));
+        best_g = best_g.min(time_once(&mut g));
     }
     (best_f, best_g)
 }
