@@ -161,8 +161,8 @@ fn main() {
             let baseline = best_serial(repeats, || spring_loop(&springs, &x_base, &mut f));
             println!(
                 "\n{threads} thread(s): baseline (naive merged springs, {} springs, 1 thread) {:.2} ms \
-                 = {:.0} Mcell/s; each ratio below is to the baseline timed beside its model \
-                 (alternately), the last column",
+                 = {:.0} Mcell/s; each ratio below is to the baseline timed beside it \
+                 (alternately; the last column is the step's)",
                 springs.len(),
                 baseline * 1e3,
                 cells as f64 / baseline / 1e6
@@ -180,11 +180,10 @@ fn main() {
                 let mut ws = model.workspace();
                 let mut f = vec![Vec3::zeros(); nodes];
                 let mut f_base = vec![Vec3::zeros(); nodes];
-                let base_loop = || spring_loop(&springs, &x_base, &mut f_base);
                 let (force, base_force) = best_beside(
                     repeats,
                     || model.internal_forces_in(precision, &x, &mut ws, &mut f),
-                    base_loop,
+                    || spring_loop(&springs, &x_base, &mut f_base),
                 );
                 let problem = Problem::new(model);
                 let options = ExplicitOptions {
@@ -194,7 +193,6 @@ fn main() {
                 let mut integ = Explicit::new(&problem, options).expect("explicit");
                 let mut state = State::at_rest(problem.model());
                 state.x = x.clone();
-                let mut f_base = vec![Vec3::zeros(); nodes];
                 let (step, base_step) = best_beside(
                     repeats,
                     || {
