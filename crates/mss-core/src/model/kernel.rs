@@ -3293,13 +3293,16 @@ unsafe fn forces_into_nodes_avx512(
 /// 512-bit operations as two 256-bit halves: an early 8-lane variant was
 /// slower there, but the AVX-512 paths as they are now (node sums added by
 /// rows, edge pass by rows, 16-lane `f32`) take the 64^3 `paper` step from
-/// 26 to 12 ms on a Zen 4 EPYC (docs/solvers.md). The standard library
-/// caches what the CPU has, so asking again costs a load.
+/// 26 to 12 ms on a Zen 4 EPYC (docs/solvers.md). Every dispatch of a
+/// batch of cells asks, so the three answers are combined once and kept.
 #[cfg(target_arch = "x86_64")]
 pub(crate) fn has_avx512() -> bool {
-    std::arch::is_x86_feature_detected!("avx512f")
-        && std::arch::is_x86_feature_detected!("avx512dq")
-        && std::arch::is_x86_feature_detected!("avx512vl")
+    static AVX512: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *AVX512.get_or_init(|| {
+        std::arch::is_x86_feature_detected!("avx512f")
+            && std::arch::is_x86_feature_detected!("avx512dq")
+            && std::arch::is_x86_feature_detected!("avx512vl")
+    })
 }
 
 #[cfg(target_arch = "x86_64")]
