@@ -934,27 +934,28 @@ impl Explicit {
             contact.anchor_at_step_start(i, t0, x_prev, &mut state.contact);
             let target = x_star - free(g0) * c;
             let mut x = target;
-            let mut g = Vec3::zeros();
+            let mut g;
             // The first iterate is rarely the answer (it is where the node
             // would be without its new contact force): its Jacobian is
             // taken at once; later ones are checked before it is taken.
             let mut with_jacobian = true;
-            for _ in 0..CONTACT_NEWTON_ITERATIONS {
+            let mut iterations = 0;
+            loop {
                 let v_chord = (x - x_prev) / dt;
-                let force = |jacobian| {
-                    contact
-                        .node_point_force(i, t1, x, v_chord, 1.0 / dt, &state.contact, jacobian)
-                        .unwrap_or((Vec3::zeros(), crate::Mat3::zeros()))
-                };
-                let (mut gx, mut jac) = force(with_jacobian);
-                let mut r = free(x - target - gx * c);
+                // One call site, so that it is inlined: its result came back
+                // through memory, and reading it stalled the store forwarding.
+                let (gx, jac) = contact
+                    .node_point_force(i, t1, x, v_chord, 1.0 / dt, &state.contact, with_jacobian)
+                    .unwrap_or((Vec3::zeros(), crate::Mat3::zeros()));
+                let r = free(x - target - gx * c);
                 if r.norm() <= tolerance {
                     g = gx;
                     break;
                 }
                 if !with_jacobian {
-                    (gx, jac) = force(true);
-                    r = free(x - target - gx * c);
+                    // The same iterate again, with its Jacobian.
+                    with_jacobian = true;
+                    continue;
                 }
                 g = gx;
                 with_jacobian = false;
@@ -971,6 +972,10 @@ impl Explicit {
                     break;
                 };
                 x -= free(inverse * r);
+                iterations += 1;
+                if iterations == CONTACT_NEWTON_ITERATIONS {
+                    break;
+                }
             }
             ok &= all_finite(&x);
             state.x[n] = x;
