@@ -770,6 +770,51 @@ fn forces_added_by_rows_are_the_cell_by_cell_bits() {
     }
 }
 
+/// Rows of every length from 1 to 17 cells, and layers of one and of two
+/// rows: the force pass's groups of eight and sixteen cells then end at
+/// every place in a row and in a batch, and its last, partial groups take
+/// every size (through the narrower paths). The same bits as the portable
+/// pass cell by cell, in `f64` and `f32`, on one and two threads.
+#[test]
+fn forces_of_rows_of_every_length_are_the_cell_by_cell_bits() {
+    let volumetric_hg = with_hourglass(Box::new(VolumetricBarrier));
+    for len in 1..=17 {
+        for rows in [1, 2] {
+            let l = Lattice::block([len, rows, 2], 0.1, [0.0; 3]).unwrap();
+            for param in [&PaperModel as &dyn Parameterization, &volumetric_hg] {
+                let model = Model::new(&l, mat(100.0, 0.3, 1.0), param).unwrap();
+                let x = deformed(&model, u64::from(len));
+                for precision in [Precision::F64, Precision::F32] {
+                    let mut scalar = vec![Vec3::zeros(); x.len()];
+                    model.internal_forces_scalar_in(
+                        precision,
+                        &x,
+                        &mut model.workspace(),
+                        &mut scalar,
+                    );
+                    assert!(scalar.iter().any(|f| f.norm() > 0.0));
+                    for threads in [1, 2] {
+                        let batched = crate::on_threads(threads, || {
+                            let mut f = vec![Vec3::zeros(); x.len()];
+                            model.internal_forces_in(precision, &x, &mut model.workspace(), &mut f);
+                            f
+                        });
+                        assert!(
+                            batched
+                                .iter()
+                                .zip(&scalar)
+                                .all(|(p, q)| (0..3).all(|d| p[d].to_bits() == q[d].to_bits())),
+                            "{} on rows of {len}, {rows} per layer, {}, {threads} threads",
+                            param.name(),
+                            precision.name()
+                        );
+                    }
+                }
+            }
+        }
+    }
+}
+
 /// docs/model.md, section 3: internal forces exert no net force on the body
 /// and turn with it (they depend on the shape, not on its placement).
 #[test]
