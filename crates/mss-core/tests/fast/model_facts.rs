@@ -42,6 +42,14 @@ fn forces(model: &Model, x: &[Vec3]) -> Vec<Vec3> {
     f
 }
 
+/// Whether two force fields are equal bit for bit.
+fn same_bits(a: &[Vec3], b: &[Vec3]) -> bool {
+    a.len() == b.len()
+        && a.iter()
+            .zip(b)
+            .all(|(p, q)| (0..3).all(|d| p[d].to_bits() == q[d].to_bits()))
+}
+
 /// A parameterization with hourglass control (strong, so that its terms show).
 fn with_hourglass(inner: Box<dyn Parameterization>) -> HourglassControl {
     HourglassControl::new(inner, 1.0).unwrap()
@@ -685,22 +693,12 @@ fn simd_and_scalar_paths_agree_bitwise() {
             }
         }
         let (a, b) = (forces(&single, &x), forces(&multi, &x));
-        assert!(
-            a.iter()
-                .zip(&b)
-                .all(|(p, q)| (0..3).all(|d| p[d].to_bits() == q[d].to_bits()))
-        );
+        assert!(same_bits(&a, &b));
         // The portable scalar path (no SIMD, one cell at a time) gives the
         // same bits as the vector one.
         let mut scalar = vec![Vec3::zeros(); x.len()];
         single.internal_forces_scalar_with(&x, &mut single.workspace(), &mut scalar);
-        assert!(
-            a.iter()
-                .zip(&scalar)
-                .all(|(p, q)| (0..3).all(|d| p[d].to_bits() == q[d].to_bits())),
-            "{}",
-            param.name()
-        );
+        assert!(same_bits(&a, &scalar), "{}", param.name());
         // And the batch path agrees with the per-cell forces, which divide
         // once per spring (the pass shares divisions: a few ulps apart).
         let mut g = vec![Vec3::zeros(); x.len()];
@@ -756,10 +754,7 @@ fn forces_added_by_rows_are_the_cell_by_cell_bits() {
                     model.internal_forces_in(precision, &x, &mut model.workspace(), &mut batched)
                 });
                 assert!(
-                    batched
-                        .iter()
-                        .zip(&scalar)
-                        .all(|(p, q)| (0..3).all(|d| p[d].to_bits() == q[d].to_bits())),
+                    same_bits(&batched, &scalar),
                     "{} on {} cells, {}, {threads} threads",
                     param.name(),
                     l.num_cells(),
@@ -800,10 +795,7 @@ fn forces_of_rows_of_every_length_are_the_cell_by_cell_bits() {
                             f
                         });
                         assert!(
-                            batched
-                                .iter()
-                                .zip(&scalar)
-                                .all(|(p, q)| (0..3).all(|d| p[d].to_bits() == q[d].to_bits())),
+                            same_bits(&batched, &scalar),
                             "{} on rows of {len}, {rows} per layer, {}, {threads} threads",
                             param.name(),
                             precision.name()
@@ -891,20 +883,15 @@ fn single_precision_forces_are_close_and_reproducible() {
                 f
             })
         };
-        let bits = |a: &[Vec3], b: &[Vec3]| {
-            a.iter()
-                .zip(b)
-                .all(|(p, q)| (0..3).all(|d| p[d].to_bits() == q[d].to_bits()))
-        };
         let exact = run(&x, Precision::F64, 1, false);
         let single = run(&x, Precision::F32, 1, false);
         assert!(
-            bits(&single, &run(&x, Precision::F32, 1, true)),
+            same_bits(&single, &run(&x, Precision::F32, 1, true)),
             "{}",
             param.name()
         );
         assert!(
-            bits(&single, &run(&x, Precision::F32, 3, false)),
+            same_bits(&single, &run(&x, Precision::F32, 3, false)),
             "{}",
             param.name()
         );
