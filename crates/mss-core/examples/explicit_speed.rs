@@ -10,8 +10,11 @@
 //! thread, wall time on two), with the ratio to
 //! the baseline timed beside it (each model's timings alternate with the
 //! baseline's): a merged-spring scatter loop (each lattice edge and body
-//! diagonal once, 7 springs per cell, f64, one thread). The second
-//! ratio is to the bandwidth bound: the bytes a step's arrays move, divided
+//! diagonal once, 7 springs per cell, f64, one thread). The `/arith`
+//! column sets the `f64` force pass beside its arithmetic bound: the
+//! operations per cell the kernel performs (`Model::force_operations`)
+//! over this core's measured rate for them. The `/bandwidth` column
+//! sets the step beside the bandwidth bound: the bytes its arrays move, divided
 //! by the copy bandwidth measured here.
 //!
 //! Then, in the same run and on one thread, the interactive and haptic
@@ -20,6 +23,8 @@
 
 use std::time::Instant;
 
+#[path = "common/arith_rate.rs"]
+mod arith_rate;
 #[path = "common/baseline.rs"]
 mod baseline;
 use baseline::{merged_springs, perturbed, spring_loop};
@@ -138,6 +143,25 @@ fn main() {
         bound * 1e3,
         step_bytes / cells as f64
     );
+    // The arithmetic bound of the f64 force pass: its counted operations per
+    // cell over this core's rate for them (the adders and multipliers, and
+    // the unit that divides and takes roots, whichever is slower).
+    let rate = arith_rate::f64_rate();
+    if let Some(r) = rate {
+        println!(
+            "f64 arithmetic rate, one core: {:.1} G additions or multiplications per second, \
+             {:.2} G divisions or square roots per second (per lane)",
+            r.pipelined / 1e9,
+            r.divide / 1e9
+        );
+    }
+    let arith_bound = |model: &Model| {
+        let ops = model.force_operations(Precision::F64);
+        rate.map(|r| {
+            cells as f64
+                * (ops.pipelined() as f64 / r.pipelined).max((ops.div + ops.sqrt) as f64 / r.divide)
+        })
+    };
     for precision in [Precision::F64, Precision::F32] {
         let (isa, lanes) = precision.kernel_vectors();
         println!(
@@ -168,8 +192,15 @@ fn main() {
                 cells as f64 / baseline / 1e6
             );
             println!(
-                "{:<26} {:>10} {:>10} {:>10} {:>10} {:>12} {:>12}",
-                "model", "force ms", "/baseline", "step ms", "/baseline", "/bandwidth", "baseline ms"
+                "{:<26} {:>10} {:>10} {:>10} {:>10} {:>10} {:>12} {:>12}",
+                "model",
+                "force ms",
+                "/baseline",
+                "/arith",
+                "step ms",
+                "/baseline",
+                "/bandwidth",
+                "baseline ms"
             );
             let runs = models.iter().flat_map(|(name, param)| {
                 [Precision::F64, Precision::F32].map(|precision| (*name, param, precision))
@@ -202,11 +233,18 @@ fn main() {
                 );
                 let step = step / f64::from(integ.substeps());
                 steps.push((threads, name, precision, step, base_step));
+                // Against the arithmetic bound: f64 only (the rate is
+                // measured in f64 lanes).
+                let over_arith = match (precision, arith_bound(problem.model())) {
+                    (Precision::F64, Some(bound)) => format!("{:.2}", force / bound),
+                    _ => "-".to_string(),
+                };
                 println!(
-                    "{:<26} {:>10.2} {:>10.2} {:>10.2} {:>10.2} {:>12.2} {:>12.2}",
+                    "{:<26} {:>10.2} {:>10.2} {:>10} {:>10.2} {:>10.2} {:>12.2} {:>12.2}",
                     format!("{name} {}", precision.name()),
                     force * 1e3,
                     force / base_force,
+                    over_arith,
                     step * 1e3,
                     step / base_step,
                     step / bound,

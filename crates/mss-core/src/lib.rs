@@ -76,10 +76,10 @@ pub use constraints::{ConstraintSpec, Constraints, NodeSelector};
 pub use loads::{Damping, Load, LoadSpec};
 pub use material::{Material, MaterialError};
 pub use model::{
-    BodySpan, CellChecks, CellCoefficients, CellDiagnostics, CellMeasure, ForceWorkspace,
-    HourglassControl, HourglassError, Model, ModelError, PaperModel, Parameterization,
-    ParameterizationError, Parameterizations, Precision, SpringsOnly, UnknownParameterization,
-    Volumetric, VolumetricBarrier,
+    BodySpan, CellChecks, CellCoefficients, CellDiagnostics, CellMeasure, ForceOperations,
+    ForceWorkspace, HourglassControl, HourglassError, Model, ModelError, PaperModel,
+    Parameterization, ParameterizationError, Parameterizations, Precision, SpringsOnly,
+    UnknownParameterization, Volumetric, VolumetricBarrier,
 };
 pub use solver::{
     Integrator, Integrators, Problem, SolverError, State, StaticOptions, solve_static,

@@ -117,6 +117,40 @@ pub trait Parameterization: Send + Sync + Debug {
 
 /// The paper's model (M2 lattice with correction forces), exact E and nu in
 /// uniaxial tension for -0.25 < nu < 0.5.
+/// Floating-point operations per cell of the explicit force pass, by kind
+/// ([`Model::force_operations`]): what one SIMD lane performs for one cell.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ForceOperations {
+    /// Additions and subtractions.
+    pub add: u64,
+    /// Multiplications.
+    pub mul: u64,
+    /// Divisions.
+    pub div: u64,
+    /// Square roots.
+    pub sqrt: u64,
+    /// Other lane operations: negations, maxima, comparisons, the
+    /// logarithm's exponent split, conversions between precisions.
+    pub other: u64,
+}
+
+impl ForceOperations {
+    /// No operations.
+    pub const ZERO: Self = Self {
+        add: 0,
+        mul: 0,
+        div: 0,
+        sqrt: 0,
+        other: 0,
+    };
+
+    /// The operations that go through the adders and multipliers: all but
+    /// the divisions and square roots, which have a unit of their own.
+    pub fn pipelined(&self) -> u64 {
+        self.add + self.mul + self.other
+    }
+}
+
 #[derive(Debug, Clone, Copy, Default)]
 pub struct PaperModel;
 
@@ -1389,6 +1423,22 @@ impl Model {
         out: &mut [Vec3],
     ) {
         self.forces_impl(x, ws, out, true, precision);
+    }
+
+    /// The arithmetic of the force pass per cell of the model's first
+    /// material in `precision` (every lane of every SIMD path performs the
+    /// same), counted by running the kernel once on a number type that counts
+    /// its operations: the cell kernel at rest (the corner barrier's test
+    /// but not its forces, which act on crushed cells only), the stretches
+    /// of the three edges at the cell's corner 0, and the corner forces'
+    /// additions into the node sums. Set beside the machine's rate for
+    /// these operations it bounds the pass's time from below
+    /// (`examples/explicit_speed.rs`).
+    pub fn force_operations(&self, precision: Precision) -> ForceOperations {
+        if self.cells.is_empty() {
+            return ForceOperations::ZERO;
+        }
+        kernel::force_operations(self.params_of(0), precision == Precision::F32)
     }
 
     /// As [`Model::internal_forces_with`] but one cell at a time, without SIMD

@@ -7,6 +7,8 @@ use std::ops::{Add, AddAssign, Div, Mul, Neg, Sub, SubAssign};
 
 use hexmesh::{CELL_DIAGONALS, CELL_EDGES, CORNER_OFFSETS};
 
+mod count;
+
 /// The arithmetic the kernel needs.
 pub(crate) trait Scalar:
     Copy
@@ -1781,6 +1783,35 @@ fn corner_stretches<T: InverseSqrtSeed, const SEED: bool>(
         *w = T::cst(1.0) - w.scale(rest);
     }
     w
+}
+
+/// [`crate::Model::force_operations`] for cells of parameters `p`:
+/// `seeded` for the single-precision pass, whose edges are stretched by
+/// [`seeded_stretch`] and whose corners are taken relative to corner 0 in
+/// `f64` (21 subtractions), narrowed (21 conversions) and whose forces are
+/// widened (24).
+pub(crate) fn force_operations(p: &CellParams, seeded: bool) -> crate::model::ForceOperations {
+    use count::Counted;
+    let mut ops = count::count(|| {
+        let x: [V3<Counted>; 8] =
+            std::array::from_fn(|n| CORNER_OFFSETS[n].map(|o| Counted(f64::from(o) * p.rest_edge)));
+        let ends = [x[1], x[3], x[4]];
+        let w = if seeded {
+            corner_stretches::<_, true>(p.rest_edge, x[0], ends)
+        } else {
+            corner_stretches::<_, false>(p.rest_edge, x[0], ends)
+        };
+        let edge_stretch = [w[0]; 12];
+        let mut f = [[Counted(0.0); 3]; 8];
+        cell_forces_with_edges(p, &x, &edge_stretch, &mut f);
+    });
+    // The corner forces added into the node sums.
+    ops.add += 24;
+    if seeded {
+        ops.add += 21;
+        ops.other += 21 + 24;
+    }
+    ops
 }
 
 /// A cell's 8 corners, in order.

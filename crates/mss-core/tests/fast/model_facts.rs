@@ -4,7 +4,8 @@
 use hexmesh::Lattice;
 use mss_core::model::{HourglassControl, PaperModel, SpringsOnly, Volumetric, VolumetricBarrier};
 use mss_core::{
-    BlockCsr, CellCoefficients, Material, MaterialError, Model, Parameterization, Precision, Vec3,
+    BlockCsr, CellCoefficients, ForceOperations, Material, MaterialError, Model, Parameterization,
+    Precision, Vec3,
 };
 
 /// Deterministic pseudo-random numbers in [-1, 1) (xorshift).
@@ -949,4 +950,68 @@ fn the_corner_barrier_is_not_counted_as_a_correction() {
     );
     let gap = forces(&barrier, &x)[0] - forces(&plain, &x)[0];
     assert!(gap.norm() > 1e-3 * forces(&plain, &x)[0].norm(), "{gap:?}");
+}
+
+/// The force pass's operations per cell of the springs-only model, counted
+/// by hand from docs/model.md: the three edge stretches at corner 0 (three
+/// differences, squared lengths and square roots, one division for the three
+/// inverses and `1 - L0 / l`), the cell's 12 edge springs (difference, axis
+/// sum, `k w d` added to one end and subtracted from the other), its 4
+/// diagonals (with one division for the four inverses) and the 24 additions
+/// into the node sums. The richer models only add to it, and the
+/// single-precision pass adds its conversions.
+#[test]
+fn the_force_pass_counts_the_operations_of_the_model() {
+    let lattice = Lattice::block([2, 2, 2], 0.1, [0.0; 3]).unwrap();
+    let material = Material::new(1.0e5, 0.3, 1000.0).unwrap();
+    let springs = Model::new(&lattice, material, &SpringsOnly).unwrap();
+    let ops = springs.force_operations(Precision::F64);
+    let edges = ForceOperations {
+        add: 9 + 6 + 3,
+        mul: 9 + 7 + 3,
+        div: 1,
+        sqrt: 3,
+        other: 0,
+    };
+    let cell = ForceOperations {
+        add: 4 * 36 + 12 + 8 + 4 + 24,
+        mul: 12 + 36 + 12 + 9 + 4 + 4 + 12,
+        div: 1,
+        sqrt: 4,
+        other: 0,
+    };
+    assert_eq!(
+        ops,
+        ForceOperations {
+            add: edges.add + cell.add + 24,
+            mul: edges.mul + cell.mul,
+            div: edges.div + cell.div,
+            sqrt: edges.sqrt + cell.sqrt,
+            other: 0,
+        }
+    );
+    let paper = Model::new(&lattice, material, &PaperModel).unwrap();
+    let default = Model::new(
+        &lattice,
+        material,
+        &HourglassControl::new(Box::new(VolumetricBarrier), 1.0).unwrap(),
+    )
+    .unwrap();
+    let (p, d) = (
+        paper.force_operations(Precision::F64),
+        default.force_operations(Precision::F64),
+    );
+    // The corrections: the cell axes (three square roots, one division).
+    assert_eq!((p.sqrt, p.div), (ops.sqrt + 3, ops.div + 1));
+    assert!(p.pipelined() > ops.pipelined());
+    // The barrier's logarithm divides once more, twice with its slope.
+    assert!(d.pipelined() > ops.pipelined() && d.div > ops.div);
+    let single = paper.force_operations(Precision::F32);
+    // In single precision: the corners' differences in `f64`, their
+    // narrowing and the forces' widening; each edge's seed (a square root and
+    // a division in `f32`, two conversions) and its Newton step in place of
+    // one third of the shared division.
+    assert_eq!(single.other, p.other + 21 + 24 + 2 * 3);
+    assert_eq!(single.add, p.add + 21 + 3);
+    assert_eq!((single.sqrt, single.div), (p.sqrt, p.div + 2));
 }
