@@ -325,6 +325,14 @@ fn frame_table(n: u32, cells: usize, steps: &[(usize, &str, Precision, f64, f64)
             "<= 8",
         ),
         (
+            "  the same, frames after the first (set-up left out), ms".to_owned(),
+            format!(
+                "{:.1} ({:.1})",
+                inter[0].cpu_per_later_frame, inter[1].cpu_per_later_frame
+            ),
+            "",
+        ),
+        (
             format!("haptic frame CPU, {} cells, f64 (f32), ms", hapt[0].cells),
             format!(
                 "{:.3} ({:.3})",

@@ -49,6 +49,9 @@ pub struct FrameStats {
     pub worst: f64,
     /// CPU time of the process per frame, the first included.
     pub cpu_per_frame: f64,
+    /// CPU time of the process per frame after the first (the rate a
+    /// running simulation keeps, without the integrator's set-up).
+    pub cpu_per_later_frame: f64,
 }
 
 /// Steps `sim` for `frames` frames of `frame` seconds, calling `before`
@@ -64,7 +67,11 @@ fn measure(
     let mut times = Vec::with_capacity(frames);
     let mut substeps = 0;
     let cpu_start = process_cpu_seconds();
+    let mut cpu_after_first = cpu_start;
     for k in 0..frames {
+        if k == 1 {
+            cpu_after_first = process_cpu_seconds();
+        }
         before(sim, k);
         let clock = Instant::now();
         let info = sim.step(frame).expect("step");
@@ -74,7 +81,9 @@ fn measure(
         }
         substeps = substeps.max(info.substeps);
     }
-    let cpu_per_frame = (process_cpu_seconds() - cpu_start) / frames as f64 * 1e3;
+    let cpu_end = process_cpu_seconds();
+    let cpu_per_frame = (cpu_end - cpu_start) / frames as f64 * 1e3;
+    let cpu_per_later_frame = (cpu_end - cpu_after_first) / (frames - 1).max(1) as f64 * 1e3;
     let first = times.remove(0);
     times.sort_by(f64::total_cmp);
     let pct = |q: f64| times[((times.len() - 1) as f64 * q) as usize];
@@ -87,6 +96,7 @@ fn measure(
         p99: pct(0.99),
         worst: times[times.len() - 1],
         cpu_per_frame,
+        cpu_per_later_frame,
     }
 }
 
