@@ -115,8 +115,6 @@ pub trait Parameterization: Send + Sync + Debug {
     fn coefficients(&self, material: &Material, h: f64) -> CellCoefficients;
 }
 
-/// The paper's model (M2 lattice with correction forces), exact E and nu in
-/// uniaxial tension for -0.25 < nu < 0.5.
 /// Floating-point operations per cell of the explicit force pass, by kind
 /// ([`Model::force_operations`]): what one SIMD lane performs for one cell.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -151,6 +149,8 @@ impl ForceOperations {
     }
 }
 
+/// The paper's model (M2 lattice with correction forces), exact E and nu in
+/// uniaxial tension for -0.25 < nu < 0.5.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct PaperModel;
 
