@@ -35,19 +35,20 @@ pub fn f64_rate() -> Option<ArithRate> {
     None
 }
 
-fn best_of(mut f: impl FnMut() -> f64) -> f64 {
-    (0..5).map(|_| f()).fold(f64::INFINITY, f64::min)
-}
-
-fn per_second(ops: f64, f: impl FnOnce()) -> f64 {
-    let t = Instant::now();
-    f();
-    ops / t.elapsed().as_secs_f64()
+/// `ops` over the shortest of five timings of `f`: noise only adds time.
+fn fastest_rate(ops: f64, mut f: impl FnMut()) -> f64 {
+    (0..5)
+        .map(|_| {
+            let t = Instant::now();
+            f();
+            ops / t.elapsed().as_secs_f64()
+        })
+        .fold(0.0, f64::max)
 }
 
 #[cfg(target_arch = "x86_64")]
 mod x86 {
-    use super::{ArithRate, best_of, per_second};
+    use super::{ArithRate, fastest_rate};
     use std::arch::x86_64::*;
     use std::hint::black_box;
 
@@ -57,39 +58,33 @@ mod x86 {
         ($name:ident, $feature:literal, $t:ty, $lanes:literal, $set1:ident, $add:ident, $mul:ident, $sqrt:ident, $div:ident) => {
             #[target_feature(enable = $feature)]
             pub unsafe fn $name() -> ArithRate {
-                let pipelined = 1.0
-                    / best_of(|| {
-                        1.0 / per_second((12 * ROUNDS * $lanes) as f64, || {
-                            let c = $set1(black_box(1e-12));
-                            let m = $set1(black_box(0.999_999_9));
-                            let mut v: [$t; 12] = std::array::from_fn(|i| $set1(1.0 + i as f64));
-                            for _ in 0..ROUNDS {
-                                for a in &mut v[..6] {
-                                    *a = $add(*a, c);
-                                }
-                                for a in &mut v[6..] {
-                                    *a = $mul(*a, m);
-                                }
-                            }
-                            black_box(v);
-                        })
-                    });
-                let divide = 1.0
-                    / best_of(|| {
-                        1.0 / per_second((8 * ROUNDS / 4 * $lanes) as f64, || {
-                            let d = $set1(black_box(1.000_000_1));
-                            let mut v: [$t; 8] = std::array::from_fn(|i| $set1(1.0 + i as f64));
-                            for _ in 0..ROUNDS / 4 {
-                                for a in &mut v[..4] {
-                                    *a = $sqrt(*a);
-                                }
-                                for a in &mut v[4..] {
-                                    *a = $div(*a, d);
-                                }
-                            }
-                            black_box(v);
-                        })
-                    });
+                let pipelined = fastest_rate((12 * ROUNDS * $lanes) as f64, || {
+                    let c = $set1(black_box(1e-12));
+                    let m = $set1(black_box(0.999_999_9));
+                    let mut v: [$t; 12] = std::array::from_fn(|i| $set1(1.0 + i as f64));
+                    for _ in 0..ROUNDS {
+                        for a in &mut v[..6] {
+                            *a = $add(*a, c);
+                        }
+                        for a in &mut v[6..] {
+                            *a = $mul(*a, m);
+                        }
+                    }
+                    black_box(v);
+                });
+                let divide = fastest_rate((8 * ROUNDS / 4 * $lanes) as f64, || {
+                    let d = $set1(black_box(1.000_000_1));
+                    let mut v: [$t; 8] = std::array::from_fn(|i| $set1(1.0 + i as f64));
+                    for _ in 0..ROUNDS / 4 {
+                        for a in &mut v[..4] {
+                            *a = $sqrt(*a);
+                        }
+                        for a in &mut v[4..] {
+                            *a = $div(*a, d);
+                        }
+                    }
+                    black_box(v);
+                });
                 ArithRate { pipelined, divide }
             }
         };
